@@ -1,0 +1,63 @@
+#pragma once
+// How blocks of work run: the host engine's job system plugs in here.
+//
+// The library asks for `item_count` items (blocks of bodies) to be processed by range
+// tasks, then waits. A host may split [0, item_count) into any ranges of at least
+// `min_range` items, run them on any workers (or inline, in `enqueue` or `wait`), in any
+// order: every block is computed the same way whoever runs it, so results do not depend
+// on the split or on the number of workers.
+
+#include <cstddef>
+#include <memory>
+
+namespace kinema {
+
+// Processes items [begin, end). `worker` is in [0, worker_count()).
+using RangeTask = void (*)(std::size_t begin, std::size_t end, unsigned worker, void* context);
+
+// Opaque token returned by enqueue and handed back to wait.
+using JobHandle = void*;
+
+class JobSystem {
+ public:
+  virtual ~JobSystem() = default;
+  // How many workers may run tasks at once (the calling thread counts if it helps).
+  virtual unsigned worker_count() const = 0;
+  virtual JobHandle enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
+                            void* context) = 0;
+  // Returns when every range of the job has run.
+  virtual void wait(JobHandle job) = 0;
+};
+
+// Runs everything inline on the calling thread.
+class SerialJobSystem final : public JobSystem {
+ public:
+  unsigned worker_count() const override { return 1; }
+  JobHandle enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
+                    void* context) override;
+  void wait(JobHandle) override {}
+};
+
+// oneTBB with its own task_arena of `threads` threads (0: all hardware threads). The
+// calling thread is one of them. The arena is created once, not per step.
+class TbbJobSystem final : public JobSystem {
+ public:
+  explicit TbbJobSystem(unsigned threads = 0);
+  ~TbbJobSystem() override;
+  TbbJobSystem(const TbbJobSystem&) = delete;
+  TbbJobSystem& operator=(const TbbJobSystem&) = delete;
+
+  unsigned worker_count() const override;
+  JobHandle enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
+                    void* context) override;
+  void wait(JobHandle) override {}
+
+ private:
+  struct Arena;
+  std::unique_ptr<Arena> arena_;
+};
+
+// Number of hardware threads this process may use.
+unsigned hardware_threads();
+
+}  // namespace kinema

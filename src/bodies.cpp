@@ -1,0 +1,132 @@
+#include "kinema/bodies.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <new>
+#include <string>
+
+#include "kinema/error.hpp"
+
+namespace kinema {
+
+template <class T>
+AlignedArray<T>::AlignedArray(std::size_t count) {
+  resize(count);
+}
+
+template <class T>
+void AlignedArray<T>::Free::operator()(T* p) const {
+  ::operator delete[](p, std::align_val_t{kSimdBytes});
+}
+
+template <class T>
+void AlignedArray<T>::resize(std::size_t count) {
+  count = padded_count<T>(count);
+  if (count <= size_) return;
+  T* fresh = static_cast<T*>(::operator new[](count * sizeof(T), std::align_val_t{kSimdBytes}));
+  std::fill(fresh, fresh + count, T(0));
+  if (size_ > 0) std::memcpy(fresh, data_.get(), size_ * sizeof(T));
+  data_.reset(fresh);
+  size_ = count;
+}
+
+namespace {
+
+template <class T>
+void check_finite(const Vec3<T>& v, std::size_t body, const char* field) {
+  for (T c : v) {
+    if (!std::isfinite(c)) {
+      throw Error("body " + std::to_string(body) + ": " + field + " is not finite");
+    }
+  }
+}
+
+}  // namespace
+
+template <class T>
+void ParticleSet<T>::grow_to(std::size_t count) {
+  // Geometric growth so adding one by one stays linear overall.
+  std::size_t capacity = px_.size();
+  if (count <= capacity) return;
+  std::size_t target = std::max(count, capacity * 2);
+  for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(target);
+}
+
+template <class T>
+void ParticleSet<T>::write(std::size_t i, const Vec3<T>& p, const Vec3<T>& v, T inv_mass) {
+  px_[i] = p[0], py_[i] = p[1], pz_[i] = p[2];
+  vx_[i] = v[0], vy_[i] = v[1], vz_[i] = v[2];
+  inv_mass_[i] = inv_mass;
+}
+
+template <class T>
+std::size_t ParticleSet<T>::add(const Vec3<T>& position, const Vec3<T>& velocity, T mass) {
+  const std::size_t i = size_;
+  check_finite(position, i, "position");
+  check_finite(velocity, i, "velocity");
+  if (!(std::isfinite(mass) && mass > 0)) {
+    throw Error("body " + std::to_string(i) + ": mass must be positive and finite, got " +
+                std::to_string(mass));
+  }
+  const T inv_mass = T(1) / mass;
+  if (!std::isfinite(inv_mass) || inv_mass == 0) {
+    throw Error("body " + std::to_string(i) + ": mass " + std::to_string(mass) +
+                " has no finite nonzero inverse in this precision");
+  }
+  grow_to(i + 1);
+  write(i, position, velocity, inv_mass);
+  size_ = i + 1;
+  return i;
+}
+
+template <class T>
+std::size_t ParticleSet<T>::add_kinematic(const Vec3<T>& position, const Vec3<T>& velocity) {
+  const std::size_t i = size_;
+  check_finite(position, i, "position");
+  check_finite(velocity, i, "velocity");
+  grow_to(i + 1);
+  write(i, position, velocity, T(0));
+  size_ = i + 1;
+  return i;
+}
+
+template <class T>
+void ParticleSet<T>::add(std::span<const ParticleDesc<T>> bodies) {
+  reserve(size_ + bodies.size());
+  for (const auto& b : bodies) add(b);
+}
+
+template <class T>
+void ParticleSet<T>::reserve(std::size_t count) {
+  for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(count);
+}
+
+template <class T>
+void ParticleSet<T>::clear() {
+  for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) {
+    std::fill(a->data(), a->data() + a->size(), T(0));
+  }
+  size_ = 0;
+}
+
+template <class T>
+void ParticleSet<T>::set_position(std::size_t i, const Vec3<T>& p) {
+  if (i >= size_) throw Error("body " + std::to_string(i) + ": no such body");
+  check_finite(p, i, "position");
+  px_[i] = p[0], py_[i] = p[1], pz_[i] = p[2];
+}
+
+template <class T>
+void ParticleSet<T>::set_velocity(std::size_t i, const Vec3<T>& v) {
+  if (i >= size_) throw Error("body " + std::to_string(i) + ": no such body");
+  check_finite(v, i, "velocity");
+  vx_[i] = v[0], vy_[i] = v[1], vz_[i] = v[2];
+}
+
+template class AlignedArray<float>;
+template class AlignedArray<double>;
+template class ParticleSet<float>;
+template class ParticleSet<double>;
+
+}  // namespace kinema

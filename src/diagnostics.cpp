@@ -1,0 +1,91 @@
+#include "kinema/diagnostics.hpp"
+
+#include <cmath>
+
+namespace kinema {
+namespace {
+
+// Potential per unit mass of the local conservative terms at x.
+double local_potential(std::span<const LocalTerm> terms, const Vec3<double>& x, double mass) {
+  double u = 0;
+  for (const LocalTerm& term : terms) {
+    if (auto* g = std::get_if<Gravity>(&term)) {
+      u -= mass * (g->g[0] * x[0] + g->g[1] * x[1] + g->g[2] * x[2]);
+    } else if (auto* s = std::get_if<Spring>(&term)) {
+      double r2 = 0;
+      for (int d = 0; d < 3; ++d) r2 += (x[d] - s->anchor[d]) * (x[d] - s->anchor[d]);
+      u += 0.5 * s->k * r2;
+    } else if (auto* c = std::get_if<Central>(&term)) {
+      double r2 = 0;
+      for (int d = 0; d < 3; ++d) r2 += (x[d] - c->center[d]) * (x[d] - c->center[d]);
+      u -= c->mu * mass / std::sqrt(r2);
+    }
+  }
+  return u;
+}
+
+}  // namespace
+
+template <class T>
+double kinetic_energy(const ParticleSet<T>& b) {
+  double e = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (b.inv_mass()[i] == 0) continue;
+    const double v2 = double(b.vx()[i]) * b.vx()[i] + double(b.vy()[i]) * b.vy()[i] +
+                      double(b.vz()[i]) * b.vz()[i];
+    e += 0.5 * v2 / double(b.inv_mass()[i]);
+  }
+  return e;
+}
+
+template <class T>
+double potential_energy(const ParticleSet<T>& b, const ForceModel<T>& forces) {
+  double u = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (b.inv_mass()[i] == 0) continue;
+    const Vec3<double> x{double(b.px()[i]), double(b.py()[i]), double(b.pz()[i])};
+    u += local_potential(forces.local_terms(), x, 1.0 / double(b.inv_mass()[i]));
+  }
+  const ParticleState<T> all{b.padded_size(), b.px(), b.py(), b.pz(),
+                             b.vx(), b.vy(), b.vz(), b.inv_mass()};
+  for (const auto& term : forces.coupled_terms()) u += term->potential_energy(all);
+  return u;
+}
+
+template <class T>
+EnergyReport energy(const ParticleSet<T>& b, const ForceModel<T>& forces) {
+  return {kinetic_energy(b), potential_energy(b, forces)};
+}
+
+template <class T>
+Vec3<double> momentum(const ParticleSet<T>& b) {
+  Vec3<double> p{};
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (b.inv_mass()[i] == 0) continue;
+    const double m = 1.0 / double(b.inv_mass()[i]);
+    p[0] += m * b.vx()[i], p[1] += m * b.vy()[i], p[2] += m * b.vz()[i];
+  }
+  return p;
+}
+
+template <class T>
+bool all_finite(const ParticleSet<T>& b) {
+  for (const T* a : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()}) {
+    for (std::size_t i = 0; i < b.size(); ++i) {
+      if (!std::isfinite(a[i])) return false;
+    }
+  }
+  return true;
+}
+
+#define KINEMA_INSTANTIATE(T)                                                  \
+  template double kinetic_energy(const ParticleSet<T>&);                       \
+  template double potential_energy(const ParticleSet<T>&, const ForceModel<T>&); \
+  template EnergyReport energy(const ParticleSet<T>&, const ForceModel<T>&);   \
+  template Vec3<double> momentum(const ParticleSet<T>&);                       \
+  template bool all_finite(const ParticleSet<T>&);
+KINEMA_INSTANTIATE(float)
+KINEMA_INSTANTIATE(double)
+#undef KINEMA_INSTANTIATE
+
+}  // namespace kinema

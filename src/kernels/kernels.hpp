@@ -1,0 +1,109 @@
+#pragma once
+// The kernels' interface: plain data in, function pointers out. One table per instruction
+// set and value type; the stepper picks a table once and calls through it per block.
+
+#include <array>
+#include <cstddef>
+
+#include "kinema/isa.hpp"
+#include "kinema/methods.hpp"
+
+namespace kinema::kernels {
+
+// The local force terms of a model, summed and converted to T once per stepper.
+template <class T>
+struct LocalForces {
+  std::array<T, 3> gravity{};
+  T spring_k = 0;               // sum of spring constants
+  std::array<T, 3> anchor{};    // their k-weighted mean anchor
+  T linear = 0;                 // linear drag k plus spring damping
+  T quadratic = 0;              // quadratic drag k
+  int central_count = 0;
+  std::array<std::array<T, 3>, 4> center{};
+  std::array<T, 4> mu{};
+  bool has_quadratic() const { return quadratic != 0; }
+  bool has_central() const { return central_count > 0; }
+};
+
+template <class T>
+struct BodyArrays {
+  T* x[3];         // px py pz
+  T* v[3];         // vx vy vz
+  const T* inv_mass;
+};
+
+// One fused step over bodies [begin, end) (multiples of the SIMD width).
+template <class T>
+struct FusedJob {
+  BodyArrays<T> bodies;
+  LocalForces<T> forces;
+  T h;
+};
+template <class T>
+using FusedFn = void (*)(const FusedJob<T>& job, std::size_t begin, std::size_t end);
+
+// out = in + h * sum_j coef[j] * k[j], for the three components of a vector field.
+template <class T>
+struct Combination {
+  const T* in[3];
+  T* out[3];
+  int terms = 0;
+  std::array<T, kMaxStages> coef{};
+  const T* k[kMaxStages][3];
+};
+
+// One stage of the staged path: stage state (x_s, v_s) = (x, v) + h sum_j a_sj (kx_j, kv_j)
+// (when there are terms), then acc = local accelerations at (x_s, v_s).
+template <class T>
+struct StageJob {
+  Combination<T> x, v;
+  T h;
+  const T* inv_mass;
+  T* acc[3];
+  LocalForces<T> forces;
+};
+template <class T>
+using StageFn = void (*)(const StageJob<T>& job, std::size_t begin, std::size_t end);
+
+template <class T>
+struct CombineJob {
+  Combination<T> c;
+  T h;
+};
+template <class T>
+using CombineFn = void (*)(const CombineJob<T>& job, std::size_t begin, std::size_t end);
+
+// acc += inv_mass * force for bodies with inv_mass != 0.
+template <class T>
+struct ForceJob {
+  T* acc[3];
+  const T* force[3];
+  const T* inv_mass;
+};
+template <class T>
+using AddForcesFn = void (*)(const ForceJob<T>& job, std::size_t begin, std::size_t end);
+
+inline constexpr std::size_t kBuiltinCount = builtin_methods.size();
+
+template <class T>
+struct KernelTable {
+  Isa isa;
+  std::size_t width;  // SIMD lanes
+  // [builtin method index][quadratic drag][central terms]
+  FusedFn<T> fused[kBuiltinCount][2][2];
+  StageFn<T> stage[2][2];
+  CombineFn<T> combine;
+  AddForcesFn<T> add_forces;
+};
+
+// The table of an available instruction set (`isa` resolved, not automatic).
+template <class T>
+const KernelTable<T>& kernel_table(Isa isa);
+
+// Defined each in its own translation unit, compiled with that unit's flags.
+template <class T> const KernelTable<T>& scalar_table();
+template <class T> const KernelTable<T>& sse2_table();
+template <class T> const KernelTable<T>& avx2_table();
+template <class T> const KernelTable<T>& avx512_table();
+
+}  // namespace kinema::kernels

@@ -1,0 +1,120 @@
+#pragma once
+// The handful of operations the kernels use, for a scalar T and for xsimd batches.
+// Included by each per-ISA translation unit inside its own namespace (KINEMA_ISA_NS), so
+// inline functions compiled with different flags never merge at link time.
+//
+// fused(a, b, c) is a*b + c with one rounding on every path: std::fma for scalar and SSE2
+// lanes, the FMA instructions for AVX2 and AVX-512. With -ffp-contract=off the compiler
+// never fuses anything else, so every path computes the same bits.
+
+#include <cmath>
+#include <cstddef>
+#include <type_traits>
+
+#include <xsimd/xsimd.hpp>
+
+namespace kinema::kernels::KINEMA_ISA_NS {
+
+template <class V>
+struct Lane {
+  using value_type = V;
+  static constexpr std::size_t width = 1;
+};
+template <class T, class A>
+struct Lane<xsimd::batch<T, A>> {
+  using value_type = T;
+  static constexpr std::size_t width = xsimd::batch<T, A>::size;
+};
+
+template <class V>
+using value_t = typename Lane<V>::value_type;
+
+template <class V>
+inline V load(const value_t<V>* p) {
+  if constexpr (std::is_floating_point_v<V>) {
+    return *p;
+  } else {
+    return V::load_aligned(p);
+  }
+}
+
+template <class V>
+inline void store(value_t<V>* p, const V& v) {
+  if constexpr (std::is_floating_point_v<V>) {
+    *p = v;
+  } else {
+    v.store_aligned(p);
+  }
+}
+
+template <class T>
+  requires std::is_floating_point_v<T>
+inline T fused(T a, T b, T c) {
+  return std::fma(a, b, c);
+}
+
+template <class T>
+inline xsimd::batch<T, xsimd::sse2> fused(const xsimd::batch<T, xsimd::sse2>& a,
+                                          const xsimd::batch<T, xsimd::sse2>& b,
+                                          const xsimd::batch<T, xsimd::sse2>& c) {
+  // SSE2 has no FMA: one correctly rounded std::fma per lane.
+  using B = xsimd::batch<T, xsimd::sse2>;
+  alignas(16) T x[B::size], y[B::size], z[B::size];
+  a.store_aligned(x);
+  b.store_aligned(y);
+  c.store_aligned(z);
+  for (std::size_t i = 0; i < B::size; ++i) x[i] = std::fma(x[i], y[i], z[i]);
+  return B::load_aligned(x);
+}
+
+#if defined(__FMA__)
+inline xsimd::batch<float, xsimd::fma3<xsimd::avx2>> fused(
+    const xsimd::batch<float, xsimd::fma3<xsimd::avx2>>& a,
+    const xsimd::batch<float, xsimd::fma3<xsimd::avx2>>& b,
+    const xsimd::batch<float, xsimd::fma3<xsimd::avx2>>& c) {
+  return _mm256_fmadd_ps(a, b, c);
+}
+inline xsimd::batch<double, xsimd::fma3<xsimd::avx2>> fused(
+    const xsimd::batch<double, xsimd::fma3<xsimd::avx2>>& a,
+    const xsimd::batch<double, xsimd::fma3<xsimd::avx2>>& b,
+    const xsimd::batch<double, xsimd::fma3<xsimd::avx2>>& c) {
+  return _mm256_fmadd_pd(a, b, c);
+}
+#endif
+
+#if defined(__AVX512F__)
+// xsimd 8.1's fma on avx512f batches is a multiply then an add: use the instruction.
+inline xsimd::batch<float, xsimd::avx512f> fused(const xsimd::batch<float, xsimd::avx512f>& a,
+                                                 const xsimd::batch<float, xsimd::avx512f>& b,
+                                                 const xsimd::batch<float, xsimd::avx512f>& c) {
+  return _mm512_fmadd_ps(a, b, c);
+}
+inline xsimd::batch<double, xsimd::avx512f> fused(
+    const xsimd::batch<double, xsimd::avx512f>& a, const xsimd::batch<double, xsimd::avx512f>& b,
+    const xsimd::batch<double, xsimd::avx512f>& c) {
+  return _mm512_fmadd_pd(a, b, c);
+}
+#endif
+
+template <class T>
+  requires std::is_floating_point_v<T>
+inline T root(T x) {
+  return std::sqrt(x);
+}
+template <class T, class A>
+inline xsimd::batch<T, A> root(const xsimd::batch<T, A>& x) {
+  return xsimd::sqrt(x);
+}
+
+template <class T>
+  requires std::is_floating_point_v<T>
+inline T pick(bool mask, T a, T b) {
+  return mask ? a : b;
+}
+template <class T, class A>
+inline xsimd::batch<T, A> pick(const xsimd::batch_bool<T, A>& mask, const xsimd::batch<T, A>& a,
+                               const xsimd::batch<T, A>& b) {
+  return xsimd::select(mask, a, b);
+}
+
+}  // namespace kinema::kernels::KINEMA_ISA_NS

@@ -1,0 +1,412 @@
+#include "kinema/stepper.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <string>
+
+#include "kernels/kernels.hpp"
+#include "kinema/error.hpp"
+
+namespace kinema {
+namespace {
+
+template <class T>
+kernels::LocalForces<T> resolve(std::span<const LocalTerm> terms) {
+  Vec3<double> g{}, weighted_anchor{};
+  double spring_k = 0, linear = 0, quadratic = 0;
+  kernels::LocalForces<T> out;
+  for (const LocalTerm& term : terms) {
+    if (auto* t = std::get_if<Gravity>(&term)) {
+      for (int d = 0; d < 3; ++d) g[d] += t->g[d];
+    } else if (auto* t = std::get_if<LinearDrag>(&term)) {
+      linear += t->k;
+    } else if (auto* t = std::get_if<QuadraticDrag>(&term)) {
+      quadratic += t->k;
+    } else if (auto* t = std::get_if<Spring>(&term)) {
+      // Springs sum to one: -sum k_i (x - a_i) = -K (x - sum k_i a_i / K).
+      spring_k += t->k;
+      linear += t->damping;
+      for (int d = 0; d < 3; ++d) weighted_anchor[d] += t->k * t->anchor[d];
+    } else if (auto* t = std::get_if<Central>(&term)) {
+      const int c = out.central_count++;
+      for (int d = 0; d < 3; ++d) out.center[c][d] = T(t->center[d]);
+      out.mu[c] = T(t->mu);
+    }
+  }
+  for (int d = 0; d < 3; ++d) {
+    out.gravity[d] = T(g[d]);
+    out.anchor[d] = spring_k > 0 ? T(weighted_anchor[d] / spring_k) : T(0);
+  }
+  out.spring_k = T(spring_k);
+  out.linear = T(linear);
+  out.quadratic = T(quadratic);
+  return out;
+}
+
+template <class T>
+kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
+  return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass()};
+}
+
+// One unit of the staged path, run per block. Phases that read other blocks' state
+// (coupled forces) need a barrier before them; without coupled terms a block runs all
+// phases of a step in one go while its data is in cache.
+enum class PhaseKind { stage, coupled, finish, kick, drift };
+struct Phase {
+  PhaseKind kind;
+  int index;  // stage or operation
+};
+constexpr int kMaxPhases = 3 * kMaxStages + 1;
+
+template <class F>
+void range_trampoline(std::size_t begin, std::size_t end, unsigned, void* context) {
+  (*static_cast<F*>(context))(begin, end);
+}
+
+}  // namespace
+
+template <class T>
+struct Stepper<T>::Impl {
+  ForceModel<T> forces;
+  Method method;
+  StepperOptions options;
+  std::unique_ptr<TbbJobSystem> owned_jobs;
+  JobSystem* jobs = nullptr;
+  const kernels::KernelTable<T>* table = nullptr;
+  kernels::LocalForces<T> local;
+  kernels::StageFn<T> stage_fn = nullptr;
+  kernels::FusedFn<T> fused_fn = nullptr;
+
+  double origin = 0;
+  std::uint64_t steps_since_origin = 0;
+  T last_h = 0;
+
+  std::array<Phase, kMaxPhases> phases{};
+  int phase_count = 0;
+  std::size_t capacity = 0;
+  // Staged scratch: stage positions and velocities (stage 0 is the bodies themselves),
+  // stage accelerations, and the force accumulator of callback and coupled terms.
+  std::array<std::array<AlignedArray<T>, 3>, kMaxStages> stage_x, stage_v, stage_a;
+  std::array<AlignedArray<T>, 3> force;
+
+  // Per-step context the phases read.
+  ParticleSet<T>* bodies = nullptr;
+  T h = 0;
+  double t0 = 0;
+
+  Impl(ForceModel<T> f, const Method& m, StepperOptions o)
+      : forces(std::move(f)), method(m), options(o) {
+    validate(method);
+    table = &kernels::kernel_table<T>(options.isa);
+    if (options.jobs == nullptr) {
+      owned_jobs = std::make_unique<TbbJobSystem>(options.threads);
+      jobs = owned_jobs.get();
+    } else {
+      jobs = options.jobs;
+    }
+    local = resolve<T>(forces.local_terms());
+    const int quad = local.has_quadratic(), central = local.has_central();
+    stage_fn = table->stage[quad][central];
+    const int builtin = builtin_index(method);
+    if (builtin >= 0 && forces.fusable() && !options.force_staged) {
+      fused_fn = table->fused[builtin][quad][central];
+    } else {
+      plan_phases();
+    }
+  }
+
+  bool coupled() const { return !forces.coupled_terms().empty(); }
+  bool needs_force_scratch() const { return coupled() || !forces.callbacks().empty(); }
+
+  void plan_phases() {
+    auto push = [&](PhaseKind k, int i) { phases[phase_count++] = {k, i}; };
+    if (method.kind == MethodKind::runge_kutta) {
+      for (int s = 0; s < method.tableau.stages; ++s) {
+        push(PhaseKind::stage, s);
+        if (coupled()) push(PhaseKind::coupled, s);
+      }
+      push(PhaseKind::finish, 0);
+      return;
+    }
+    for (int k = 0; k < method.scheme.count; ++k) {
+      if (method.scheme.ops[k].kind == OpKind::drift) {
+        push(PhaseKind::drift, k);
+        continue;
+      }
+      push(PhaseKind::stage, k);
+      if (coupled()) push(PhaseKind::coupled, k);
+      push(PhaseKind::kick, k);
+    }
+  }
+
+  void reserve(std::size_t n) {
+    n = padded_count<T>(n);
+    if (fused_fn != nullptr || n <= capacity) return;
+    const int stages = method.kind == MethodKind::runge_kutta ? method.tableau.stages : 1;
+    for (int s = 0; s < stages; ++s) {
+      for (int d = 0; d < 3; ++d) {
+        if (s > 0) stage_x[s][d].resize(n), stage_v[s][d].resize(n);
+        stage_a[s][d].resize(n);
+      }
+    }
+    if (needs_force_scratch()) {
+      for (auto& f : force) f.resize(n);
+    }
+    capacity = n;
+  }
+
+  // Runs fn(body_begin, body_end) over every block, on the job system when worth it.
+  template <class F>
+  void for_blocks(std::size_t bodies_count, F&& fn) {
+    const std::size_t blocks = (bodies_count + kBlockBodies - 1) / kBlockBodies;
+    auto over_blocks = [&](std::size_t b0, std::size_t b1) {
+      fn(b0 * kBlockBodies, std::min(b1 * kBlockBodies, bodies_count));
+    };
+    if (bodies_count < options.inline_below || jobs->worker_count() <= 1 || blocks <= 1) {
+      over_blocks(0, blocks);
+      return;
+    }
+    using Fn = decltype(over_blocks);
+    jobs->wait(jobs->enqueue(&range_trampoline<Fn>, blocks, 1, &over_blocks));
+  }
+
+  double time() const { return origin + double(steps_since_origin) * double(last_h); }
+
+  void step(ParticleSet<T>& b, T step_size) {
+    if (!(std::isfinite(step_size) && step_size > 0)) {
+      throw Error("step size h must be positive and finite, got " + std::to_string(step_size));
+    }
+    if (step_size != last_h) {
+      origin = time();
+      steps_since_origin = 0;
+      last_h = step_size;
+    }
+    bodies = &b;
+    h = step_size;
+    t0 = time();
+    const std::size_t n = b.padded_size();
+    if (fused_fn != nullptr) {
+      const kernels::FusedJob<T> job{arrays(b), local, h};
+      for_blocks(n, [&](std::size_t begin, std::size_t end) { fused_fn(job, begin, end); });
+    } else {
+      reserve(n);
+      step_staged(n);
+    }
+    ++steps_since_origin;
+  }
+
+  void step_staged(std::size_t n) {
+    if (coupled()) {
+      for (int p = 0; p < phase_count; ++p) {
+        for_blocks(n, [&](std::size_t begin, std::size_t end) {
+          for (std::size_t i = begin; i < end; i += kBlockBodies) {
+            run_phase(phases[p], i, std::min(i + kBlockBodies, end));
+          }
+        });
+      }
+      return;
+    }
+    for_blocks(n, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; i += kBlockBodies) {
+        for (int p = 0; p < phase_count; ++p) {
+          run_phase(phases[p], i, std::min(i + kBlockBodies, end));
+        }
+      }
+    });
+  }
+
+  // Stage state s: the bodies themselves for stage 0 (and for every kick-drift stage).
+  const T* state_x(int s, int d) {
+    return s == 0 || method.kind == MethodKind::kick_drift ? arrays(*bodies).x[d]
+                                                           : stage_x[s][d].data();
+  }
+  const T* state_v(int s, int d) {
+    return s == 0 || method.kind == MethodKind::kick_drift ? arrays(*bodies).v[d]
+                                                           : stage_v[s][d].data();
+  }
+  int accel_slot(const Phase& p) const {
+    return method.kind == MethodKind::runge_kutta ? p.index : 0;
+  }
+  double phase_time(const Phase& p) const {
+    const double c = method.kind == MethodKind::runge_kutta ? method.tableau.c[p.index]
+                                                            : method.scheme.ops[p.index].time;
+    return t0 + c * double(h);
+  }
+
+  void run_phase(const Phase& p, std::size_t begin, std::size_t end) {
+    switch (p.kind) {
+      case PhaseKind::stage: return run_stage(p, begin, end);
+      case PhaseKind::coupled: return run_coupled(p, begin, end);
+      case PhaseKind::finish: return run_finish(begin, end);
+      case PhaseKind::kick:
+      case PhaseKind::drift: return run_kick_drift(p, begin, end);
+    }
+  }
+
+  void run_stage(const Phase& p, std::size_t begin, std::size_t end) {
+    const int s = accel_slot(p);
+    kernels::StageJob<T> job{};
+    job.h = h;
+    job.inv_mass = bodies->inv_mass();
+    job.forces = local;
+    auto body = arrays(*bodies);
+    for (int d = 0; d < 3; ++d) {
+      job.x.in[d] = body.x[d];
+      job.v.in[d] = body.v[d];
+      job.x.out[d] = s > 0 ? stage_x[s][d].data() : nullptr;
+      job.v.out[d] = s > 0 ? stage_v[s][d].data() : nullptr;
+      job.acc[d] = stage_a[s][d].data();
+    }
+    if (s > 0) {
+      for (int j = 0; j < s; ++j) {
+        const double a = method.tableau.a[s][j];
+        if (a == 0) continue;
+        const int k = job.x.terms++;
+        job.v.terms++;
+        job.x.coef[k] = job.v.coef[k] = T(a);
+        for (int d = 0; d < 3; ++d) {
+          job.x.k[k][d] = state_v(j, d);
+          job.v.k[k][d] = stage_a[j][d].data();
+        }
+      }
+    }
+    stage_fn(job, begin, end);
+    if (!needs_force_scratch()) return;
+    for (auto& f : force) std::fill(f.data() + begin, f.data() + end, T(0));
+    const ParticleBlock<T> block = block_view(s, begin, end, phase_time(p));
+    for (const auto& callback : forces.callbacks()) callback(block);
+    if (!coupled()) add_forces(s, begin, end);
+  }
+
+  ParticleBlock<T> block_view(int s, std::size_t begin, std::size_t end, double t) {
+    ParticleBlock<T> b;
+    b.begin = begin;
+    b.count = end - begin;
+    b.t = t;
+    b.px = state_x(s, 0) + begin, b.py = state_x(s, 1) + begin, b.pz = state_x(s, 2) + begin;
+    b.vx = state_v(s, 0) + begin, b.vy = state_v(s, 1) + begin, b.vz = state_v(s, 2) + begin;
+    b.inv_mass = bodies->inv_mass() + begin;
+    b.fx = force[0].data() + begin, b.fy = force[1].data() + begin, b.fz = force[2].data() + begin;
+    return b;
+  }
+
+  void add_forces(int s, std::size_t begin, std::size_t end) {
+    kernels::ForceJob<T> job{};
+    for (int d = 0; d < 3; ++d) job.acc[d] = stage_a[s][d].data(), job.force[d] = force[d].data();
+    job.inv_mass = bodies->inv_mass();
+    table->add_forces(job, begin, end);
+  }
+
+  void run_coupled(const Phase& p, std::size_t begin, std::size_t end) {
+    const int s = accel_slot(p);
+    const ParticleState<T> all{bodies->padded_size(), state_x(s, 0), state_x(s, 1), state_x(s, 2),
+                               state_v(s, 0), state_v(s, 1), state_v(s, 2), bodies->inv_mass()};
+    const ParticleBlock<T> block = block_view(s, begin, end, phase_time(p));
+    for (const auto& term : forces.coupled_terms()) term->accumulate(all, block);
+    add_forces(s, begin, end);
+  }
+
+  void run_finish(std::size_t begin, std::size_t end) {
+    auto body = arrays(*bodies);
+    kernels::CombineJob<T> x{}, v{};
+    x.h = v.h = h;
+    for (int d = 0; d < 3; ++d) {
+      x.c.in[d] = x.c.out[d] = body.x[d];
+      v.c.in[d] = v.c.out[d] = body.v[d];
+    }
+    for (int s = 0; s < method.tableau.stages; ++s) {
+      const double b = method.tableau.b[s];
+      if (b == 0) continue;
+      const int k = x.c.terms++;
+      v.c.terms++;
+      x.c.coef[k] = v.c.coef[k] = T(b);
+      for (int d = 0; d < 3; ++d) {
+        x.c.k[k][d] = state_v(s, d);
+        v.c.k[k][d] = stage_a[s][d].data();
+      }
+    }
+    // Positions first: they read the stage-0 velocities, which are the bodies' own.
+    table->combine(x, begin, end);
+    table->combine(v, begin, end);
+  }
+
+  void run_kick_drift(const Phase& p, std::size_t begin, std::size_t end) {
+    auto body = arrays(*bodies);
+    const bool kick = p.kind == PhaseKind::kick;
+    kernels::CombineJob<T> job{};
+    job.h = T(method.scheme.ops[p.index].weight) * h;
+    job.c.terms = 1;
+    job.c.coef[0] = T(1);
+    for (int d = 0; d < 3; ++d) {
+      T* target = kick ? body.v[d] : body.x[d];
+      job.c.in[d] = job.c.out[d] = target;
+      job.c.k[0][d] = kick ? stage_a[0][d].data() : body.v[d];
+    }
+    table->combine(job, begin, end);
+  }
+};
+
+template <class T>
+Stepper<T>::Stepper(ForceModel<T> forces, const Method& method, StepperOptions options)
+    : impl_(std::make_unique<Impl>(std::move(forces), method, options)) {}
+
+template <class T>
+Stepper<T>::~Stepper() = default;
+template <class T>
+Stepper<T>::Stepper(Stepper&&) noexcept = default;
+template <class T>
+Stepper<T>& Stepper<T>::operator=(Stepper&&) noexcept = default;
+
+template <class T>
+void Stepper<T>::step(ParticleSet<T>& io_bodies, T h) {
+  impl_->step(io_bodies, h);
+}
+
+template <class T>
+void Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps) {
+  for (std::uint64_t k = 0; k < steps; ++k) impl_->step(io_bodies, h);
+}
+
+template <class T>
+void Stepper<T>::reserve(std::size_t bodies) {
+  impl_->reserve(bodies);
+}
+
+template <class T>
+double Stepper<T>::time() const {
+  return impl_->time();
+}
+
+template <class T>
+void Stepper<T>::set_time(double t) {
+  if (!std::isfinite(t)) throw Error("time must be finite");
+  impl_->origin = t;
+  impl_->steps_since_origin = 0;
+}
+
+template <class T>
+const Method& Stepper<T>::method() const {
+  return impl_->method;
+}
+template <class T>
+const ForceModel<T>& Stepper<T>::forces() const {
+  return impl_->forces;
+}
+template <class T>
+Isa Stepper<T>::isa() const {
+  return impl_->table->isa;
+}
+template <class T>
+bool Stepper<T>::fused() const {
+  return impl_->fused_fn != nullptr;
+}
+template <class T>
+unsigned Stepper<T>::threads() const {
+  return impl_->jobs->worker_count();
+}
+
+template class Stepper<float>;
+template class Stepper<double>;
+
+}  // namespace kinema

@@ -1,0 +1,72 @@
+// The kinema command-line program.
+#include <cstdio>
+#include <exception>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "kinema/error.hpp"
+#include "run_command.hpp"
+
+namespace {
+
+// Options CLI11 fills as text, turned into RunOptions after parsing.
+struct TextOptions {
+  std::string isa = "auto";
+  std::string precision;
+};
+
+void add_run_command(CLI::App& app, kinema::cli::RunOptions& o, TextOptions& text) {
+  CLI::App* run = app.add_subcommand("run", "Step a scene and print a summary of the run");
+  run->add_option("scene", o.scene_path, "Scene file (JSON); see tools/scenes/")->required();
+  run->add_option("--method", o.method,
+                  "Override the scene's method: euler, midpoint, heun, rk4, symplectic_euler, "
+                  "velocity_verlet");
+  run->add_option("--dt", o.dt, "Override the step size (seconds, > 0)")
+      ->check(CLI::PositiveNumber);
+  run->add_option("--steps", o.steps, "Override the number of steps");
+  run->add_option("--precision", text.precision, "Override the scene's precision: float or double")
+      ->check(CLI::IsMember({"float", "double"}));
+  run->add_option("--out", o.trajectory_path,
+                  "Write the trajectory as CSV (step,t,body,px,py,pz,vx,vy,vz)");
+  run->add_option("--every", o.every, "With --out: write every K steps (plus step 0 and the last)")
+      ->check(CLI::PositiveNumber);
+  run->add_option("--summary", o.summary_path, "Write the run's summary as JSON");
+  run->add_option("--isa", text.isa, "Instruction set: auto, scalar, sse2, avx2, avx512")
+      ->check(CLI::IsMember({"auto", "scalar", "sse2", "avx2", "avx512"}));
+  run->add_option("--threads", o.threads, "Worker threads (0: all cores)")
+      ->check(CLI::Range(0u, 1024u));
+  run->add_flag("--quiet,-q", o.quiet, "Print nothing on success");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "kinema: a data-oriented time integrator for particles.\n"
+      "Runs a scene (JSON) with a chosen method and reports speed and energy."};
+  app.require_subcommand(1);
+  kinema::cli::RunOptions options;
+  TextOptions text;
+  add_run_command(app, options, text);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help
+    std::fprintf(stderr, "kinema: error: %s (see kinema --help)\n", e.what());
+    return 2;
+  }
+  try {
+    options.isa = kinema::isa_by_name(text.isa);
+    if (!text.precision.empty()) {
+      options.precision =
+          text.precision == "float" ? kinema::Precision::single : kinema::Precision::dual;
+    }
+    return kinema::cli::run_scene(options);
+  } catch (const kinema::Error& e) {
+    std::fprintf(stderr, "kinema: error: %s\n", e.what());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "kinema: error: %s\n", e.what());
+  }
+  return 1;
+}

@@ -1,0 +1,30 @@
+#pragma once
+// `kinema run`: load a scene, step it, report.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "kinema/isa.hpp"
+#include "kinema/scene.hpp"
+
+namespace kinema::cli {
+
+struct RunOptions {
+  std::string scene_path;
+  std::optional<std::string> method;
+  std::optional<double> dt;
+  std::optional<std::uint64_t> steps;
+  std::optional<Precision> precision;
+  std::string trajectory_path;  // empty: no trajectory
+  std::uint64_t every = 1;
+  std::string summary_path;     // empty: no summary file
+  Isa isa = Isa::automatic;
+  unsigned threads = 0;         // 0: all hardware threads
+  bool quiet = false;
+};
+
+// Returns the process exit code: 0, or 3 when the state stopped being finite.
+int run_scene(const RunOptions& options);
+
+}  // namespace kinema::cli
