@@ -16,6 +16,21 @@ AlignedArray<T>::AlignedArray(std::size_t count) {
 }
 
 template <class T>
+AlignedArray<T>::AlignedArray(const AlignedArray& other) {
+  *this = other;
+}
+
+template <class T>
+AlignedArray<T>& AlignedArray<T>::operator=(const AlignedArray& other) {
+  if (this == &other) return *this;
+  data_.reset();
+  size_ = 0;
+  resize(other.size_);
+  if (size_ > 0) std::memcpy(data_.get(), other.data_.get(), size_ * sizeof(T));
+  return *this;
+}
+
+template <class T>
 void AlignedArray<T>::Free::operator()(T* p) const {
   ::operator delete[](p, std::align_val_t{kSimdBytes});
 }

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "kinema/error.hpp"
+#include "kinema/methods.hpp"
 
 namespace kinema {
 
@@ -188,7 +189,15 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
       p.fail("expected \"float\" or \"double\"");
     }
   }
-  if (root.has("method")) s.method = root.child("method").string();
+  if (root.has("method")) {
+    const Node m = root.child("method");
+    s.method = m.string();
+    try {
+      method_by_name(s.method);
+    } catch (const Error& e) {
+      m.fail(e.what());
+    }
+  }
   if (root.has("dt")) s.dt = root.child("dt").positive();
   if (root.has("steps")) s.steps = root.child("steps").count(true);
   if (root.has("particles")) {

@@ -25,6 +25,10 @@ class AlignedArray {
  public:
   AlignedArray() = default;
   explicit AlignedArray(std::size_t count);
+  AlignedArray(const AlignedArray& other);
+  AlignedArray& operator=(const AlignedArray& other);
+  AlignedArray(AlignedArray&&) noexcept = default;
+  AlignedArray& operator=(AlignedArray&&) noexcept = default;
 
   T* data() { return data_.get(); }
   const T* data() const { return data_.get(); }

@@ -1,0 +1,73 @@
+// ParticleSet storage: alignment, padding with inert bodies, growth, validation.
+#include <catch2/catch.hpp>
+
+#include <cstdint>
+#include <limits>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+TEMPLATE_TEST_CASE("arrays are 64-byte aligned and padded to whole lines", "[bodies]", float,
+                   double) {
+  ParticleSet<TestType> set;
+  constexpr std::size_t lane = 64 / sizeof(TestType);
+  for (std::size_t n = 1; n <= 3 * lane + 1; ++n) {
+    set.add({TestType(n), 0, 0}, {0, 0, 0}, 1);
+    REQUIRE(set.size() == n);
+    REQUIRE(set.padded_size() % lane == 0);
+    REQUIRE(set.padded_size() >= n);
+    REQUIRE(set.padded_size() < n + lane);
+    const auto& view = set;
+    for (const TestType* a : {view.px(), view.py(), view.pz(), view.vx(), view.vy(), view.vz(),
+                              view.inv_mass()}) {
+      REQUIRE(reinterpret_cast<std::uintptr_t>(a) % 64 == 0);
+    }
+  }
+}
+
+TEMPLATE_TEST_CASE("padding bodies are inert and stay put", "[bodies]", float, double) {
+  ParticleSet<TestType> set;
+  set.add({1, 2, 3}, {4, 5, 6}, 2);
+  REQUIRE(set.padded_size() > 1);
+  Stepper<TestType> s(test::all_local_terms<TestType>(), rk4, test::serial_options());
+  s.advance(set, TestType(0.01), 10);
+  for (std::size_t i = 1; i < set.padded_size(); ++i) {
+    CHECK(set.inv_mass()[i] == 0);
+    CHECK(set.px()[i] == 0);
+    CHECK(set.vx()[i] == 0);
+  }
+  CHECK(set.inv_mass()[0] == TestType(0.5));
+}
+
+TEST_CASE("bulk add and one-by-one add build the same set", "[bodies]") {
+  std::vector<ParticleDesc<double>> descs;
+  ParticleSet<double> one;
+  for (int i = 0; i < 100; ++i) {
+    descs.push_back({{double(i), 1, 2}, {0, double(-i), 0}, 1.0 + i});
+    one.add(descs.back());
+  }
+  ParticleSet<double> bulk;
+  bulk.add(std::span<const ParticleDesc<double>>(descs));
+  CHECK(test::state_hash(bulk) == test::state_hash(one));
+  ParticleSet<double> copy = bulk;
+  CHECK(test::state_hash(copy) == test::state_hash(bulk));
+  CHECK(copy.px() != bulk.px());
+}
+
+TEST_CASE("bad bodies are refused with the body and field named", "[bodies][errors]") {
+  ParticleSet<float> set;
+  set.add({0, 0, 0}, {0, 0, 0}, 1);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  CHECK_THROWS_WITH(set.add({0, nan, 0}, {0, 0, 0}, 1), "body 1: position is not finite");
+  CHECK_THROWS_WITH(set.add({0, 0, 0}, {inf, 0, 0}, 1), "body 1: velocity is not finite");
+  CHECK_THROWS_WITH(set.add({0, 0, 0}, {0, 0, 0}, -1),
+                    Catch::Contains("body 1: mass must be positive and finite"));
+  CHECK_THROWS_WITH(set.add({0, 0, 0}, {0, 0, 0}, 0), Catch::Contains("body 1: mass"));
+  CHECK_THROWS_WITH(set.add({0, 0, 0}, {0, 0, 0}, inf), Catch::Contains("body 1: mass"));
+  CHECK_THROWS_WITH(set.add({0, 0, 0}, {0, 0, 0}, nan), Catch::Contains("body 1: mass"));
+  CHECK_THROWS_WITH(set.set_velocity(0, {nan, 0, 0}), "body 0: velocity is not finite");
+  CHECK_THROWS_WITH(set.set_position(5, {0, 0, 0}), "body 5: no such body");
+  CHECK(set.size() == 1);  // nothing half-added
+}

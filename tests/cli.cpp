@@ -1,0 +1,205 @@
+// The kinema program end to end: trajectory CSV, summary JSON, and one clear error line
+// with a non-zero exit for every malformed scene or option.
+#include <catch2/catch.hpp>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "kinema/kinema.hpp"
+
+namespace fs = std::filesystem;
+using namespace kinema;
+
+namespace {
+
+struct Result {
+  int code;
+  std::string out, err;
+};
+
+fs::path work_dir() {
+  static const fs::path dir = [] {
+    fs::path d = fs::temp_directory_path() / ("kinema_cli_" + std::to_string(::getpid()));
+    fs::create_directories(d);
+    return d;
+  }();
+  return dir;
+}
+
+std::string read(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+fs::path write(const std::string& name, const std::string& text) {
+  const fs::path p = work_dir() / name;
+  std::ofstream(p) << text;
+  return p;
+}
+
+Result kinema_cli(const std::string& args) {
+  const fs::path out = work_dir() / "stdout.txt", err = work_dir() / "stderr.txt";
+  const std::string cmd = std::string(KINEMA_CLI) + " " + args + " >" + out.string() + " 2>" +
+                          err.string();
+  const int status = std::system(cmd.c_str());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, read(out), read(err)};
+}
+
+std::string scene(const std::string& name) { return std::string(KINEMA_SCENES) + "/" + name; }
+
+long lines(const std::string& s) { return std::count(s.begin(), s.end(), '\n'); }
+
+}  // namespace
+
+TEST_CASE("help explains the command and every run option", "[cli]") {
+  const Result top = kinema_cli("--help");
+  CHECK(top.code == 0);
+  CHECK(top.out.find("run") != std::string::npos);
+  const Result run = kinema_cli("run --help");
+  CHECK(run.code == 0);
+  for (const char* option : {"--method", "--dt", "--steps", "--precision", "--out", "--every",
+                             "--summary", "--isa", "--threads"}) {
+    INFO(option);
+    CHECK(run.out.find(option) != std::string::npos);
+  }
+}
+
+TEST_CASE("the trajectory holds step 0, every K-th step and the last, bit for bit", "[cli]") {
+  const fs::path csv = work_dir() / "traj.csv", summary = work_dir() / "summary.json";
+  const Result r = kinema_cli("run " + scene("projectiles.json") + " --steps 20 --every 7 --out " +
+                              csv.string() + " --summary " + summary.string());
+  REQUIRE(r.code == 0);
+  std::istringstream in(read(csv));
+  std::string line;
+  std::getline(in, line);
+  CHECK(line == "step,t,body,px,py,pz,vx,vy,vz");
+  std::vector<std::vector<double>> rows;
+  while (std::getline(in, line)) {
+    std::vector<double> row;
+    std::istringstream cells(line);
+    for (std::string cell; std::getline(cells, cell, ',');) row.push_back(std::strtod(cell.c_str(), nullptr));
+    rows.push_back(row);
+  }
+  REQUIRE(rows.size() == 4 * 4);  // steps 0, 7, 14, 20 for 4 bodies
+  CHECK(rows[0][0] == 0);
+  CHECK(rows[4][0] == 7);
+  CHECK(rows[15][0] == 20);
+  CHECK(rows[15][1] == 20 * double(float(1.0 / 60)));
+
+  // The library, run directly, gives the very same floats.
+  const Scene s = load_scene(scene("projectiles.json"));
+  ParticleSet<float> b = make_particles<float>(s);
+  Stepper<float> st(make_forces<float>(s), method_by_name(s.method));
+  st.advance(b, float(s.dt), 20);
+  for (std::size_t i = 0; i < 4; ++i) {
+    const auto& row = rows[12 + i];
+    CHECK(float(row[3]) == b.px()[i]);
+    CHECK(float(row[4]) == b.py()[i]);
+    CHECK(float(row[7]) == b.vy()[i]);
+  }
+
+  const auto j = nlohmann::json::parse(read(summary));
+  for (const char* key : {"bodies", "steps", "method", "dt", "precision", "isa", "threads",
+                          "wall_seconds", "body_steps_per_second", "energy_initial",
+                          "energy_final", "finite"}) {
+    INFO(key);
+    CHECK(j.contains(key));
+  }
+  CHECK(j["bodies"] == 4);
+  CHECK(j["steps"] == 20);
+  CHECK(j["finite"] == true);
+  CHECK(j["precision"] == "float");
+  CHECK(j["energy_initial"].get<double>() ==
+        Approx(energy(make_particles<float>(s), make_forces<float>(s)).total()));
+  CHECK(r.out.find("body_steps_per_second") != std::string::npos);  // for people, too
+}
+
+TEST_CASE("options override the scene", "[cli]") {
+  const fs::path summary = work_dir() / "override.json";
+  const Result r = kinema_cli("run " + scene("damped_spring.json") +
+                              " --method velocity_verlet --dt 0.02 --steps 50 --precision float"
+                              " --isa scalar --threads 1 --quiet --summary " + summary.string());
+  REQUIRE(r.code == 0);
+  CHECK(r.out.empty());
+  const auto j = nlohmann::json::parse(read(summary));
+  CHECK(j["method"] == "velocity_verlet");
+  CHECK(j["dt"] == 0.02);
+  CHECK(j["steps"] == 50);
+  CHECK(j["precision"] == "float");
+  CHECK(j["isa"] == "scalar");
+  CHECK(j["threads"] == 1);
+}
+
+TEST_CASE("a state that blows up is reported, not hidden", "[cli]") {
+  const fs::path p = write("blowup.json", R"({"particles": [{"position": [0,0,0]}],
+      "forces": [{"type": "central", "mu": 1}], "steps": 3})");
+  const Result r = kinema_cli("run " + p.string());
+  CHECK(r.code == 3);
+  CHECK(r.err.find("no longer finite") != std::string::npos);
+}
+
+TEST_CASE("every malformed scene or option fails with one clear line", "[cli][errors]") {
+  const std::string body = R"("particles": [{"position": [1,0,0]}])";
+  const std::pair<std::string, std::string> scenes[] = {
+      {"{\"particles\": [", "invalid JSON"},
+      {"[1, 2, 3]", "expected an object"},
+      {"{" + body + ", \"method\": \"rk5\"}", "unknown method 'rk5'"},
+      {"{" + body + ", \"dt\": -0.1}", "dt: expected a number > 0"},
+      {"{" + body + ", \"dt\": \"fast\"}", "dt: expected a number"},
+      {"{" + body + ", \"steps\": -5}", "steps: expected an integer >= 0"},
+      {R"({"particles": [{"velocity": [1,0,0]}]})", "particles[0]: missing key 'position'"},
+      {R"({"particles": [{"position": [1,0]}]})", "particles[0].position: expected an array of 3"},
+      {R"({"particles": [{"position": [1,0,0], "mass": 0}]})", "particles[0].mass: expected a number > 0"},
+      {R"({"particles": [{"position": [1,0,0], "velocity": [0,"up",0]}]})", "particles[0].velocity[1]: expected a number"},
+      {"{" + body + R"(, "forces": [{"type": "magnet"}]})", "forces[0].type: unknown force 'magnet'"},
+      {"{" + body + R"(, "forces": [{"type": "gravity", "g": [0,0,0]}, {"type": "spring", "k": -4}]})", "forces[1].k: expected a number >= 0"},
+      {"{" + body + R"(, "forces": [{"k": 1}]})", "forces[0]: missing key 'type'"},
+      {"{" + body + R"(, "forces": [{"type": "gravity", "g": 9.81}]})", "forces[0].g: expected an array of 3"},
+      {"{" + body + R"(, "forces": [{"type": "central", "mu": -1}]})", "forces[0].mu: expected a number >= 0"},
+      {R"({"generate": {"count": -3, "position_min": [0,0,0], "position_max": [1,1,1]}})", "generate.count: expected an integer >= 0"},
+      {R"({"generate": {"count": 3, "position_min": [0,0,0], "position_max": [1,-1,1]}})", "generate.position_max: must not be below"},
+      {"{" + body + ", \"precision\": \"half\"}", "precision: expected \"float\" or \"double\""},
+      {R"({"particles": []})", "the scene has no bodies"},
+      {"{\"partciles\": [{\"position\": [1,0,0]}]}", "partciles: unknown key"},
+      {"{" + body + ", \"forces\": {\"type\": \"gravity\"}}", "forces: expected an array"},
+  };
+  int i = 0;
+  for (const auto& [text, message] : scenes) {
+    const fs::path p = write("bad" + std::to_string(i++) + ".json", text);
+    const Result r = kinema_cli("run " + p.string());
+    INFO(text << "\nstderr: " << r.err);
+    CHECK(r.code != 0);
+    CHECK(lines(r.err) == 1);
+    CHECK(r.err.rfind("kinema: error: ", 0) == 0);
+    CHECK(r.err.find(message) != std::string::npos);
+    CHECK(r.err.find(p.string()) != std::string::npos);  // names the file
+  }
+  const std::string good = scene("damped_spring.json");
+  const std::pair<std::string, std::string> options[] = {
+      {"run " + (work_dir() / "missing.json").string(), "cannot open the file"},
+      {"run " + good + " --dt -1", "--dt"},
+      {"run " + good + " --every 0", "--every"},
+      {"run " + good + " --isa neon", "--isa"},
+      {"run " + good + " --precision half", "--precision"},
+      {"run " + good + " --method bogus", "unknown method 'bogus'"},
+      {"run " + good + " --steps many", "--steps"},
+      {"fly " + good, "subcommand"},
+      {"", "A subcommand is required"},
+  };
+  for (const auto& [args, message] : options) {
+    const Result r = kinema_cli(args);
+    INFO(args << "\nstderr: " << r.err);
+    CHECK(r.code != 0);
+    CHECK(lines(r.err) == 1);
+    CHECK(r.err.find(message) != std::string::npos);
+  }
+}

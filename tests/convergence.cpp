@@ -1,0 +1,88 @@
+// Measured orders of convergence from errors at h, h/2, h/4, and the classic RK4 typo
+// (k4 = f(x + h k3 / 2)) caught by the same measurement.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+namespace {
+
+// Damped oscillator (k = 4, c = 0.5, m = 1) from x = 1 over 2 s: global error at the end.
+double oscillator_error(const Method& method, int steps, double damping, bool staged = false) {
+  const double k = 4, t = 2, gamma = damping / 2, wd = std::sqrt(k - gamma * gamma);
+  const double e = std::exp(-gamma * t), b = gamma / wd;
+  const double x = e * (std::cos(wd * t) + b * std::sin(wd * t));
+  const double v = e * (-gamma * (std::cos(wd * t) + b * std::sin(wd * t)) +
+                        wd * (-std::sin(wd * t) + b * std::cos(wd * t)));
+  ForceModel<double> f;
+  f.add(Spring{{0, 0, 0}, k, damping});
+  StepperOptions o = test::serial_options();
+  o.force_staged = staged;
+  const auto s = test::run_one<double>(method, f, {1, 0, 0}, {0, 0, 0}, 1, t / steps, steps, o);
+  return std::hypot(s.x[0] - x, s.v[0] - v);
+}
+
+// Step counts in each method's asymptotic range, well above round-off.
+int base_steps(int order) { return order == 1 ? 2000 : order == 2 ? 400 : 50; }
+
+double measured_order(const Method& method, double damping, bool staged = false) {
+  const int n = base_steps(method.order);
+  std::vector<double> h, err;
+  for (int k : {1, 2, 4}) {
+    h.push_back(2.0 / (n * k));
+    err.push_back(oscillator_error(method, n * k, damping, staged));
+  }
+  INFO(method.name << " errors " << err[0] << " " << err[1] << " " << err[2]);
+  // Each halving on its own gives the same order as the fit.
+  CHECK(std::log2(err[0] / err[1]) == Approx(std::log2(err[1] / err[2])).margin(0.1));
+  return test::fitted_order(h, err);
+}
+
+}  // namespace
+
+TEST_CASE("each method converges at its nominal order", "[convergence]") {
+  for (const Method* m : builtin_methods) {
+    // Velocity Verlet's second kick sees the half-step velocity: its order is 2 only for
+    // velocity-independent forces, so it is measured undamped (see the next test).
+    const double damping = m == &velocity_verlet ? 0.0 : 0.5;
+    INFO("method " << m->name);
+    CHECK(measured_order(*m, damping) == Approx(m->order).margin(0.1));
+  }
+}
+
+TEST_CASE("velocity verlet drops to first order with velocity-dependent forces",
+          "[convergence]") {
+  CHECK(measured_order(velocity_verlet, 0.0) == Approx(2).margin(0.1));
+  CHECK(measured_order(velocity_verlet, 0.5) == Approx(1).margin(0.15));
+}
+
+TEST_CASE("the staged path converges at the same orders", "[convergence]") {
+  for (const Method* m : builtin_methods) {
+    INFO("method " << m->name);
+    const double damping = m == &velocity_verlet ? 0.0 : 0.5;
+    CHECK(measured_order(*m, damping, true) == Approx(m->order).margin(0.1));
+  }
+}
+
+TEST_CASE("the RK4 typo k4 = f(x + h k3/2) is caught as a loss of order", "[convergence]") {
+  Method typo = rk4;
+  typo.name = "rk4_typo";
+  typo.tableau.a[3][2] = 0.5;
+  REQUIRE(builtin_index(typo) == -1);  // runs on the staged path, from its tableau
+  // sum b_i c_i = 5/12 instead of 1/2: the second-order condition fails, first order remains.
+  const double order = test::fitted_order(
+      {2.0 / 400, 2.0 / 800, 2.0 / 1600},
+      {oscillator_error(typo, 400, 0.5), oscillator_error(typo, 800, 0.5),
+       oscillator_error(typo, 1600, 0.5)});
+  CHECK(order == Approx(1).margin(0.15));
+  CHECK(measured_order(rk4, 0.5, true) == Approx(4).margin(0.1));
+}
+
+TEST_CASE("a user tableau (Ralston's RK2) runs and converges at order 2", "[convergence]") {
+  Method ralston{"ralston", MethodKind::runge_kutta, 2,
+                 {2, {{{}, {2.0 / 3}}}, {0.25, 0.75}, {0, 2.0 / 3}}, {}};
+  CHECK(measured_order(ralston, 0.5) == Approx(2).margin(0.1));
+}

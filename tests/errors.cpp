@@ -1,0 +1,52 @@
+// Set-up errors are kinema::Error with a message naming the culprit; nothing moves.
+#include <catch2/catch.hpp>
+
+#include <limits>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+TEST_CASE("bad step sizes are refused before any body moves", "[errors]") {
+  ParticleSet<double> b;
+  b.add({1, 0, 0}, {0, 1, 0}, 1);
+  Stepper<double> s(test::all_local_terms<double>(), rk4, test::serial_options());
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (double h : {0.0, -0.01, nan, std::numeric_limits<double>::infinity()}) {
+    CHECK_THROWS_WITH(s.step(b, h), Catch::StartsWith("step size h must be positive and finite"));
+    CHECK_THROWS_AS(s.advance(b, h, 3), Error);
+  }
+  CHECK(b.position(0) == Vec3<double>{1, 0, 0});
+  CHECK(s.time() == 0);
+}
+
+TEST_CASE("bad force parameters name the term and field", "[errors]") {
+  ForceModel<float> f;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(f.add(LinearDrag{-1}), "linear_drag.k: must be finite and >= 0");
+  CHECK_THROWS_WITH(f.add(QuadraticDrag{nan}), "quadratic_drag.k: must be finite and >= 0");
+  CHECK_THROWS_WITH(f.add(Spring{{0, 0, 0}, 1, -2}), "spring.damping: must be finite and >= 0");
+  CHECK_THROWS_WITH(f.add(Spring{{0, nan, 0}, 1, 0}), "spring.anchor: must be finite");
+  CHECK_THROWS_WITH(f.add(Gravity{{0, nan, 0}}), "gravity.g: must be finite");
+  CHECK_THROWS_WITH(f.add(Central{{0, 0, 0}, -1}), "central.mu: must be finite and >= 0");
+  for (int i = 0; i < kMaxCentralTerms; ++i) f.add(Central{{double(i), 0, 0}, 1});
+  CHECK_THROWS_WITH(f.add(Central{{0, 0, 0}, 1}), "central: at most 4 central terms per model");
+  CHECK_THROWS_WITH(f.add(ForceCallback<float>{}), "callback force: empty function");
+  CHECK_THROWS_WITH(f.add(std::shared_ptr<const CoupledTerm<float>>{}),
+                    "coupled force: null term");
+}
+
+TEST_CASE("unknown instruction sets are refused by name", "[errors]") {
+  CHECK_THROWS_WITH(isa_by_name("neon"), Catch::StartsWith("unknown isa 'neon'"));
+  CHECK(isa_by_name("avx2") == Isa::avx2);
+  CHECK(resolve_isa(Isa::automatic) == best_isa());
+  CHECK(resolve_isa(Isa::scalar) == Isa::scalar);
+}
+
+TEST_CASE("a stepper refuses an invalid method", "[errors]") {
+  Method bad = rk4;
+  bad.name = "bad";
+  bad.tableau.a[1][1] = 0.5;
+  CHECK_THROWS_WITH(Stepper<double>(ForceModel<double>{}, bad, test::serial_options()),
+                    Catch::Contains("method 'bad'"));
+}

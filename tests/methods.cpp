@@ -1,0 +1,74 @@
+// Methods as data: the tableaus satisfy their order conditions; lookups and validation.
+#include <catch2/catch.hpp>
+
+#include "kinema/error.hpp"
+#include "kinema/methods.hpp"
+
+using namespace kinema;
+
+TEST_CASE("every tableau is consistent: sum b = 1 and c_i = sum_j a_ij", "[methods]") {
+  for (const Method* m : builtin_methods) {
+    if (m->kind != MethodKind::runge_kutta) continue;
+    const auto& t = m->tableau;
+    double sum_b = 0;
+    for (int i = 0; i < t.stages; ++i) {
+      sum_b += t.b[i];
+      double row = 0;
+      for (int j = 0; j < i; ++j) row += t.a[i][j];
+      INFO(m->name << " stage " << i);
+      CHECK(row == Approx(t.c[i]));
+    }
+    CHECK(sum_b == Approx(1.0));
+  }
+}
+
+TEST_CASE("rk4's tableau meets the fourth-order conditions", "[methods]") {
+  const auto& t = rk4.tableau;
+  double bc = 0, bc2 = 0, bc3 = 0, bac = 0, bcac = 0, bac2 = 0, baac = 0;
+  for (int i = 0; i < 4; ++i) {
+    bc += t.b[i] * t.c[i];
+    bc2 += t.b[i] * t.c[i] * t.c[i];
+    bc3 += t.b[i] * t.c[i] * t.c[i] * t.c[i];
+    for (int j = 0; j < 4; ++j) {
+      bac += t.b[i] * t.a[i][j] * t.c[j];
+      bcac += t.b[i] * t.c[i] * t.a[i][j] * t.c[j];
+      bac2 += t.b[i] * t.a[i][j] * t.c[j] * t.c[j];
+      for (int k = 0; k < 4; ++k) baac += t.b[i] * t.a[i][j] * t.a[j][k] * t.c[k];
+    }
+  }
+  CHECK(bc == Approx(1.0 / 2));
+  CHECK(bc2 == Approx(1.0 / 3));
+  CHECK(bac == Approx(1.0 / 6));
+  CHECK(bc3 == Approx(1.0 / 4));
+  CHECK(bcac == Approx(1.0 / 8));
+  CHECK(bac2 == Approx(1.0 / 12));
+  CHECK(baac == Approx(1.0 / 24));
+}
+
+TEST_CASE("methods are found by name; unknown names list the known ones", "[methods][errors]") {
+  for (const Method* m : builtin_methods) {
+    CHECK(&method_by_name(m->name) == m);
+    CHECK(builtin_index(*m) >= 0);
+  }
+  CHECK_THROWS_WITH(method_by_name("rk5"),
+                    "unknown method 'rk5' (known: euler, midpoint, heun, rk4, "
+                    "symplectic_euler, velocity_verlet)");
+}
+
+TEST_CASE("invalid user methods are refused", "[methods][errors]") {
+  Method upper = rk4;
+  upper.name = "upper";
+  upper.tableau.a[0][1] = 1;
+  CHECK_THROWS_WITH(validate(upper), Catch::Contains("strictly lower triangular"));
+  Method big = rk4;
+  big.name = "big";
+  big.tableau.stages = 5;
+  CHECK_THROWS_WITH(validate(big), Catch::Contains("method 'big': stages must be 1..4"));
+  Method empty = symplectic_euler;
+  empty.name = "empty";
+  empty.scheme.count = 0;
+  CHECK_THROWS_AS(validate(empty), Error);
+  CHECK(rk4.evaluations() == 4);
+  CHECK(velocity_verlet.evaluations() == 2);
+  CHECK(symplectic_euler.evaluations() == 1);
+}

@@ -1,0 +1,90 @@
+#pragma once
+// Helpers shared by the tests: one-body runs, state hashing, analytic error measures.
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <vector>
+
+#include "kinema/kinema.hpp"
+
+namespace kinema::test {
+
+inline StepperOptions serial_options(Isa isa = Isa::automatic) {
+  static SerialJobSystem serial;
+  StepperOptions o;
+  o.isa = isa;
+  o.jobs = &serial;
+  return o;
+}
+
+template <class T>
+struct Snapshot {
+  Vec3<double> x, v;
+};
+
+// Steps one body of mass m from (x0, v0) n times with step h; returns its final state.
+template <class T>
+Snapshot<T> run_one(const Method& method, const ForceModel<T>& forces, const Vec3<T>& x0,
+                    const Vec3<T>& v0, T mass, T h, std::uint64_t n,
+                    StepperOptions options = serial_options()) {
+  ParticleSet<T> bodies;
+  bodies.add(x0, v0, mass);
+  Stepper<T> stepper(forces, method, options);
+  stepper.advance(bodies, h, n);
+  const auto x = bodies.position(0), v = bodies.velocity(0);
+  return {{x[0], x[1], x[2]}, {v[0], v[1], v[2]}};
+}
+
+inline double distance(const Vec3<double>& a, const Vec3<double>& b) {
+  return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                   (a[2] - b[2]) * (a[2] - b[2]));
+}
+
+// Least-squares slope of log(error) against log(h): the measured order of convergence.
+inline double fitted_order(const std::vector<double>& h, const std::vector<double>& error) {
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  const double n = double(h.size());
+  for (std::size_t i = 0; i < h.size(); ++i) {
+    const double x = std::log(h[i]), y = std::log(error[i]);
+    sx += x, sy += y, sxx += x * x, sxy += x * y;
+  }
+  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+
+// FNV-1a over every array of the set, padding included: equal hashes mean equal bits.
+template <class T>
+std::uint64_t state_hash(const ParticleSet<T>& b) {
+  std::uint64_t hash = 1469598103934665603ull;
+  for (const T* a : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz(), b.inv_mass()}) {
+    const auto* bytes = reinterpret_cast<const unsigned char*>(a);
+    for (std::size_t i = 0; i < b.padded_size() * sizeof(T); ++i) {
+      hash = (hash ^ bytes[i]) * 1099511628211ull;
+    }
+  }
+  return hash;
+}
+
+// A reproducible cloud of bodies with a spread of masses, for determinism tests.
+template <class T>
+ParticleSet<T> cloud(std::size_t count, std::uint64_t seed = 3) {
+  Scene scene;
+  scene.generate = GenerateSpec{count, seed, {-2, -2, -2}, {2, 2, 2}, {-1, -1, -1}, {1, 1, 1}, 2};
+  ParticleSet<T> set = make_particles<T>(scene);
+  for (std::size_t i = 0; i < count; i += 7) set.set_velocity(i, {T(0.5), T(-1), T(2)});
+  return set;
+}
+
+// Every built-in local term, with a central attractor off the cloud's centre.
+template <class T>
+ForceModel<T> all_local_terms(bool quadratic = true, bool central = true) {
+  ForceModel<T> f;
+  f.add(Gravity{{0.1, -9.81, 0.2}});
+  f.add(LinearDrag{0.3});
+  f.add(Spring{{0.5, -0.25, 1}, 2.5, 0.1});
+  if (quadratic) f.add(QuadraticDrag{0.05});
+  if (central) f.add(Central{{7, 3, -5}, 4});
+  return f;
+}
+
+}  // namespace kinema::test
