@@ -2,6 +2,8 @@
 // Helpers shared by the tests: one-body runs, state hashing, analytic error measures.
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstdint>
 #include <cstring>
 #include <vector>
@@ -10,7 +12,23 @@
 
 namespace kinema::test {
 
-inline StepperOptions serial_options(Isa isa = Isa::automatic) {
+// The ISA the physics tests run on: KINEMA_TEST_ISA when set (ctest runs the suite once
+// per ISA), else the best one. Exits with 77 (ctest: skipped) when this CPU lacks it.
+inline Isa test_isa() {
+  static const Isa isa = [] {
+    const char* name = std::getenv("KINEMA_TEST_ISA");
+    if (name == nullptr) return Isa::automatic;
+    const Isa requested = isa_by_name(name);
+    if (!isa_available(requested)) {
+      std::fprintf(stderr, "skipped: this CPU has no %s\n", name);
+      std::exit(77);
+    }
+    return requested;
+  }();
+  return isa;
+}
+
+inline StepperOptions serial_options(Isa isa = test_isa()) {
   static SerialJobSystem serial;
   StepperOptions o;
   o.isa = isa;
