@@ -173,7 +173,7 @@ struct Stepper<T>::Impl {
 
   double time() const { return origin + double(steps_since_origin) * double(last_h); }
 
-  void step(ParticleSet<T>& b, T step_size) {
+  void start_steps(ParticleSet<T>& b, T step_size) {
     if (!(std::isfinite(step_size) && step_size > 0)) {
       throw Error("step size h must be positive and finite, got " + std::to_string(step_size));
     }
@@ -184,16 +184,30 @@ struct Stepper<T>::Impl {
     }
     bodies = &b;
     h = step_size;
-    t0 = time();
+  }
+
+  void advance(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
+    start_steps(b, step_size);
     const std::size_t n = b.padded_size();
     if (fused_fn != nullptr) {
+      // Local, time-independent forces: each block can take all its steps while it sits in
+      // cache. Every body sees the same operations as step by step, so the bits agree.
       const kernels::FusedJob<T> job{arrays(b), local, h};
-      for_blocks(n, [&](std::size_t begin, std::size_t end) { fused_fn(job, begin, end); });
-    } else {
-      reserve(n);
-      step_staged(n);
+      for_blocks(n, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; i += kBlockBodies) {
+          const std::size_t block_end = std::min(i + kBlockBodies, end);
+          for (std::uint64_t k = 0; k < steps; ++k) fused_fn(job, i, block_end);
+        }
+      });
+      steps_since_origin += steps;
+      return;
     }
-    ++steps_since_origin;
+    reserve(n);
+    for (std::uint64_t k = 0; k < steps; ++k) {
+      t0 = time();
+      step_staged(n);
+      ++steps_since_origin;
+    }
   }
 
   void step_staged(std::size_t n) {
@@ -225,6 +239,14 @@ struct Stepper<T>::Impl {
     return s == 0 || method.kind == MethodKind::kick_drift ? arrays(*bodies).v[d]
                                                            : stage_v[s][d].data();
   }
+  // Stage s's velocities (the x derivative) and accelerations, as three component arrays.
+  std::array<const T*, 3> velocities(int s) {
+    return {state_v(s, 0), state_v(s, 1), state_v(s, 2)};
+  }
+  std::array<const T*, 3> accelerations(int s) {
+    return {stage_a[s][0].data(), stage_a[s][1].data(), stage_a[s][2].data()};
+  }
+
   int accel_slot(const Phase& p) const {
     return method.kind == MethodKind::runge_kutta ? p.index : 0;
   }
@@ -258,18 +280,13 @@ struct Stepper<T>::Impl {
       job.v.out[d] = s > 0 ? stage_v[s][d].data() : nullptr;
       job.acc[d] = stage_a[s][d].data();
     }
-    if (s > 0) {
-      for (int j = 0; j < s; ++j) {
-        const double a = method.tableau.a[s][j];
-        if (a == 0) continue;
-        const int k = job.x.terms++;
-        job.v.terms++;
-        job.x.coef[k] = job.v.coef[k] = T(a);
-        for (int d = 0; d < 3; ++d) {
-          job.x.k[k][d] = state_v(j, d);
-          job.v.k[k][d] = stage_a[j][d].data();
-        }
-      }
+    double first = 0;
+    for (int j = 0; j < s; ++j) {
+      const double a = method.tableau.a[s][j];
+      if (a == 0) continue;
+      if (first == 0) first = a;
+      job.x.add(a, first, velocities(j));
+      job.v.add(a, first, accelerations(j));
     }
     stage_fn(job, begin, end);
     if (!needs_force_scratch()) return;
@@ -315,16 +332,13 @@ struct Stepper<T>::Impl {
       x.c.in[d] = x.c.out[d] = body.x[d];
       v.c.in[d] = v.c.out[d] = body.v[d];
     }
+    double first = 0;
     for (int s = 0; s < method.tableau.stages; ++s) {
       const double b = method.tableau.b[s];
       if (b == 0) continue;
-      const int k = x.c.terms++;
-      v.c.terms++;
-      x.c.coef[k] = v.c.coef[k] = T(b);
-      for (int d = 0; d < 3; ++d) {
-        x.c.k[k][d] = state_v(s, d);
-        v.c.k[k][d] = stage_a[s][d].data();
-      }
+      if (first == 0) first = b;
+      x.c.add(b, first, velocities(s));
+      v.c.add(b, first, accelerations(s));
     }
     // Positions first: they read the stage-0 velocities, which are the bodies' own.
     table->combine(x, begin, end);
@@ -336,13 +350,8 @@ struct Stepper<T>::Impl {
     const bool kick = p.kind == PhaseKind::kick;
     kernels::CombineJob<T> job{};
     job.h = T(method.scheme.ops[p.index].weight) * h;
-    job.c.terms = 1;
-    job.c.coef[0] = T(1);
-    for (int d = 0; d < 3; ++d) {
-      T* target = kick ? body.v[d] : body.x[d];
-      job.c.in[d] = job.c.out[d] = target;
-      job.c.k[0][d] = kick ? stage_a[0][d].data() : body.v[d];
-    }
+    for (int d = 0; d < 3; ++d) job.c.in[d] = job.c.out[d] = kick ? body.v[d] : body.x[d];
+    job.c.add(1, 1, kick ? accelerations(0) : velocities(0));
     table->combine(job, begin, end);
   }
 };
@@ -360,12 +369,12 @@ Stepper<T>& Stepper<T>::operator=(Stepper&&) noexcept = default;
 
 template <class T>
 void Stepper<T>::step(ParticleSet<T>& io_bodies, T h) {
-  impl_->step(io_bodies, h);
+  impl_->advance(io_bodies, h, 1);
 }
 
 template <class T>
 void Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps) {
-  for (std::uint64_t k = 0; k < steps; ++k) impl_->step(io_bodies, h);
+  impl_->advance(io_bodies, h, steps);
 }
 
 template <class T>

@@ -128,3 +128,17 @@ TEST_CASE("one scene, every ISA and thread count: one hash", "[determinism][isa]
   }
   CHECK(hashes.size() == 1);
 }
+
+TEST_CASE("advance(n) gives the bits of n calls to step()", "[determinism]") {
+  for (bool staged : {false, true}) {
+    const ForceModel<double> f = test::all_local_terms<double>();
+    StepperOptions o = test::serial_options();
+    o.force_staged = staged;
+    ParticleSet<double> a = test::cloud<double>(5000), b = a;
+    Stepper<double> sa(f, rk4, o), sb(f, rk4, o);
+    sa.advance(a, 0.01, 25);
+    for (int k = 0; k < 25; ++k) sb.step(b, 0.01);
+    CHECK(test::state_hash(a) == test::state_hash(b));
+    CHECK(sa.time() == sb.time());
+  }
+}

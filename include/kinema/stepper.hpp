@@ -48,7 +48,9 @@ class Stepper {
 
   // One step of size h (> 0, finite; else kinema::Error). Forces see t = time().
   void step(ParticleSet<T>& io_bodies, T h);
-  // `steps` steps of size h; step k sees t = t_start + k h exactly (no running sum).
+  // `steps` steps of size h; step k sees t = t_start + k h exactly (no running sum). On the
+  // fused path each block of bodies takes all its steps while in cache (same bits as
+  // calling step() `steps` times, far less memory traffic).
   void advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps);
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);

@@ -42,14 +42,24 @@ struct FusedJob {
 template <class T>
 using FusedFn = void (*)(const FusedJob<T>& job, std::size_t begin, std::size_t end);
 
-// out = in + h * sum_j coef[j] * k[j], for the three components of a vector field.
+// out = in + h * sum_j w_j k[j] for the three components of a vector field, given as
+// scale = w_0 and ratio[j] = w_j / w_0 (ratio[0] unused): see `advanced` in kernel_impl.hpp.
 template <class T>
 struct Combination {
   const T* in[3];
   T* out[3];
   int terms = 0;
-  std::array<T, kMaxStages> coef{};
+  T scale = 0;
+  std::array<T, kMaxStages> ratio{};
   const T* k[kMaxStages][3];
+
+  // Appends the term w k (w != 0).
+  void add(double w, double first_w, const std::array<const T*, 3>& field) {
+    if (terms == 0) scale = T(w);
+    ratio[terms] = T(w / first_w);
+    for (int d = 0; d < 3; ++d) k[terms][d] = field[d];
+    ++terms;
+  }
 };
 
 // One stage of the staged path: stage state (x_s, v_s) = (x, v) + h sum_j a_sj (kx_j, kv_j)

@@ -1,0 +1,44 @@
+#pragma once
+// The benchmark problem every suite shares: N particles under gravity, linear drag and a
+// spring to the origin, the same bodies for kinema, the naive baseline and Odeint.
+
+#include <benchmark/benchmark.h>
+
+#include <cstddef>
+
+#include "kinema/kinema.hpp"
+
+namespace kinema::bench {
+
+inline constexpr double kGravity = -9.81, kDrag = 0.5, kSpring = 2.0, kDt = 1.0 / 60;
+
+inline Scene bench_scene(std::size_t count) {
+  Scene s;
+  s.generate = GenerateSpec{count, 7, {-10, -10, -10}, {10, 10, 10}, {-1, -1, -1}, {1, 1, 1}, 1};
+  s.forces = {Gravity{{0, kGravity, 0}}, LinearDrag{kDrag}, Spring{{0, 0, 0}, kSpring, 0}};
+  return s;
+}
+
+// State bytes a particle step reads and writes: 7 arrays in, 6 out.
+template <class T>
+constexpr double particle_step_bytes() {
+  return 13.0 * sizeof(T);
+}
+
+// Counters every suite reports, so ratios can be read across rows.
+inline void report_body_steps(benchmark::State& state, double body_steps_per_iteration,
+                              double bytes_per_body_step) {
+  using benchmark::Counter;
+  const double total = body_steps_per_iteration * double(state.iterations());
+  state.counters["ns_per_body_step"] = Counter(total * 1e-9, Counter::kIsRate | Counter::kInvert);
+  state.counters["body_steps_per_s"] = Counter(total, Counter::kIsRate);
+  state.counters["GB_per_s"] = Counter(total * bytes_per_body_step * 1e-9, Counter::kIsRate);
+}
+
+// Fails the run (visible in the output) when a benchmark left a non-finite state behind.
+template <class T>
+void require_finite(benchmark::State& state, const ParticleSet<T>& bodies) {
+  if (!all_finite(bodies)) state.SkipWithError("state is not finite after the run");
+}
+
+}  // namespace kinema::bench

@@ -1,0 +1,28 @@
+#pragma once
+// The machine's own limits, measured in the same run as the kernels: in-place streaming
+// bandwidth (x += h v) and the FMA peak. Each has a version per instruction set, compiled in
+// its own unit; the best available one runs.
+
+#include <cstddef>
+
+namespace kinema::bench {
+
+// x[i] += h * v[i] for i in [0, n); x and v 64-byte aligned, n a multiple of 16.
+using StreamFn = void (*)(float* x, const float* v, std::size_t n, float h);
+// `rounds` rounds of dependent FMAs over independent accumulators; returns a checksum and
+// the FLOPs done through out_flops.
+using PeakFloatFn = float (*)(long rounds, double* out_flops);
+using PeakDoubleFn = double (*)(long rounds, double* out_flops);
+
+struct LimitKernels {
+  const char* isa;
+  StreamFn stream;
+  PeakFloatFn peak_float;
+  PeakDoubleFn peak_double;
+};
+
+LimitKernels limits_avx512();
+LimitKernels limits_avx2();
+LimitKernels limits_sse2();
+
+}  // namespace kinema::bench

@@ -1,0 +1,100 @@
+// kinema's particle paths: fused step by step (what a frame loop does), the same kernel with
+// its memory traffic removed (advance(): each cache-sized block takes every step in turn),
+// and the staged path, per method, precision, size, thread count and instruction set.
+#include <benchmark/benchmark.h>
+
+#include <memory>
+#include <string>
+
+#include "bench_scene.hpp"
+
+namespace kinema::bench {
+namespace {
+
+constexpr std::int64_t kCeilingSteps = 64;
+
+struct Case {
+  const Method* method;
+  Isa isa;
+  unsigned threads;
+  bool staged;
+};
+
+template <class T>
+void step_by_step(benchmark::State& state, Case c) {
+  const auto n = std::size_t(state.range(0));
+  const Scene scene = bench_scene(n);
+  ParticleSet<T> bodies = make_particles<T>(scene);
+  TbbJobSystem jobs(c.threads);
+  SerialJobSystem serial;
+  StepperOptions o;
+  o.isa = c.isa;
+  o.jobs = c.threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
+  o.force_staged = c.staged;
+  Stepper<T> stepper(make_forces<T>(scene), *c.method, o);
+  stepper.step(bodies, T(kDt));  // warm: first-touch, scratch
+  for (auto _ : state) {
+    stepper.step(bodies, T(kDt));
+    benchmark::ClobberMemory();
+  }
+  benchmark::DoNotOptimize(bodies.px());
+  require_finite(state, bodies);
+  report_body_steps(state, double(n), particle_step_bytes<T>());
+}
+
+template <class T>
+void temporally_blocked(benchmark::State& state, Case c) {
+  const auto n = std::size_t(state.range(0));
+  const Scene scene = bench_scene(n);
+  ParticleSet<T> bodies = make_particles<T>(scene);
+  TbbJobSystem jobs(c.threads);
+  SerialJobSystem serial;
+  StepperOptions o;
+  o.isa = c.isa;
+  o.jobs = c.threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
+  Stepper<T> stepper(make_forces<T>(scene), *c.method, o);
+  for (auto _ : state) {
+    stepper.advance(bodies, T(kDt), kCeilingSteps);
+    benchmark::ClobberMemory();
+  }
+  require_finite(state, bodies);
+  report_body_steps(state, double(n) * kCeilingSteps, particle_step_bytes<T>());
+}
+
+std::string name(const char* kind, const Case& c, const char* precision) {
+  return std::string(kind) + "/" + std::string(c.method->name) + "/" + precision + "/" +
+         std::string(isa_name(c.isa)) + "/threads:" + std::to_string(c.threads);
+}
+
+void register_all() {
+  const std::int64_t sizes[] = {1 << 10, 1 << 14, 100000, 1 << 20, 1 << 22};
+  for (Isa isa : {Isa::scalar, Isa::sse2, Isa::avx2, Isa::avx512}) {
+    if (!isa_available(isa)) continue;
+    for (const Method* m : builtin_methods) {
+      for (unsigned threads : {1u, 2u}) {
+        const Case c{m, isa, threads, false};
+        auto* f = benchmark::RegisterBenchmark(name("fused", c, "float").c_str(),
+                                               step_by_step<float>, c);
+        auto* d = benchmark::RegisterBenchmark(name("fused", c, "double").c_str(),
+                                               step_by_step<double>, c);
+        auto* cf = benchmark::RegisterBenchmark(name("ceiling", c, "float").c_str(),
+                                                temporally_blocked<float>, c);
+        auto* cd = benchmark::RegisterBenchmark(name("ceiling", c, "double").c_str(),
+                                                temporally_blocked<double>, c);
+        for (auto* b : {f, d, cf, cd}) {
+          for (std::int64_t n : sizes) b->Arg(n);
+          b->UseRealTime()->Unit(benchmark::kMicrosecond);
+        }
+        const Case s{m, isa, threads, true};
+        auto* st = benchmark::RegisterBenchmark(name("staged", s, "float").c_str(),
+                                                step_by_step<float>, s);
+        st->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
+      }
+    }
+  }
+}
+
+const int registered = (register_all(), 0);
+
+}  // namespace
+}  // namespace kinema::bench
