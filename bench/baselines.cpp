@@ -1,4 +1,5 @@
-// The baselines, on the same bodies and forces as the kinema suites:
+// The baselines, on the same bodies and forces as the kinema suites, built for baseline
+// x86-64 like any portable binary:
 //  - a textbook array-of-structs RK4 with a temporary state per stage;
 //  - Boost.Odeint runge_kutta4 over std::vector (positions then velocities).
 #include <benchmark/benchmark.h>
@@ -12,78 +13,100 @@
 namespace kinema::bench {
 namespace {
 
+// The textbook particle system (as in Witkin and Baraff's course notes): particles as
+// structs with a force accumulator, the state gathered into one flat vector, and RK4 built
+// from whole-vector operations, each stage a pass writing its own temporary. The
+// temporaries are allocated once, not per step (kinder than the notes).
 template <class T>
 struct Particle {
-  T x[3], v[3], inv_mass;
+  T x[3], v[3], f[3], m;
 };
 
 template <class T>
-struct Derivative {
-  T dx[3], dv[3];
-};
-
-template <class T>
-Derivative<T> derivative(const Particle<T>& p) {
-  Derivative<T> d;
-  for (int i = 0; i < 3; ++i) {
-    const T force = -T(kSpring) * p.x[i] - T(kDrag) * p.v[i];
-    d.dx[i] = p.v[i];
-    d.dv[i] = (i == 1 ? T(kGravity) : T(0)) + p.inv_mass * force;
+class NaiveSystem {
+ public:
+  explicit NaiveSystem(std::size_t n) : particles_(n) {
+    const ParticleSet<T> soa = make_particles<T>(bench_scene(n));
+    for (std::size_t i = 0; i < n; ++i) {
+      Particle<T>& p = particles_[i];
+      p.x[0] = soa.px()[i], p.x[1] = soa.py()[i], p.x[2] = soa.pz()[i];
+      p.v[0] = soa.vx()[i], p.v[1] = soa.vy()[i], p.v[2] = soa.vz()[i];
+      p.m = T(1) / soa.inv_mass()[i];
+    }
+    for (auto* v : {&x0_, &tmp_, &k1_, &k2_, &k3_, &k4_}) v->resize(6 * n);
   }
-  return d;
-}
 
-template <class T>
-Particle<T> offset(const Particle<T>& p, const Derivative<T>& d, T h) {
-  Particle<T> q = p;
-  for (int i = 0; i < 3; ++i) q.x[i] += h * d.dx[i], q.v[i] += h * d.dv[i];
-  return q;
-}
+  void rk4_step(T h) {
+    get_state(x0_);
+    derivative(k1_);
+    add_scaled(x0_, k1_, h / 2, tmp_);
+    set_state(tmp_);
+    derivative(k2_);
+    add_scaled(x0_, k2_, h / 2, tmp_);
+    set_state(tmp_);
+    derivative(k3_);
+    add_scaled(x0_, k3_, h, tmp_);
+    set_state(tmp_);
+    derivative(k4_);
+    for (std::size_t i = 0; i < x0_.size(); ++i) {
+      x0_[i] += h / 6 * (k1_[i] + 2 * k2_[i] + 2 * k3_[i] + k4_[i]);
+    }
+    set_state(x0_);
+  }
 
-// The textbook RK4: per-stage temporaries for the whole set, one pass per stage.
-template <class T>
-void naive_rk4_step(std::vector<Particle<T>>& ps, std::vector<Derivative<T>> (&k)[4], T h) {
-  const std::size_t n = ps.size();
-  for (std::size_t i = 0; i < n; ++i) k[0][i] = derivative(ps[i]);
-  for (std::size_t i = 0; i < n; ++i) k[1][i] = derivative(offset(ps[i], k[0][i], h / 2));
-  for (std::size_t i = 0; i < n; ++i) k[2][i] = derivative(offset(ps[i], k[1][i], h / 2));
-  for (std::size_t i = 0; i < n; ++i) k[3][i] = derivative(offset(ps[i], k[2][i], h));
-  for (std::size_t i = 0; i < n; ++i) {
-    for (int c = 0; c < 3; ++c) {
-      ps[i].x[c] += h / 6 * (k[0][i].dx[c] + 2 * k[1][i].dx[c] + 2 * k[2][i].dx[c] + k[3][i].dx[c]);
-      ps[i].v[c] += h / 6 * (k[0][i].dv[c] + 2 * k[1][i].dv[c] + 2 * k[2][i].dv[c] + k[3][i].dv[c]);
+  bool finite() const {
+    for (const auto& p : particles_) {
+      if (!std::isfinite(p.x[0] + p.x[1] + p.x[2] + p.v[0] + p.v[1] + p.v[2])) return false;
+    }
+    return true;
+  }
+
+ private:
+  void get_state(std::vector<T>& dst) const {
+    for (std::size_t i = 0; i < particles_.size(); ++i) {
+      for (int c = 0; c < 3; ++c) dst[6 * i + c] = particles_[i].x[c];
+      for (int c = 0; c < 3; ++c) dst[6 * i + 3 + c] = particles_[i].v[c];
     }
   }
-}
-
-template <class T>
-std::vector<Particle<T>> aos_bodies(std::size_t n) {
-  const ParticleSet<T> soa = make_particles<T>(bench_scene(n));
-  std::vector<Particle<T>> ps(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    ps[i] = {{soa.px()[i], soa.py()[i], soa.pz()[i]},
-             {soa.vx()[i], soa.vy()[i], soa.vz()[i]},
-             soa.inv_mass()[i]};
+  void set_state(const std::vector<T>& src) {
+    for (std::size_t i = 0; i < particles_.size(); ++i) {
+      for (int c = 0; c < 3; ++c) particles_[i].x[c] = src[6 * i + c];
+      for (int c = 0; c < 3; ++c) particles_[i].v[c] = src[6 * i + 3 + c];
+    }
   }
-  return ps;
-}
+  void compute_forces() {
+    for (auto& p : particles_) {
+      for (int c = 0; c < 3; ++c) {
+        p.f[c] = (c == 1 ? p.m * T(kGravity) : T(0)) - T(kDrag) * p.v[c] - T(kSpring) * p.x[c];
+      }
+    }
+  }
+  void derivative(std::vector<T>& dst) {
+    for (auto& p : particles_) p.f[0] = p.f[1] = p.f[2] = 0;
+    compute_forces();
+    for (std::size_t i = 0; i < particles_.size(); ++i) {
+      for (int c = 0; c < 3; ++c) dst[6 * i + c] = particles_[i].v[c];
+      for (int c = 0; c < 3; ++c) dst[6 * i + 3 + c] = particles_[i].f[c] / particles_[i].m;
+    }
+  }
+  static void add_scaled(const std::vector<T>& a, const std::vector<T>& b, T s,
+                         std::vector<T>& out) {
+    for (std::size_t i = 0; i < a.size(); ++i) out[i] = a[i] + s * b[i];
+  }
+
+  std::vector<Particle<T>> particles_;
+  std::vector<T> x0_, tmp_, k1_, k2_, k3_, k4_;
+};
 
 template <class T>
 void naive_aos_rk4(benchmark::State& state) {
   const auto n = std::size_t(state.range(0));
-  std::vector<Particle<T>> ps = aos_bodies<T>(n);
-  std::vector<Derivative<T>> k[4] = {std::vector<Derivative<T>>(n), std::vector<Derivative<T>>(n),
-                                     std::vector<Derivative<T>>(n), std::vector<Derivative<T>>(n)};
+  NaiveSystem<T> system(n);
   for (auto _ : state) {
-    naive_rk4_step(ps, k, T(kDt));
+    system.rk4_step(T(kDt));
     benchmark::ClobberMemory();
   }
-  for (const auto& p : ps) {
-    if (!std::isfinite(p.x[0] + p.x[1] + p.x[2] + p.v[0] + p.v[1] + p.v[2])) {
-      state.SkipWithError("state is not finite after the run");
-      break;
-    }
-  }
+  if (!system.finite()) state.SkipWithError("state is not finite after the run");
   report_body_steps(state, double(n), particle_step_bytes<T>());
 }
 

@@ -1,0 +1,240 @@
+// kinema_bench_report BENCH.json [CSV]: turns one kinema_bench run (Google Benchmark JSON,
+// ideally with repetitions) into a table of ratios measured in that run: speed-ups over the
+// naive and Odeint baselines, the fraction of the compute ceiling and of the streaming
+// bandwidth reached, 2-thread scaling, and a verdict on whether 2-thread figures hold.
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace {
+
+using json = nlohmann::json;
+
+struct Figure {
+  double median = 0;  // of the counter, over repetitions
+  double cv = 0;      // coefficient of variation, 0 without repetitions
+};
+
+// run_name -> counter -> figure
+using Runs = std::map<std::string, std::map<std::string, Figure>>;
+
+Runs load_runs(const json& doc) {
+  Runs runs;
+  for (const json& b : doc.at("benchmarks")) {
+    const std::string run = b.value("run_name", b.value("name", ""));
+    const std::string aggregate = b.value("aggregate_name", "");
+    if (b.value("run_type", "") == "aggregate" && aggregate != "median" && aggregate != "cv") {
+      continue;
+    }
+    if (b.contains("error_occurred") && b["error_occurred"].get<bool>()) continue;
+    for (const auto& [key, value] : b.items()) {
+      if (!value.is_number()) continue;
+      Figure& f = runs[run][key];
+      if (aggregate == "cv") {
+        f.cv = value.get<double>();
+      } else if (aggregate == "median" || aggregate.empty()) {
+        f.median = value.get<double>();
+      }
+    }
+  }
+  return runs;
+}
+
+std::optional<Figure> find(const Runs& runs, const std::string& run, const char* counter) {
+  const auto r = runs.find(run);
+  if (r == runs.end()) return std::nullopt;
+  const auto c = r->second.find(counter);
+  if (c == r->second.end() || c->second.median == 0) return std::nullopt;
+  return c->second;
+}
+
+std::string fused(const std::string& kind, const std::string& method, const std::string& p,
+                  const std::string& isa, int threads, long n) {
+  return kind + "/" + method + "/" + p + "/" + isa + "/threads:" + std::to_string(threads) + "/" +
+         std::to_string(n) + "/real_time";
+}
+std::string baseline(const char* name, const std::string& p, long n) {
+  return std::string(name) + "/rk4/" + p + "/" + std::to_string(n) + "/real_time";
+}
+std::string stream(long n, int threads) {
+  return "limit/stream/" + std::to_string(n) + "/real_time/threads:" + std::to_string(threads);
+}
+std::string peak(const std::string& p, int threads) {
+  return "limit/fma_peak/" + p + "/real_time/threads:" + std::to_string(threads);
+}
+
+std::string cell(std::optional<double> x, const char* format) {
+  if (!x || !std::isfinite(*x)) return "-";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, *x);
+  return buf;
+}
+
+std::optional<double> percent(std::optional<double> x) {
+  if (!x) return std::nullopt;
+  return 100 * *x;
+}
+
+std::optional<double> median(std::optional<Figure> f) {
+  if (!f) return std::nullopt;
+  return f->median;
+}
+
+std::optional<double> ratio(std::optional<Figure> a, std::optional<Figure> b) {
+  if (!a || !b) return std::nullopt;
+  return a->median / b->median;
+}
+
+class Report {
+ public:
+  Report(Runs runs, std::string isa, std::FILE* csv)
+      : runs_(std::move(runs)), isa_(std::move(isa)), csv_(csv) {}
+
+  void rk4_table() {
+    std::printf("\nFused RK4 (gravity + linear drag + spring), %s, ns per body-step; ratios from this run\n",
+                isa_.c_str());
+    std::printf("%-6s %8s | %12s %7s %7s %8s %6s | %12s %7s %6s\n", "prec", "N", "1 thread",
+                "x naive", "x odeint", "ceiling", "BW", "2 threads", "scaling", "BW");
+    for (const std::string p : {"float", "double"}) {
+      for (long n : {1024L, 16384L, 100000L, 1048576L, 4194304L}) rk4_row(p, n);
+    }
+    std::printf("ceiling: the same kernel with its memory traffic removed (each cache-resident block "
+                "takes all steps in turn), as ceiling time / step time.\nBW: state bytes read + "
+                "written per second against in-place streaming (x += h v) at the same size and "
+                "thread count.\n");
+  }
+
+  void methods_table() {
+    std::printf("\nEvery method, N = 100000, 1 thread, %s: ns per body-step (ceiling fraction)\n",
+                isa_.c_str());
+    for (const std::string p : {"float", "double"}) {
+      std::printf("%-6s", p.c_str());
+      for (const char* m : {"euler", "midpoint", "heun", "rk4", "symplectic_euler", "velocity_verlet"}) {
+        const auto f = find(runs_, fused("fused", m, p, isa_, 1, 100000), "ns_per_body_step");
+        const auto c = find(runs_, fused("ceiling", m, p, isa_, 1, 100000), "ns_per_body_step");
+        std::printf("  %s %s (%s)", m, cell(median(f), "%.3f").c_str(),
+                    cell(percent(ratio(c, f)), "%.0f%%").c_str());
+      }
+      std::printf("\n");
+    }
+  }
+
+  void isa_table() {
+    std::printf("\nRK4, N = 100000, 1 thread, by instruction set: ns per body-step (speed-up over scalar)\n");
+    for (const std::string p : {"float", "double"}) {
+      const auto scalar = find(runs_, fused("fused", "rk4", p, "scalar", 1, 100000), "ns_per_body_step");
+      std::printf("%-6s", p.c_str());
+      for (const char* isa : {"scalar", "sse2", "avx2", "avx512"}) {
+        const auto f = find(runs_, fused("fused", "rk4", p, isa, 1, 100000), "ns_per_body_step");
+        if (!f) continue;
+        std::printf("  %s %.3f (%s)", isa, f->median, cell(ratio(scalar, f), "%.1fx").c_str());
+      }
+      std::printf("\n");
+    }
+  }
+
+  void limits() {
+    std::printf("\nMachine limits in this run: FMA peak float %s / %s GFLOP/s (1 / 2 threads), double %s / %s;"
+                "\n  in-place streaming at 4M bodies' state: %s / %s GB/s\n",
+                value(peak("float", 1), "GFLOP_per_s").c_str(), value(peak("float", 2), "GFLOP_per_s").c_str(),
+                value(peak("double", 1), "GFLOP_per_s").c_str(), value(peak("double", 2), "GFLOP_per_s").c_str(),
+                value(stream(4194304, 1), "GB_per_s").c_str(), value(stream(4194304, 2), "GB_per_s").c_str());
+    const auto one = find(runs_, peak("float", 1), "GFLOP_per_s");
+    const auto two = find(runs_, peak("float", 2), "GFLOP_per_s");
+    if (one && two) {
+      const double s = two->median / one->median;
+      std::printf("scaling check: pure FMA work runs %.2fx faster on 2 threads: %s\n", s,
+                  s >= 1.8 ? "two real cores, the 2-thread figures are trustworthy"
+                           : "below 1.8x, the vCPUs share a core now; discard the 2-thread figures");
+    }
+  }
+
+  void noise() const {
+    double max_cv = 0, sum = 0;
+    for (double cv : cvs_) max_cv = std::max(max_cv, cv), sum += cv;
+    if (!cvs_.empty()) {
+      std::printf("noise: coefficient of variation over repetitions, mean %.1f%%, max %.1f%% "
+                  "(differences below that are noise)\n",
+                  100 * sum / double(cvs_.size()), 100 * max_cv);
+    }
+  }
+
+ private:
+  std::string value(const std::string& run, const char* counter) const {
+    const auto f = find(runs_, run, counter);
+    return f ? cell(f->median, "%.1f") : "-";
+  }
+
+  void rk4_row(const std::string& p, long n) {
+    const auto one = find(runs_, fused("fused", "rk4", p, isa_, 1, n), "ns_per_body_step");
+    if (!one) return;
+    cvs_.push_back(one->cv);
+    const auto two = find(runs_, fused("fused", "rk4", p, isa_, 2, n), "ns_per_body_step");
+    const auto naive = find(runs_, baseline("naive_aos", p, n), "ns_per_body_step");
+    const auto odeint = find(runs_, baseline("odeint", p, n), "ns_per_body_step");
+    const auto ceiling = find(runs_, fused("ceiling", "rk4", p, isa_, 1, 100000), "ns_per_body_step");
+    const auto bw1 = ratio(find(runs_, fused("fused", "rk4", p, isa_, 1, n), "GB_per_s"),
+                           find(runs_, stream(n, 1), "GB_per_s"));
+    const auto bw2 = ratio(find(runs_, fused("fused", "rk4", p, isa_, 2, n), "GB_per_s"),
+                           find(runs_, stream(n, 2), "GB_per_s"));
+    std::printf("%-6s %8ld | %7.3f ±%2.0f%% %7s %8s %8s %6s | %12s %7s %6s\n", p.c_str(), n, one->median,
+                100 * one->cv, cell(ratio(naive, one), "%.1fx").c_str(),
+                cell(ratio(odeint, one), "%.1fx").c_str(), cell(percent(ratio(ceiling, one)), "%.0f%%").c_str(),
+                cell(percent(bw1), "%.0f%%").c_str(), cell(median(two), "%.3f").c_str(),
+                cell(ratio(one, two), "%.2fx").c_str(), cell(percent(bw2), "%.0f%%").c_str());
+    if (csv_ != nullptr) {
+      std::fprintf(csv_, "%s,%ld,%s,%.6g,%.4g,%s,%s,%s,%s,%s,%s,%s\n", p.c_str(), n, isa_.c_str(),
+                   one->median, one->cv, cell(median(two), "%.6g").c_str(),
+                   cell(ratio(naive, one), "%.4g").c_str(), cell(ratio(odeint, one), "%.4g").c_str(),
+                   cell(ratio(ceiling, one), "%.4g").c_str(), cell(bw1, "%.4g").c_str(),
+                   cell(bw2, "%.4g").c_str(), cell(ratio(one, two), "%.4g").c_str());
+    }
+  }
+
+  Runs runs_;
+  std::string isa_;
+  std::FILE* csv_;
+  std::vector<double> cvs_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: kinema_bench_report BENCH.json [TABLE.csv]\n");
+    return 2;
+  }
+  json doc;
+  try {
+    std::ifstream in(argv[1]);
+    doc = json::parse(in);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "kinema_bench_report: %s: %s\n", argv[1], e.what());
+    return 1;
+  }
+  const json& context = doc.at("context");
+  const std::string isa = context.value("kinema_best_isa", "avx512");
+  std::printf("kinema benchmarks on %s (cpu family %s, %d threads), %s; kernels use %s\n",
+              context.value("cpu_model", "?").c_str(), context.value("cpu_family", "?").c_str(),
+              context.value("num_cpus", 0), context.value("date", "?").c_str(), isa.c_str());
+  std::FILE* csv = argc > 2 ? std::fopen(argv[2], "w") : nullptr;
+  if (csv != nullptr) {
+    std::fprintf(csv, "precision,n,isa,ns_per_body_step,cv,ns_per_body_step_2t,speedup_naive,"
+                      "speedup_odeint,ceiling_fraction,bandwidth_fraction,bandwidth_fraction_2t,"
+                      "scaling_2t\n");
+  }
+  Report report(load_runs(doc), isa, csv);
+  report.rk4_table();
+  report.methods_table();
+  report.isa_table();
+  report.limits();
+  report.noise();
+  if (csv != nullptr) std::fclose(csv);
+  return 0;
+}
