@@ -18,6 +18,7 @@ struct Case {
   Isa isa;
   unsigned threads;
   bool staged;
+  bool relaxed = false;
 };
 
 template <class T>
@@ -31,6 +32,7 @@ void step_by_step(benchmark::State& state, Case c) {
   o.isa = c.isa;
   o.jobs = c.threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
   o.force_staged = c.staged;
+  o.relaxed_fma = c.relaxed;
   Stepper<T> stepper(make_forces<T>(scene), *c.method, o);
   stepper.step(bodies, T(kDt));  // warm: first-touch, scratch
   for (auto _ : state) {
@@ -92,6 +94,16 @@ void register_all() {
         auto* st = benchmark::RegisterBenchmark(name("staged", s, "float").c_str(),
                                                 step_by_step<float>, s);
         st->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
+      }
+    }
+    if (isa == Isa::scalar || isa == Isa::sse2) {
+      // What exact fused multiply-adds cost where there is no FMA unit.
+      const Case r{&rk4, isa, 1, false, true};
+      for (auto* b : {benchmark::RegisterBenchmark(name("relaxed", r, "float").c_str(),
+                                                   step_by_step<float>, r),
+                      benchmark::RegisterBenchmark(name("relaxed", r, "double").c_str(),
+                                                   step_by_step<double>, r)}) {
+        b->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
       }
     }
   }

@@ -98,7 +98,7 @@ struct Stepper<T>::Impl {
   Impl(ForceModel<T> f, const Method& m, StepperOptions o)
       : forces(std::move(f)), method(m), options(o) {
     validate(method);
-    table = &kernels::kernel_table<T>(options.isa);
+    table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
     if (options.jobs == nullptr) {
       owned_jobs = std::make_unique<TbbJobSystem>(options.threads);
       jobs = owned_jobs.get();

@@ -142,3 +142,25 @@ TEST_CASE("advance(n) gives the bits of n calls to step()", "[determinism]") {
     CHECK(sa.time() == sb.time());
   }
 }
+
+TEST_CASE("the relaxed scalar and SSE2 builds stay deterministic and close", "[determinism][isa]") {
+  const ForceModel<float> f = test::all_local_terms<float>();
+  for (Isa isa : {Isa::scalar, Isa::sse2}) {
+    StepperOptions relaxed = test::serial_options(isa);
+    relaxed.relaxed_fma = true;
+    ParticleSet<float> exact = test::cloud<float>(2000), fast = exact;
+    Stepper<float>(f, rk4, test::serial_options(isa)).advance(exact, 0.01f, 20);
+    Stepper<float>(f, rk4, relaxed).advance(fast, 0.01f, 20);
+    INFO(isa_name(isa));
+    CHECK(test::state_hash(fast) != test::state_hash(exact));  // it really is another build
+    for (std::size_t i = 0; i < exact.size(); ++i) {
+      REQUIRE(exact.px()[i] == Approx(fast.px()[i]).epsilon(1e-5).margin(1e-5));
+    }
+    TbbJobSystem two(2);
+    relaxed.jobs = &two;
+    relaxed.inline_below = 0;
+    ParticleSet<float> again = test::cloud<float>(2000);
+    Stepper<float>(f, rk4, relaxed).advance(again, 0.01f, 20);
+    CHECK(test::state_hash(again) == test::state_hash(fast));
+  }
+}

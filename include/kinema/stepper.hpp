@@ -30,6 +30,10 @@ struct StepperOptions {
   std::size_t inline_below = 8192;
   // Take the staged path even where the fused one applies (cross-checks, benchmarks).
   bool force_staged = false;
+  // Scalar and SSE2 paths only (CPUs without FMA, or a forced isa): multiply then add
+  // instead of an exact fused multiply-add. Faster there, but results then differ in the
+  // last bits from the AVX2 and AVX-512 paths. Those always use their FMA units.
+  bool relaxed_fma = false;
 };
 
 // Bodies per block: the unit of work handed to the job system. Fixed, so the partition

@@ -69,17 +69,17 @@ Isa isa_by_name(std::string_view name) {
 namespace kernels {
 
 template <class T>
-const KernelTable<T>& kernel_table(Isa isa) {
+const KernelTable<T>& kernel_table(Isa isa, bool relaxed) {
   switch (resolve_isa(isa)) {
     case Isa::avx512: return avx512_table<T>();
     case Isa::avx2: return avx2_table<T>();
-    case Isa::sse2: return sse2_table<T>();
-    default: return scalar_table<T>();
+    case Isa::sse2: return relaxed ? sse2_relaxed_table<T>() : sse2_table<T>();
+    default: return relaxed ? scalar_relaxed_table<T>() : scalar_table<T>();
   }
 }
 
-template const KernelTable<float>& kernel_table<float>(Isa);
-template const KernelTable<double>& kernel_table<double>(Isa);
+template const KernelTable<float>& kernel_table<float>(Isa, bool);
+template const KernelTable<double>& kernel_table<double>(Isa, bool);
 
 }  // namespace kernels
 }  // namespace kinema

@@ -106,14 +106,17 @@ struct KernelTable {
   AddForcesFn<T> add_forces;
 };
 
-// The table of an available instruction set (`isa` resolved, not automatic).
+// The table of an available instruction set (`isa` resolved, not automatic). `relaxed`
+// picks the multiply-then-add build of the scalar and SSE2 paths (others have FMA units).
 template <class T>
-const KernelTable<T>& kernel_table(Isa isa);
+const KernelTable<T>& kernel_table(Isa isa, bool relaxed = false);
 
 // Defined each in its own translation unit, compiled with that unit's flags.
 template <class T> const KernelTable<T>& scalar_table();
 template <class T> const KernelTable<T>& sse2_table();
 template <class T> const KernelTable<T>& avx2_table();
 template <class T> const KernelTable<T>& avx512_table();
+template <class T> const KernelTable<T>& scalar_relaxed_table();
+template <class T> const KernelTable<T>& sse2_relaxed_table();
 
 }  // namespace kinema::kernels

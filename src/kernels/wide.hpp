@@ -3,15 +3,18 @@
 // Included by each per-ISA translation unit inside its own namespace (KINEMA_ISA_NS), so
 // inline functions compiled with different flags never merge at link time.
 //
-// fused(a, b, c) is a*b + c with one rounding on every path: std::fma for scalar and SSE2
-// lanes, the FMA instructions for AVX2 and AVX-512. With -ffp-contract=off the compiler
-// never fuses anything else, so every path computes the same bits.
+// fused(a, b, c) is a*b + c with one rounding on every path: the FMA instructions on AVX2
+// and AVX-512, std::fma on the scalar path, and on SSE2 an exact emulation for float
+// (exact_fma.hpp) and std::fma per lane for double. With -ffp-contract=off the compiler never fuses anything else,
+// so every path computes the same bits.
 
 #include <cmath>
 #include <cstddef>
 #include <type_traits>
 
 #include <xsimd/xsimd.hpp>
+
+#include "kernels/exact_fma.hpp"
 
 namespace kinema::kernels::KINEMA_ISA_NS {
 
@@ -47,17 +50,46 @@ inline void store(value_t<V>* p, const V& v) {
   }
 }
 
+#if defined(KINEMA_RELAXED_FMA)
+// The opt-in relaxed build of the scalar and SSE2 paths: a multiply then an add (two
+// roundings). Faster where there is no FMA unit; no longer the other paths' bits.
+template <class T>
+  requires std::is_floating_point_v<T>
+inline T fused(T a, T b, T c) {
+  return a * b + c;
+}
+inline xsimd::batch<float, xsimd::sse2> fused(const xsimd::batch<float, xsimd::sse2>& a,
+                                              const xsimd::batch<float, xsimd::sse2>& b,
+                                              const xsimd::batch<float, xsimd::sse2>& c) {
+  return a * b + c;
+}
+inline xsimd::batch<double, xsimd::sse2> fused(const xsimd::batch<double, xsimd::sse2>& a,
+                                               const xsimd::batch<double, xsimd::sse2>& b,
+                                               const xsimd::batch<double, xsimd::sse2>& c) {
+  return a * b + c;
+}
+#else
+// Scalar: libm's fma, the hardware instruction behind a call where the CPU has one. (The
+// inline emulation below is slower here: a lone dependent chain exposes its latency.)
 template <class T>
   requires std::is_floating_point_v<T>
 inline T fused(T a, T b, T c) {
   return std::fma(a, b, c);
 }
 
-template <class T>
-inline xsimd::batch<T, xsimd::sse2> fused(const xsimd::batch<T, xsimd::sse2>& a,
-                                          const xsimd::batch<T, xsimd::sse2>& b,
-                                          const xsimd::batch<T, xsimd::sse2>& c) {
+// SSE2 float: four lanes emulated at once (exact_fma.hpp), 1.5x faster than four libm
+// calls (measured: rk4, 100k bodies, 86 against 127 ns per body-step, Zen 4).
+inline xsimd::batch<float, xsimd::sse2> fused(const xsimd::batch<float, xsimd::sse2>& a,
+                                              const xsimd::batch<float, xsimd::sse2>& b,
+                                              const xsimd::batch<float, xsimd::sse2>& c) {
+  return exact_fma(__m128(a), __m128(b), __m128(c));
+}
+
+inline xsimd::batch<double, xsimd::sse2> fused(const xsimd::batch<double, xsimd::sse2>& a,
+                                               const xsimd::batch<double, xsimd::sse2>& b,
+                                               const xsimd::batch<double, xsimd::sse2>& c) {
   // SSE2 has no FMA: one correctly rounded std::fma per lane.
+  using T = double;
   using B = xsimd::batch<T, xsimd::sse2>;
   alignas(16) T x[B::size], y[B::size], z[B::size];
   a.store_aligned(x);
@@ -66,6 +98,7 @@ inline xsimd::batch<T, xsimd::sse2> fused(const xsimd::batch<T, xsimd::sse2>& a,
   for (std::size_t i = 0; i < B::size; ++i) x[i] = std::fma(x[i], y[i], z[i]);
   return B::load_aligned(x);
 }
+#endif
 
 #if defined(__FMA__)
 inline xsimd::batch<float, xsimd::fma3<xsimd::avx2>> fused(

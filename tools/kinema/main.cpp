@@ -36,6 +36,10 @@ void add_run_command(CLI::App& app, kinema::cli::RunOptions& o, TextOptions& tex
       ->check(CLI::IsMember({"auto", "scalar", "sse2", "avx2", "avx512"}));
   run->add_option("--threads", o.threads, "Worker threads (0: all cores)")
       ->check(CLI::Range(0u, 1024u));
+  run->add_flag("--relaxed-fma", o.relaxed_fma,
+                "Scalar and SSE2 paths: multiply then add instead of an exact fused "
+                "multiply-add (faster without an FMA unit; results then differ in the last "
+                "bits from the AVX2 and AVX-512 paths)");
   run->add_flag("--quiet,-q", o.quiet, "Print nothing on success");
 }
 

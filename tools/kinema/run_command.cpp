@@ -43,6 +43,7 @@ int run_typed(const Scene& scene, const RunOptions& o) {
   StepperOptions stepper_options;
   stepper_options.isa = o.isa;
   stepper_options.threads = o.threads;
+  stepper_options.relaxed_fma = o.relaxed_fma;
   Stepper<T> stepper(make_forces<T>(scene), method_by_name(scene.method), stepper_options);
   const T h = T(scene.dt);
   const EnergyReport initial = energy(bodies, stepper.forces());
@@ -80,6 +81,7 @@ int run_typed(const Scene& scene, const RunOptions& o) {
   summary["t_final"] = stepper.time();
   summary["precision"] = std::string(precision_name(scene.precision));
   summary["isa"] = std::string(isa_name(stepper.isa()));
+  summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
   summary["wall_seconds"] = wall_seconds;
   summary["body_steps_per_second"] = wall_seconds > 0 ? body_steps / wall_seconds : 0.0;

@@ -21,6 +21,7 @@ struct RunOptions {
   std::string summary_path;     // empty: no summary file
   Isa isa = Isa::automatic;
   unsigned threads = 0;         // 0: all hardware threads
+  bool relaxed_fma = false;     // scalar and SSE2 paths: multiply then add
   bool quiet = false;
 };
 
