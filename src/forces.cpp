@@ -14,6 +14,9 @@ std::string term_name(const LocalTerm& term) {
     const char* operator()(const QuadraticDrag&) const { return "quadratic_drag"; }
     const char* operator()(const Spring&) const { return "spring"; }
     const char* operator()(const Central&) const { return "central"; }
+    const char* operator()(const Torque&) const { return "torque"; }
+    const char* operator()(const AngularDrag&) const { return "angular_drag"; }
+    const char* operator()(const PointForce&) const { return "point_force"; }
   };
   return std::visit(Name{}, term);
 }
@@ -44,6 +47,13 @@ void validate(const LocalTerm& term) {
   } else if (auto* c = std::get_if<Central>(&term)) {
     require(finite3(c->center), term, "center", "must be finite");
     require(non_negative(c->mu), term, "mu", "must be finite and >= 0");
+  } else if (auto* t = std::get_if<Torque>(&term)) {
+    require(finite3(t->torque), term, "torque", "must be finite");
+  } else if (auto* a = std::get_if<AngularDrag>(&term)) {
+    require(non_negative(a->c), term, "c", "must be finite and >= 0");
+  } else if (auto* p = std::get_if<PointForce>(&term)) {
+    require(finite3(p->point), term, "point", "must be finite");
+    require(finite3(p->force), term, "force", "must be finite");
   }
 }
 
@@ -58,6 +68,13 @@ ForceModel<T>& ForceModel<T>::add(const LocalTerm& term) {
                   " central terms per model");
     }
     ++central_count_;
+  }
+  if (std::holds_alternative<PointForce>(term)) {
+    if (point_force_count_ == kMaxPointForces) {
+      throw Error("point_force: at most " + std::to_string(kMaxPointForces) +
+                  " point forces per model");
+    }
+    ++point_force_count_;
   }
   local_.push_back(term);
   return *this;

@@ -13,7 +13,7 @@ namespace {
 
 template <class T>
 kernels::LocalForces<T> resolve(std::span<const LocalTerm> terms) {
-  Vec3<double> g{}, weighted_anchor{};
+  Vec3<double> g{}, weighted_anchor{}, point_force_sum{};
   double spring_k = 0, linear = 0, quadratic = 0;
   kernels::LocalForces<T> out;
   for (const LocalTerm& term : terms) {
@@ -32,15 +32,39 @@ kernels::LocalForces<T> resolve(std::span<const LocalTerm> terms) {
       const int c = out.central_count++;
       for (int d = 0; d < 3; ++d) out.center[c][d] = T(t->center[d]);
       out.mu[c] = T(t->mu);
+    } else if (auto* t = std::get_if<PointForce>(&term)) {
+      for (int d = 0; d < 3; ++d) point_force_sum[d] += t->force[d];
     }
   }
   for (int d = 0; d < 3; ++d) {
     out.gravity[d] = T(g[d]);
+    out.constant_force[d] = T(point_force_sum[d]);
     out.anchor[d] = spring_k > 0 ? T(weighted_anchor[d] / spring_k) : T(0);
   }
   out.spring_k = T(spring_k);
   out.linear = T(linear);
   out.quadratic = T(quadratic);
+  return out;
+}
+
+// The rotational terms; rigid bodies only.
+template <class T>
+kernels::RotationalForces<T> resolve_rotational(std::span<const LocalTerm> terms) {
+  Vec3<double> torque{};
+  double drag = 0;
+  kernels::RotationalForces<T> out;
+  for (const LocalTerm& term : terms) {
+    if (auto* t = std::get_if<Torque>(&term)) {
+      for (int d = 0; d < 3; ++d) torque[d] += t->torque[d];
+    } else if (auto* t = std::get_if<AngularDrag>(&term)) {
+      drag += t->c;
+    } else if (auto* t = std::get_if<PointForce>(&term)) {
+      const int p = out.point_count++;
+      for (int d = 0; d < 3; ++d) out.point[p][d] = T(t->point[d]), out.force[p][d] = T(t->force[d]);
+    }
+  }
+  for (int d = 0; d < 3; ++d) out.torque[d] = T(torque[d]);
+  out.angular_drag = T(drag);
   return out;
 }
 
@@ -77,6 +101,9 @@ struct Stepper<T>::Impl {
   kernels::LocalForces<T> local;
   kernels::StageFn<T> stage_fn = nullptr;
   kernels::FusedFn<T> fused_fn = nullptr;
+  kernels::RigidFn<T> rigid_fn = nullptr;
+  kernels::LocalForces<T> rigid_local;
+  kernels::RotationalForces<T> rotational;
 
   double origin = 0;
   std::uint64_t steps_since_origin = 0;
@@ -106,9 +133,14 @@ struct Stepper<T>::Impl {
       jobs = options.jobs;
     }
     local = resolve<T>(forces.local_terms());
+    // Particles have no orientation: the point forces' push is for rigid bodies only.
+    rigid_local = local;
+    local.constant_force = {};
+    rotational = resolve_rotational<T>(forces.local_terms());
     const int quad = local.has_quadratic(), central = local.has_central();
     stage_fn = table->stage[quad][central];
     const int builtin = builtin_index(method);
+    if (builtin >= 0 && forces.fusable()) rigid_fn = table->rigid[builtin][quad][central];
     if (builtin >= 0 && forces.fusable() && !options.force_staged) {
       fused_fn = table->fused[builtin][quad][central];
     } else {
@@ -184,6 +216,25 @@ struct Stepper<T>::Impl {
     }
     bodies = &b;
     h = step_size;
+  }
+
+  void advance(RigidBodySet<T>& b, T step_size, std::uint64_t steps) {
+    if (rigid_fn == nullptr) {
+      throw Error("rigid bodies need a built-in method and local force terms only (no "
+                  "callbacks, no coupled terms)");
+    }
+    start_steps(b.centers(), step_size);
+    kernels::RigidJob<T> job{arrays(b.centers()), {b.q(0), b.q(1), b.q(2), b.q(3)},
+                             {b.l(0), b.l(1), b.l(2)},
+                             {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
+                             rigid_local, rotational, h, options.renormalize_quaternions};
+    for_blocks(b.padded_size(), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; i += kBlockBodies) {
+        const std::size_t block_end = std::min(i + kBlockBodies, end);
+        for (std::uint64_t k = 0; k < steps; ++k) rigid_fn(job, i, block_end);
+      }
+    });
+    steps_since_origin += steps;
   }
 
   void advance(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
@@ -374,6 +425,16 @@ void Stepper<T>::step(ParticleSet<T>& io_bodies, T h) {
 
 template <class T>
 void Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps) {
+  impl_->advance(io_bodies, h, steps);
+}
+
+template <class T>
+void Stepper<T>::step(RigidBodySet<T>& io_bodies, T h) {
+  impl_->advance(io_bodies, h, 1);
+}
+
+template <class T>
+void Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps) {
   impl_->advance(io_bodies, h, steps);
 }
 

@@ -84,6 +84,8 @@ class ParticleSet {
   std::size_t size() const { return size_; }
   // Real bodies plus inert padding: the extent kernels run over.
   std::size_t padded_size() const { return padded_count<T>(size_); }
+  // Elements allocated per array (grows geometrically as bodies are added).
+  std::size_t capacity() const { return px_.size(); }
 
   // The SoA arrays, each of padded_size() elements.
   T* px() { return px_.data(); }
@@ -113,9 +115,88 @@ class ParticleSet {
   std::size_t size_ = 0;
 };
 
+template <class T>
+using Quat = std::array<T, 4>;  // (w, x, y, z), rotating body-frame vectors into the world
+
+// A rigid body as given by a user. Orientation need not be normalized (it is on add).
+// The body frame is the principal frame: `inertia` holds the principal moments. Use
+// `principal_frame` to turn a full inertia tensor into this form.
+template <class T>
+struct RigidBodyDesc {
+  Vec3<T> position{};
+  Vec3<T> velocity{};
+  Quat<T> orientation{1, 0, 0, 0};
+  Vec3<T> angular_momentum{};  // world frame
+  T mass = 1;
+  Vec3<T> inertia{1, 1, 1};   // principal moments, body frame
+};
+
+// Rigid bodies: the particle arrays for the centre of mass, plus orientation quaternion
+// (qw qx qy qz), world angular momentum (lx ly lz) and inverse principal moments of
+// inertia (inv_ix inv_iy inv_iz). Padding bodies have identity orientation and zero
+// everything else, so they stay inert.
+template <class T>
+class RigidBodySet {
+ public:
+  // Throws kinema::Error naming the body and field on non-finite values, a mass or moment
+  // that is not positive and finite, or a zero orientation quaternion. (Moments that break
+  // the triangle inequality I1 + I2 >= I3 describe no solid body but are accepted: textbook
+  // examples use them.)
+  std::size_t add(const RigidBodyDesc<T>& body);
+  void reserve(std::size_t count);
+
+  std::size_t size() const { return centers_.size(); }
+  std::size_t padded_size() const { return centers_.padded_size(); }
+
+  // The centre-of-mass arrays, as a ParticleSet (px ... vz, inv_mass).
+  ParticleSet<T>& centers() { return centers_; }
+  const ParticleSet<T>& centers() const { return centers_; }
+  T* q(int k) { return q_[k].data(); }  // k = 0..3: w, x, y, z
+  const T* q(int k) const { return q_[k].data(); }
+  T* l(int d) { return l_[d].data(); }  // world angular momentum
+  const T* l(int d) const { return l_[d].data(); }
+  const T* inv_inertia(int d) const { return inv_inertia_[d].data(); }
+
+  Quat<T> orientation(std::size_t i) const { return {q_[0][i], q_[1][i], q_[2][i], q_[3][i]}; }
+  Vec3<T> angular_momentum(std::size_t i) const { return {l_[0][i], l_[1][i], l_[2][i]}; }
+  // World angular velocity omega = R diag(1/I) R^T L, computed in double.
+  Vec3<double> angular_velocity(std::size_t i) const;
+
+ private:
+  void grow_rotation_arrays();
+
+  ParticleSet<T> centers_;
+  std::array<AlignedArray<T>, 4> q_;
+  std::array<AlignedArray<T>, 3> l_, inv_inertia_;
+};
+
+// Principal moments of a symmetric inertia tensor (body frame) and the rotation from the
+// principal frame to that body frame, for RigidBodyDesc: orientation_world * rotation gives
+// the orientation of the principal frame. Throws kinema::Error when the tensor is not
+// symmetric, not finite or not positive definite.
+struct PrincipalFrame {
+  Vec3<double> moments;
+  Quat<double> rotation;
+};
+PrincipalFrame principal_frame(const std::array<std::array<double, 3>, 3>& inertia);
+
+// Quaternion product a * b.
+template <class T>
+Quat<T> multiply(const Quat<T>& a, const Quat<T>& b) {
+  return {a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+          a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+          a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+          a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]};
+}
+
+// v rotated by the unit quaternion q.
+Vec3<double> rotate(const Quat<double>& q, const Vec3<double>& v);
+
 extern template class AlignedArray<float>;
 extern template class AlignedArray<double>;
 extern template class ParticleSet<float>;
 extern template class ParticleSet<double>;
+extern template class RigidBodySet<float>;
+extern template class RigidBodySet<double>;
 
 }  // namespace kinema

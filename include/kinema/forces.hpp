@@ -42,10 +42,29 @@ struct Central {
   double mu = 0;
 };
 
-using LocalTerm = std::variant<Gravity, LinearDrag, QuadraticDrag, Spring, Central>;
+// Rotational terms act on rigid bodies only (particles have no orientation):
+// a constant world torque,
+struct Torque {
+  Vec3<double> torque{};
+};
+// torque = -c omega,
+struct AngularDrag {
+  double c = 0;
+};
+// a constant world force applied at a body-fixed point (body frame, from the centre of
+// mass): it accelerates the centre of mass and gives the torque (R point) x force.
+struct PointForce {
+  Vec3<double> point{};
+  Vec3<double> force{};
+};
 
-// At most this many central attractors per model (they are evaluated in registers).
+using LocalTerm = std::variant<Gravity, LinearDrag, QuadraticDrag, Spring, Central, Torque,
+                               AngularDrag, PointForce>;
+
+// At most this many central attractors, and point forces, per model (they are evaluated
+// in registers).
 inline constexpr int kMaxCentralTerms = 4;
+inline constexpr int kMaxPointForces = 4;
 
 // What a callback or coupled term sees: the bodies [begin, begin + count) of one block at
 // one stage, as SoA pointers already offset to `begin`. It adds forces into fx, fy, fz
@@ -100,6 +119,7 @@ class ForceModel {
   std::vector<ForceCallback<T>> callbacks_;
   std::vector<std::shared_ptr<const CoupledTerm<T>>> coupled_;
   int central_count_ = 0;
+  int point_force_count_ = 0;
 };
 
 // Name of a term as scenes spell it ("gravity", "linear_drag", ...).

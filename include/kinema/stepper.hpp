@@ -34,6 +34,9 @@ struct StepperOptions {
   // instead of an exact fused multiply-add. Faster there, but results then differ in the
   // last bits from the AVX2 and AVX-512 paths. Those always use their FMA units.
   bool relaxed_fma = false;
+  // Rigid bodies: renormalize orientation quaternions after each step. Off only to test
+  // how a method lets |q| drift.
+  bool renormalize_quaternions = true;
 };
 
 // Bodies per block: the unit of work handed to the job system. Fixed, so the partition
@@ -56,6 +59,11 @@ class Stepper {
   // fused path each block of bodies takes all its steps while in cache (same bits as
   // calling step() `steps` times, far less memory traffic).
   void advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps);
+  // Rigid bodies: the same, with orientation and angular momentum. They take the fused
+  // path only: a built-in method and local force terms (kinema::Error otherwise). Use one
+  // stepper per body set: each keeps its own clock.
+  void step(RigidBodySet<T>& io_bodies, T h);
+  void advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps);
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);
 

@@ -18,25 +18,37 @@ inline void static_for(F&& f) {
   }(std::make_integer_sequence<int, N>{});
 }
 
-template <class V>
+// A vector quantity of N components (positions, velocities: 3; quaternions: 4), one
+// lane type each: SoA in registers.
+template <class V, int N = 3>
 struct Vec {
-  V c[3];
+  V c[N];
 };
 
+template <int N, class V>
+inline Vec<V, N> load_n(const value_t<V>* const p[N], std::size_t i) {
+  Vec<V, N> v;
+  for (int d = 0; d < N; ++d) v.c[d] = load<V>(p[d] + i);
+  return v;
+}
+template <int N, class V>
+inline void store_n(value_t<V>* const p[N], std::size_t i, const Vec<V, N>& v) {
+  for (int d = 0; d < N; ++d) store(p[d] + i, v.c[d]);
+}
 template <class V>
 inline Vec<V> load3(const value_t<V>* const p[3], std::size_t i) {
-  return {{load<V>(p[0] + i), load<V>(p[1] + i), load<V>(p[2] + i)}};
+  return load_n<3, V>(p, i);
 }
 template <class V>
 inline void store3(value_t<V>* const p[3], std::size_t i, const Vec<V>& v) {
-  for (int d = 0; d < 3; ++d) store(p[d] + i, v.c[d]);
+  store_n<3, V>(p, i, v);
 }
 
 // The local force terms, broadcast to lanes once per call.
 template <class V>
 struct Forces {
   using T = value_t<V>;
-  V g[3], anchor[3], neg_spring_k, neg_linear, neg_quadratic;
+  V g[3], force[3], anchor[3], neg_spring_k, neg_linear, neg_quadratic;
   int central_count;
   V center[4][3], neg_mu[4];
 
@@ -45,6 +57,7 @@ struct Forces {
         central_count(f.central_count) {
     for (int d = 0; d < 3; ++d) {
       g[d] = V(f.gravity[d]);
+      force[d] = V(f.constant_force[d]);
       anchor[d] = V(f.anchor[d]);
     }
     for (int c = 0; c < central_count; ++c) {
@@ -69,7 +82,7 @@ inline auto body_terms(const Forces<V>& f, const V& inv_mass) {
   const auto dynamic = inv_mass != V(0);
   BodyTerms<V, decltype(dynamic)> b{f.neg_spring_k * inv_mass, f.neg_linear * inv_mass,
                                     f.neg_quadratic * inv_mass, {}, dynamic};
-  for (int d = 0; d < 3; ++d) b.g[d] = pick(dynamic, f.g[d], V(0));
+  for (int d = 0; d < 3; ++d) b.g[d] = pick(dynamic, fused(inv_mass, f.force[d], f.g[d]), V(0));
   return b;
 }
 
@@ -100,10 +113,11 @@ inline Vec<V> accel(const Forces<V>& f, const B& body, const Vec<V>& x, const Ve
   return a;
 }
 
-template <class V>
-inline Vec<V> step_by(const V& h, const Vec<V>& dir, const Vec<V>& base) {
-  return {{fused(h, dir.c[0], base.c[0]), fused(h, dir.c[1], base.c[1]),
-           fused(h, dir.c[2], base.c[2])}};
+template <class V, int N>
+inline Vec<V, N> step_by(const V& h, const Vec<V, N>& dir, const Vec<V, N>& base) {
+  Vec<V, N> out;
+  for (int d = 0; d < N; ++d) out.c[d] = fused(h, dir.c[d], base.c[d]);
+  return out;
 }
 
 using Weights = std::array<double, kMaxStages>;
@@ -129,18 +143,18 @@ inline V accumulate(value_t<V> ratio, const V& k, const V& sum) {
 // sum = k_f, then sum = fma(w_j / w_f, k_j, sum) in j order, then fma(w_f h, sum, base).
 // One rounding into base, and one operation per term (RK4's ratios 2, 2, 1 are exact). The
 // staged path's `combined` follows the same rule at run time.
-template <Weights W, class V, int N>
-inline Vec<V> advanced(value_t<V> h, const Vec<V> (&k)[N], const Vec<V>& base) {
+template <Weights W, class V, int S, int N>
+inline Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Vec<V, N>& base) {
   using T = value_t<V>;
   constexpr int first = first_nonzero(W);
   if constexpr (first < 0) {
     return base;
   } else {
-    Vec<V> sum = k[first];
-    static_for<N>([&](auto j) {
+    Vec<V, N> sum = k[first];
+    static_for<S>([&](auto j) {
       if constexpr (j > first && W[j] != 0) {
         constexpr T ratio = T(W[j] / W[first]);
-        for (int d = 0; d < 3; ++d) sum.c[d] = accumulate(ratio, k[j].c[d], sum.c[d]);
+        for (int d = 0; d < N; ++d) sum.c[d] = accumulate(ratio, k[j].c[d], sum.c[d]);
       }
     });
     return step_by(V(T(W[first]) * h), sum, base);
@@ -263,27 +277,6 @@ void add_forces(const ForceJob<value_t<V>>& job, std::size_t begin, std::size_t 
     }
     store3(job.acc, i, sum);
   }
-}
-
-template <class V>
-KernelTable<value_t<V>> make_table(Isa isa) {
-  KernelTable<value_t<V>> t{};
-  t.isa = isa;
-  t.width = Lane<V>::width;
-  static_for<int(kBuiltinCount)>([&](auto m) {
-    constexpr const Method& method = *builtin_methods[m];
-    t.fused[m][0][0] = fused_kernel<method, false, false, V>();
-    t.fused[m][0][1] = fused_kernel<method, false, true, V>();
-    t.fused[m][1][0] = fused_kernel<method, true, false, V>();
-    t.fused[m][1][1] = fused_kernel<method, true, true, V>();
-  });
-  t.stage[0][0] = &stage<false, false, V>;
-  t.stage[0][1] = &stage<false, true, V>;
-  t.stage[1][0] = &stage<true, false, V>;
-  t.stage[1][1] = &stage<true, true, V>;
-  t.combine = &combine<V>;
-  t.add_forces = &add_forces<V>;
-  return t;
 }
 
 }  // namespace kinema::kernels::KINEMA_ISA_NS

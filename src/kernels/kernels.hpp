@@ -21,6 +21,7 @@ struct LocalForces {
   int central_count = 0;
   std::array<std::array<T, 3>, 4> center{};
   std::array<T, 4> mu{};
+  std::array<T, 3> constant_force{};  // sum of point forces (rigid bodies only)
   bool has_quadratic() const { return quadratic != 0; }
   bool has_central() const { return central_count > 0; }
 };
@@ -31,6 +32,31 @@ struct BodyArrays {
   T* v[3];         // vx vy vz
   const T* inv_mass;
 };
+
+// The rotational terms of a model, for rigid bodies.
+template <class T>
+struct RotationalForces {
+  std::array<T, 3> torque{};
+  T angular_drag = 0;
+  int point_count = 0;
+  std::array<std::array<T, 3>, 4> point{};  // body frame
+  std::array<std::array<T, 3>, 4> force{};  // world frame
+};
+
+// One fused rigid-body step over bodies [begin, end).
+template <class T>
+struct RigidJob {
+  BodyArrays<T> bodies;  // centres of mass
+  T* q[4];
+  T* l[3];
+  const T* inv_inertia[3];
+  LocalForces<T> forces;
+  RotationalForces<T> rotation;
+  T h;
+  bool renormalize;
+};
+template <class T>
+using RigidFn = void (*)(const RigidJob<T>& job, std::size_t begin, std::size_t end);
 
 // One fused step over bodies [begin, end) (multiples of the SIMD width).
 template <class T>
@@ -101,6 +127,7 @@ struct KernelTable {
   std::size_t width;  // SIMD lanes
   // [builtin method index][quadratic drag][central terms]
   FusedFn<T> fused[kBuiltinCount][2][2];
+  RigidFn<T> rigid[kBuiltinCount][2][2];
   StageFn<T> stage[2][2];
   CombineFn<T> combine;
   AddForcesFn<T> add_forces;

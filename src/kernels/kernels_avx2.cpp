@@ -1,6 +1,6 @@
 // The kernels for avx2, compiled with this unit's own instruction-set flags.
 #define KINEMA_ISA_NS isa_avx2
-#include "kernels/kernel_impl.hpp"
+#include "kernels/kernel_table.hpp"
 
 namespace kinema::kernels {
 

@@ -1,7 +1,7 @@
 // The kernels for scalar with multiply-then-add instead of fused multiply-add (opt-in).
 #define KINEMA_ISA_NS isa_scalar_relaxed
 #define KINEMA_RELAXED_FMA 1
-#include "kernels/kernel_impl.hpp"
+#include "kernels/kernel_table.hpp"
 
 namespace kinema::kernels {
 

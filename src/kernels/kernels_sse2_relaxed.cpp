@@ -1,7 +1,7 @@
 // The kernels for sse2 with multiply-then-add instead of fused multiply-add (opt-in).
 #define KINEMA_ISA_NS isa_sse2_relaxed
 #define KINEMA_RELAXED_FMA 1
-#include "kernels/kernel_impl.hpp"
+#include "kernels/kernel_table.hpp"
 
 namespace kinema::kernels {
 

@@ -1,0 +1,34 @@
+#pragma once
+// Collects one instruction set's kernels into its table.
+
+#include "kernels/kernel_impl.hpp"
+#include "kernels/rigid_kernels.hpp"
+
+namespace kinema::kernels::KINEMA_ISA_NS {
+
+template <class V>
+KernelTable<value_t<V>> make_table(Isa isa) {
+  KernelTable<value_t<V>> t{};
+  t.isa = isa;
+  t.width = Lane<V>::width;
+  static_for<int(kBuiltinCount)>([&](auto m) {
+    constexpr const Method& method = *builtin_methods[m];
+    t.fused[m][0][0] = fused_kernel<method, false, false, V>();
+    t.fused[m][0][1] = fused_kernel<method, false, true, V>();
+    t.fused[m][1][0] = fused_kernel<method, true, false, V>();
+    t.fused[m][1][1] = fused_kernel<method, true, true, V>();
+    t.rigid[m][0][0] = rigid_kernel<method, false, false, V>();
+    t.rigid[m][0][1] = rigid_kernel<method, false, true, V>();
+    t.rigid[m][1][0] = rigid_kernel<method, true, false, V>();
+    t.rigid[m][1][1] = rigid_kernel<method, true, true, V>();
+  });
+  t.stage[0][0] = &stage<false, false, V>;
+  t.stage[0][1] = &stage<false, true, V>;
+  t.stage[1][0] = &stage<true, false, V>;
+  t.stage[1][1] = &stage<true, true, V>;
+  t.combine = &combine<V>;
+  t.add_forces = &add_forces<V>;
+  return t;
+}
+
+}  // namespace kinema::kernels::KINEMA_ISA_NS

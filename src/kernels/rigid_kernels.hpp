@@ -1,0 +1,218 @@
+#pragma once
+// Rigid-body kernels: the particle kernels' translation plus orientation q and world
+// angular momentum L, integrated together in registers.
+//   omega = R diag(1/I) R^T L,  dq/dt = 1/2 (0, omega) * q,  dL/dt = torque.
+// R is the rotation of q / |q|, so stage quaternions that drift off unit length still give
+// a true rotation; q is renormalized after each step.
+
+#include "kernels/kernel_impl.hpp"
+
+namespace kinema::kernels::KINEMA_ISA_NS {
+
+template <class V>
+using Quat4 = Vec<V, 4>;
+
+template <class V>
+struct Rotation {
+  V m[3][3];
+};
+
+// Rotation matrix of q / |q|: with s = 2 / |q|^2, R = I + s (w [u]x + [u]x^2), u = (x, y, z).
+template <class V>
+inline Rotation<V> rotation(const Quat4<V>& q) {
+  const V w = q.c[0], x = q.c[1], y = q.c[2], z = q.c[3];
+  const V s = V(2) / fused(w, w, fused(x, x, fused(y, y, z * z)));
+  const V xs = x * s, ys = y * s, zs = z * s;
+  const V wx = w * xs, wy = w * ys, wz = w * zs, xx = x * xs, xy = x * ys, xz = x * zs;
+  const V yy = y * ys, yz = y * zs, zz = z * zs, one(1);
+  return {{{one - (yy + zz), xy - wz, xz + wy},
+           {xy + wz, one - (xx + zz), yz - wx},
+           {xz - wy, yz + wx, one - (xx + yy)}}};
+}
+
+template <class V>
+inline Vec<V> times(const Rotation<V>& r, const Vec<V>& v) {
+  Vec<V> out;
+  for (int d = 0; d < 3; ++d) {
+    out.c[d] = fused(r.m[d][0], v.c[0], fused(r.m[d][1], v.c[1], r.m[d][2] * v.c[2]));
+  }
+  return out;
+}
+
+template <class V>
+inline Vec<V> transposed_times(const Rotation<V>& r, const Vec<V>& v) {
+  Vec<V> out;
+  for (int d = 0; d < 3; ++d) {
+    out.c[d] = fused(r.m[0][d], v.c[0], fused(r.m[1][d], v.c[1], r.m[2][d] * v.c[2]));
+  }
+  return out;
+}
+
+template <class V>
+inline Vec<V> cross(const Vec<V>& a, const Vec<V>& b) {
+  return {{fused(a.c[1], b.c[2], -(a.c[2] * b.c[1])), fused(a.c[2], b.c[0], -(a.c[0] * b.c[2])),
+           fused(a.c[0], b.c[1], -(a.c[1] * b.c[0]))}};
+}
+
+// omega = R diag(1/I) R^T L
+template <class V>
+inline Vec<V> angular_velocity(const Rotation<V>& r, const Vec<V>& inv_inertia, const Vec<V>& l) {
+  Vec<V> body = transposed_times(r, l);
+  for (int d = 0; d < 3; ++d) body.c[d] = body.c[d] * inv_inertia.c[d];
+  return times(r, body);
+}
+
+// dq/dt = 1/2 (0, omega) * q = 1/2 (-omega . u, w omega + omega x u)
+template <class V>
+inline Quat4<V> quaternion_rate(const Vec<V>& omega, const Quat4<V>& q) {
+  const V half(0.5);
+  Vec<V> o;
+  for (int d = 0; d < 3; ++d) o.c[d] = half * omega.c[d];  // exact
+  const Vec<V> u{{q.c[1], q.c[2], q.c[3]}};
+  const Vec<V> ou = cross(o, u);
+  return {{-fused(o.c[0], u.c[0], fused(o.c[1], u.c[1], o.c[2] * u.c[2])),
+           fused(q.c[0], o.c[0], ou.c[0]), fused(q.c[0], o.c[1], ou.c[1]),
+           fused(q.c[0], o.c[2], ou.c[2])}};
+}
+
+template <class V>
+struct Rotational {
+  V torque[3], neg_drag;
+  int point_count;
+  Vec<V> point[4], force[4];
+
+  explicit Rotational(const RotationalForces<value_t<V>>& r)
+      : neg_drag(-r.angular_drag), point_count(r.point_count) {
+    for (int d = 0; d < 3; ++d) torque[d] = V(r.torque[d]);
+    for (int p = 0; p < point_count; ++p) {
+      for (int d = 0; d < 3; ++d) point[p].c[d] = V(r.point[p][d]), force[p].c[d] = V(r.force[p][d]);
+    }
+  }
+};
+
+// torque = T0 - c omega + sum (R p) x F, zero where inv_mass is 0.
+template <class V, class B>
+inline Vec<V> torque(const Rotational<V>& f, const B& body, const Rotation<V>& r,
+                     const Vec<V>& omega) {
+  Vec<V> t;
+  for (int d = 0; d < 3; ++d) t.c[d] = fused(f.neg_drag, omega.c[d], f.torque[d]);
+  for (int p = 0; p < f.point_count; ++p) {
+    const Vec<V> arm = cross(times(r, f.point[p]), f.force[p]);
+    for (int d = 0; d < 3; ++d) t.c[d] = t.c[d] + arm.c[d];
+  }
+  for (int d = 0; d < 3; ++d) t.c[d] = pick(body.dynamic, t.c[d], V(0));
+  return t;
+}
+
+template <class V>
+struct RigidState {
+  Vec<V> x, v;
+  Quat4<V> q;
+  Vec<V> l;
+};
+
+template <class V>
+inline Quat4<V> normalized(const Quat4<V>& q) {
+  const V norm = root(fused(q.c[0], q.c[0], fused(q.c[1], q.c[1], fused(q.c[2], q.c[2], q.c[3] * q.c[3]))));
+  Quat4<V> out;
+  for (int k = 0; k < 4; ++k) out.c[k] = q.c[k] / norm;
+  return out;
+}
+
+template <class V>
+inline RigidState<V> load_rigid(const RigidJob<value_t<V>>& job, std::size_t i) {
+  return {load3<V>(job.bodies.x, i), load3<V>(job.bodies.v, i), load_n<4, V>(job.q, i),
+          load3<V>(job.l, i)};
+}
+
+template <class V>
+inline void store_rigid(const RigidJob<value_t<V>>& job, std::size_t i, RigidState<V> s) {
+  if (job.renormalize) s.q = normalized(s.q);
+  store3(job.bodies.x, i, s.x);
+  store3(job.bodies.v, i, s.v);
+  store_n<4, V>(job.q, i, s.q);
+  store3(job.l, i, s.l);
+}
+
+template <const Method& M, bool Quadratic, bool Central, class V>
+void rigid_runge_kutta(const RigidJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  constexpr ButcherTableau tab = M.tableau;
+  constexpr int S = tab.stages;
+  const Forces<V> f(job.forces);
+  const Rotational<V> rf(job.rotation);
+  const value_t<V> h = job.h;
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    const RigidState<V> s0 = load_rigid<V>(job, i);
+    const auto body = body_terms(f, load<V>(job.bodies.inv_mass + i));
+    const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
+    Vec<V> kx[S], kv[S], kl[S];
+    Quat4<V> kq[S];
+    static_for<S>([&](auto s) {
+      constexpr Weights row = tab.a[s];
+      const Vec<V> xs = advanced<row>(h, kx, s0.x), vs = advanced<row>(h, kv, s0.v);
+      const Quat4<V> qs = advanced<row>(h, kq, s0.q);
+      const Vec<V> ls = advanced<row>(h, kl, s0.l);
+      const Rotation<V> r = rotation(qs);
+      const Vec<V> omega = angular_velocity(r, inv_inertia, ls);
+      kx[s] = vs;
+      kv[s] = accel<Quadratic, Central>(f, body, xs, vs);
+      kq[s] = quaternion_rate(omega, qs);
+      kl[s] = torque(rf, body, r, omega);
+    });
+    store_rigid<V>(job, i,
+                   {advanced<tab.b>(h, kx, s0.x), advanced<tab.b>(h, kv, s0.v),
+                    advanced<tab.b>(h, kq, s0.q), advanced<tab.b>(h, kl, s0.l)});
+  }
+}
+
+// Kick-drift for rigid bodies: a kick updates v and L; a drift moves x and turns q with the
+// current L, by Euler for first-order schemes and by the midpoint rule for second-order
+// ones, so the rotation keeps the scheme's order.
+template <const Method& M, bool Quadratic, bool Central, class V>
+void rigid_kick_drift(const RigidJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  using T = value_t<V>;
+  constexpr KickDriftScheme scheme = M.scheme;
+  const Forces<V> f(job.forces);
+  const Rotational<V> rf(job.rotation);
+  V wh[kMaxStages], half_wh[kMaxStages];
+  for (int k = 0; k < scheme.count; ++k) {
+    wh[k] = V(T(scheme.ops[k].weight) * job.h);
+    half_wh[k] = V(T(0.5 * scheme.ops[k].weight) * job.h);
+  }
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    RigidState<V> s = load_rigid<V>(job, i);
+    const auto body = body_terms(f, load<V>(job.bodies.inv_mass + i));
+    const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
+    auto rate = [&](const Quat4<V>& q) {
+      return quaternion_rate(angular_velocity(rotation(q), inv_inertia, s.l), q);
+    };
+    static_for<scheme.count>([&](auto k) {
+      if constexpr (scheme.ops[k].kind == OpKind::kick) {
+        const Rotation<V> r = rotation(s.q);
+        const Vec<V> omega = angular_velocity(r, inv_inertia, s.l);
+        const Vec<V> tau = torque(rf, body, r, omega);
+        s.v = step_by(wh[k], accel<Quadratic, Central>(f, body, s.x, s.v), s.v);
+        s.l = step_by(wh[k], tau, s.l);
+      } else {
+        s.x = step_by(wh[k], s.v, s.x);
+        if constexpr (M.order >= 2) {
+          s.q = step_by(wh[k], rate(step_by(half_wh[k], rate(s.q), s.q)), s.q);
+        } else {
+          s.q = step_by(wh[k], rate(s.q), s.q);
+        }
+      }
+    });
+    store_rigid<V>(job, i, s);
+  }
+}
+
+template <const Method& M, bool Quadratic, bool Central, class V>
+constexpr RigidFn<value_t<V>> rigid_kernel() {
+  if constexpr (M.kind == MethodKind::runge_kutta) {
+    return &rigid_runge_kutta<M, Quadratic, Central, V>;
+  } else {
+    return &rigid_kick_drift<M, Quadratic, Central, V>;
+  }
+}
+
+}  // namespace kinema::kernels::KINEMA_ISA_NS

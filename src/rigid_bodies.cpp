@@ -1,0 +1,163 @@
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "kinema/bodies.hpp"
+#include "kinema/error.hpp"
+
+namespace kinema {
+namespace {
+
+[[noreturn]] void fail(std::size_t body, const std::string& what) {
+  throw Error("rigid body " + std::to_string(body) + ": " + what);
+}
+
+template <class T, std::size_t N>
+void check_finite(const std::array<T, N>& v, std::size_t body, const char* field) {
+  for (T c : v) {
+    if (!std::isfinite(c)) fail(body, std::string(field) + " is not finite");
+  }
+}
+
+using Matrix = std::array<std::array<double, 3>, 3>;
+
+// Rotation matrix (columns: the rotated axes) to a unit quaternion (Shepperd's method:
+// take the largest of the four squared components to stay well conditioned).
+Quat<double> to_quaternion(const Matrix& m) {
+  const double trace = m[0][0] + m[1][1] + m[2][2];
+  Quat<double> q;
+  if (trace >= std::max({m[0][0], m[1][1], m[2][2]})) {
+    const double r = std::sqrt(1 + trace), s = 0.5 / r;
+    q = {0.5 * r, (m[2][1] - m[1][2]) * s, (m[0][2] - m[2][0]) * s, (m[1][0] - m[0][1]) * s};
+  } else if (m[0][0] >= m[1][1] && m[0][0] >= m[2][2]) {
+    const double r = std::sqrt(1 + m[0][0] - m[1][1] - m[2][2]), s = 0.5 / r;
+    q = {(m[2][1] - m[1][2]) * s, 0.5 * r, (m[0][1] + m[1][0]) * s, (m[0][2] + m[2][0]) * s};
+  } else if (m[1][1] >= m[2][2]) {
+    const double r = std::sqrt(1 - m[0][0] + m[1][1] - m[2][2]), s = 0.5 / r;
+    q = {(m[0][2] - m[2][0]) * s, (m[0][1] + m[1][0]) * s, 0.5 * r, (m[1][2] + m[2][1]) * s};
+  } else {
+    const double r = std::sqrt(1 - m[0][0] - m[1][1] + m[2][2]), s = 0.5 / r;
+    q = {(m[1][0] - m[0][1]) * s, (m[0][2] + m[2][0]) * s, (m[1][2] + m[2][1]) * s, 0.5 * r};
+  }
+  return q;
+}
+
+}  // namespace
+
+Vec3<double> rotate(const Quat<double>& q, const Vec3<double>& v) {
+  // v + 2 w (u x v) + 2 u x (u x v), u the vector part.
+  const Vec3<double> u{q[1], q[2], q[3]};
+  const Vec3<double> t{2 * (u[1] * v[2] - u[2] * v[1]), 2 * (u[2] * v[0] - u[0] * v[2]),
+                       2 * (u[0] * v[1] - u[1] * v[0])};
+  return {v[0] + q[0] * t[0] + (u[1] * t[2] - u[2] * t[1]),
+          v[1] + q[0] * t[1] + (u[2] * t[0] - u[0] * t[2]),
+          v[2] + q[0] * t[2] + (u[0] * t[1] - u[1] * t[0])};
+}
+
+PrincipalFrame principal_frame(const Matrix& inertia) {
+  Matrix a = inertia, v{{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      if (!std::isfinite(a[i][j])) throw Error("inertia: not finite");
+      if (std::abs(a[i][j] - a[j][i]) > 1e-9 * (std::abs(a[i][j]) + std::abs(a[j][i]))) {
+        throw Error("inertia: the tensor is not symmetric");
+      }
+    }
+  }
+  // Cyclic Jacobi: each rotation zeroes one off-diagonal entry; a few sweeps converge.
+  for (int sweep = 0; sweep < 50; ++sweep) {
+    const double off = std::abs(a[0][1]) + std::abs(a[0][2]) + std::abs(a[1][2]);
+    if (off <= 1e-15 * (std::abs(a[0][0]) + std::abs(a[1][1]) + std::abs(a[2][2]))) break;
+    for (int p = 0; p < 2; ++p) {
+      for (int q = p + 1; q < 3; ++q) {
+        if (a[p][q] == 0) continue;
+        const double theta = (a[q][q] - a[p][p]) / (2 * a[p][q]);
+        const double t = std::copysign(1.0, theta) / (std::abs(theta) + std::hypot(theta, 1.0));
+        const double c = 1 / std::hypot(t, 1.0), s = t * c;
+        for (int k = 0; k < 3; ++k) {  // a = J^T a J
+          const double akp = a[k][p], akq = a[k][q];
+          a[k][p] = c * akp - s * akq, a[k][q] = s * akp + c * akq;
+        }
+        for (int k = 0; k < 3; ++k) {
+          const double apk = a[p][k], aqk = a[q][k];
+          a[p][k] = c * apk - s * aqk, a[q][k] = s * apk + c * aqk;
+        }
+        for (int k = 0; k < 3; ++k) {  // v = v J: columns become the eigenvectors
+          const double vkp = v[k][p], vkq = v[k][q];
+          v[k][p] = c * vkp - s * vkq, v[k][q] = s * vkp + c * vkq;
+        }
+      }
+    }
+  }
+  const double det = v[0][0] * (v[1][1] * v[2][2] - v[1][2] * v[2][1]) -
+                     v[0][1] * (v[1][0] * v[2][2] - v[1][2] * v[2][0]) +
+                     v[0][2] * (v[1][0] * v[2][1] - v[1][1] * v[2][0]);
+  if (det < 0) {
+    for (int k = 0; k < 3; ++k) v[k][2] = -v[k][2];  // a rotation, not a reflection
+  }
+  const Vec3<double> moments{a[0][0], a[1][1], a[2][2]};
+  for (double m : moments) {
+    if (!(m > 0)) throw Error("inertia: the tensor is not positive definite");
+  }
+  return {moments, to_quaternion(v)};
+}
+
+template <class T>
+void RigidBodySet<T>::grow_rotation_arrays() {
+  // Match the centre arrays' capacity; new padding gets the identity orientation.
+  const std::size_t target = centers_.capacity(), old = q_[0].size();
+  if (target <= old) return;
+  for (auto& a : q_) a.resize(target);
+  for (auto& a : l_) a.resize(target);
+  for (auto& a : inv_inertia_) a.resize(target);
+  for (std::size_t i = old; i < target; ++i) q_[0][i] = 1;
+}
+
+template <class T>
+void RigidBodySet<T>::reserve(std::size_t count) {
+  centers_.reserve(count);
+  grow_rotation_arrays();
+}
+
+template <class T>
+std::size_t RigidBodySet<T>::add(const RigidBodyDesc<T>& b) {
+  const std::size_t i = size();
+  check_finite(b.orientation, i, "orientation");
+  check_finite(b.angular_momentum, i, "angular_momentum");
+  check_finite(b.inertia, i, "inertia");
+  for (T m : b.inertia) {
+    if (!(m > 0)) fail(i, "inertia moments must be positive");
+  }
+  double norm = 0;
+  for (T c : b.orientation) norm += double(c) * double(c);
+  norm = std::sqrt(norm);
+  if (!(norm > 0)) fail(i, "orientation quaternion is zero");
+  try {
+    centers_.add(b.position, b.velocity, b.mass);
+  } catch (const Error& e) {
+    fail(i, std::string(e.what()).substr(std::string(e.what()).find(':') + 2));
+  }
+  grow_rotation_arrays();
+  for (int k = 0; k < 4; ++k) q_[k][i] = T(b.orientation[k] / norm);
+  for (int d = 0; d < 3; ++d) {
+    l_[d][i] = b.angular_momentum[d];
+    inv_inertia_[d][i] = T(1) / b.inertia[d];
+  }
+  return i;
+}
+
+template <class T>
+Vec3<double> RigidBodySet<T>::angular_velocity(std::size_t i) const {
+  Quat<double> q{q_[0][i], q_[1][i], q_[2][i], q_[3][i]};
+  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (double& c : q) c /= n;
+  const Quat<double> conj{q[0], -q[1], -q[2], -q[3]};
+  Vec3<double> body = rotate(conj, {double(l_[0][i]), double(l_[1][i]), double(l_[2][i])});
+  for (int d = 0; d < 3; ++d) body[d] *= double(inv_inertia_[d][i]);
+  return rotate(q, body);
+}
+
+template class RigidBodySet<float>;
+template class RigidBodySet<double>;
+
+}  // namespace kinema
