@@ -78,12 +78,69 @@ bool all_finite(const ParticleSet<T>& b) {
   return true;
 }
 
+template <class T>
+Vec3<double> angular_momentum(const ParticleSet<T>& b) {
+  Vec3<double> l{};
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (b.inv_mass()[i] == 0) continue;
+    const double m = 1.0 / double(b.inv_mass()[i]);
+    const Vec3<double> x{b.px()[i], b.py()[i], b.pz()[i]}, v{b.vx()[i], b.vy()[i], b.vz()[i]};
+    l[0] += m * (x[1] * v[2] - x[2] * v[1]);
+    l[1] += m * (x[2] * v[0] - x[0] * v[2]);
+    l[2] += m * (x[0] * v[1] - x[1] * v[0]);
+  }
+  return l;
+}
+
+template <class T>
+double rotational_energy(const RigidBodySet<T>& b) {
+  double e = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const Vec3<double> omega = b.angular_velocity(i);
+    const Vec3<T> l = b.angular_momentum(i);
+    e += 0.5 * (omega[0] * l[0] + omega[1] * l[1] + omega[2] * l[2]);
+  }
+  return e;
+}
+
+template <class T>
+EnergyReport energy(const RigidBodySet<T>& b, const ForceModel<T>& forces) {
+  return {kinetic_energy(b.centers()) + rotational_energy(b),
+          potential_energy(b.centers(), forces)};
+}
+
+template <class T>
+Vec3<double> angular_momentum(const RigidBodySet<T>& b) {
+  Vec3<double> l = angular_momentum(b.centers());
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    for (int d = 0; d < 3; ++d) l[d] += b.l(d)[i];
+  }
+  return l;
+}
+
+template <class T>
+bool all_finite(const RigidBodySet<T>& b) {
+  if (!all_finite(b.centers())) return false;
+  for (int k = 0; k < 7; ++k) {
+    const T* a = k < 4 ? b.q(k) : b.l(k - 4);
+    for (std::size_t i = 0; i < b.size(); ++i) {
+      if (!std::isfinite(a[i])) return false;
+    }
+  }
+  return true;
+}
+
 #define KINEMA_INSTANTIATE(T)                                                  \
   template double kinetic_energy(const ParticleSet<T>&);                       \
   template double potential_energy(const ParticleSet<T>&, const ForceModel<T>&); \
   template EnergyReport energy(const ParticleSet<T>&, const ForceModel<T>&);   \
   template Vec3<double> momentum(const ParticleSet<T>&);                       \
-  template bool all_finite(const ParticleSet<T>&);
+  template bool all_finite(const ParticleSet<T>&);                             \
+  template Vec3<double> angular_momentum(const ParticleSet<T>&);               \
+  template double rotational_energy(const RigidBodySet<T>&);                   \
+  template EnergyReport energy(const RigidBodySet<T>&, const ForceModel<T>&);  \
+  template Vec3<double> angular_momentum(const RigidBodySet<T>&);              \
+  template bool all_finite(const RigidBodySet<T>&);
 KINEMA_INSTANTIATE(float)
 KINEMA_INSTANTIATE(double)
 #undef KINEMA_INSTANTIATE

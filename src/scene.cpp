@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <initializer_list>
+#include <numbers>
 #include <random>
 #include <sstream>
 
@@ -118,8 +119,21 @@ LocalTerm parse_force(const Node& n) {
     c.mu = n.required("mu").non_negative();
     return c;
   }
+  if (type == "torque") {
+    n.expect_object({"type", "torque"});
+    return Torque{n.required("torque").vec3()};
+  }
+  if (type == "angular_drag") {
+    n.expect_object({"type", "c"});
+    return AngularDrag{n.required("c").non_negative()};
+  }
+  if (type == "point_force") {
+    n.expect_object({"type", "point", "force"});
+    return PointForce{n.required("point").vec3(), n.required("force").vec3()};
+  }
   n.child("type").fail("unknown force '" + type +
-                       "' (known: gravity, linear_drag, quadratic_drag, spring, central)");
+                       "' (known: gravity, linear_drag, quadratic_drag, spring, central, "
+                       "torque, angular_drag, point_force)");
 }
 
 BodySpec parse_body(const Node& n) {
@@ -141,9 +155,78 @@ void check_box(const Node& n, const char* lo_key, const char* hi_key, const Vec3
   }
 }
 
+// Principal moments, from [Ixx, Iyy, Izz] or a symmetric 3x3 matrix; the rotation from the
+// principal frame to the given body frame comes back through out_turn.
+Vec3<double> parse_inertia(const Node& n, Quat<double>& out_turn) {
+  out_turn = {1, 0, 0, 0};
+  if (n.value.is_array() && n.value.size() == 3 && n.value[0].is_array()) {
+    std::array<std::array<double, 3>, 3> tensor;
+    for (std::size_t i = 0; i < 3; ++i) {
+      const Node row = n.element(i);
+      tensor[i] = row.vec3();
+    }
+    try {
+      const PrincipalFrame frame = principal_frame(tensor);
+      out_turn = frame.rotation;
+      return frame.moments;
+    } catch (const Error& e) {
+      n.fail(std::string(e.what()).substr(9));  // drop the "inertia: " prefix
+    }
+  }
+  if (!n.value.is_array() || n.value.size() != 3) {
+    n.fail("expected [Ixx, Iyy, Izz] or a 3x3 matrix");
+  }
+  const Vec3<double> moments = n.vec3();
+  for (std::size_t i = 0; i < 3; ++i) {
+    if (!(moments[i] > 0)) n.element(i).fail("expected a number > 0");
+  }
+  return moments;
+}
+
+Quat<double> parse_orientation(const Node& n) {
+  if (!n.value.is_array() || n.value.size() != 4) n.fail("expected [w, x, y, z]");
+  Quat<double> q;
+  double norm = 0;
+  for (std::size_t k = 0; k < 4; ++k) q[k] = n.element(k).number(), norm += q[k] * q[k];
+  if (!(norm > 0)) n.fail("the quaternion is zero");
+  for (double& c : q) c /= std::sqrt(norm);
+  return q;
+}
+
+// L = R diag(I) R^T omega, all in double.
+Vec3<double> momentum_from_velocity(const Quat<double>& q, const Vec3<double>& inertia,
+                                    const Vec3<double>& omega) {
+  Vec3<double> body = rotate({q[0], -q[1], -q[2], -q[3]}, omega);
+  for (int d = 0; d < 3; ++d) body[d] *= inertia[d];
+  return rotate(q, body);
+}
+
+RigidSpec parse_rigid(const Node& n) {
+  n.expect_object({"position", "velocity", "orientation", "angular_velocity",
+                   "angular_momentum", "mass", "inertia"});
+  RigidSpec b;
+  b.position = n.required("position").vec3();
+  if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
+  if (n.has("mass")) b.mass = n.child("mass").positive();
+  Quat<double> given{1, 0, 0, 0}, turn{1, 0, 0, 0};
+  if (n.has("orientation")) given = parse_orientation(n.child("orientation"));
+  if (n.has("inertia")) b.inertia = parse_inertia(n.child("inertia"), turn);
+  b.orientation = multiply(given, turn);
+  if (n.has("angular_velocity") && n.has("angular_momentum")) {
+    n.child("angular_momentum").fail("give angular_velocity or angular_momentum, not both");
+  }
+  if (n.has("angular_momentum")) b.angular_momentum = n.child("angular_momentum").vec3();
+  if (n.has("angular_velocity")) {
+    b.angular_momentum =
+        momentum_from_velocity(b.orientation, b.inertia, n.child("angular_velocity").vec3());
+  }
+  return b;
+}
+
 GenerateSpec parse_generate(const Node& n) {
   n.expect_object({"count", "seed", "position_min", "position_max", "velocity_min",
-                   "velocity_max", "mass"});
+                   "velocity_max", "mass", "kind", "inertia", "angular_velocity_min",
+                   "angular_velocity_max"});
   GenerateSpec g;
   g.count = n.required("count").count(true);
   if (n.has("seed")) g.seed = n.child("seed").count(true);
@@ -152,8 +235,27 @@ GenerateSpec parse_generate(const Node& n) {
   if (n.has("velocity_min")) g.velocity_min = n.child("velocity_min").vec3();
   if (n.has("velocity_max")) g.velocity_max = n.child("velocity_max").vec3();
   if (n.has("mass")) g.mass = n.child("mass").positive();
+  if (n.has("kind")) {
+    const Node kind = n.child("kind");
+    const std::string name = kind.string();
+    if (name != "particle" && name != "rigid") kind.fail("expected \"particle\" or \"rigid\"");
+    g.rigid = name == "rigid";
+  }
+  for (const char* key : {"inertia", "angular_velocity_min", "angular_velocity_max"}) {
+    if (n.has(key) && !g.rigid) n.child(key).fail("only for \"kind\": \"rigid\"");
+  }
+  if (n.has("inertia")) {
+    Quat<double> turn;
+    const Node inertia = n.child("inertia");
+    g.inertia = parse_inertia(inertia, turn);
+    if (turn != Quat<double>{1, 0, 0, 0}) inertia.fail("expected principal moments [Ixx, Iyy, Izz]");
+  }
+  if (n.has("angular_velocity_min")) g.angular_velocity_min = n.child("angular_velocity_min").vec3();
+  if (n.has("angular_velocity_max")) g.angular_velocity_max = n.child("angular_velocity_max").vec3();
   check_box(n, "position_min", "position_max", g.position_min, g.position_max);
   check_box(n, "velocity_min", "velocity_max", g.velocity_min, g.velocity_max);
+  check_box(n, "angular_velocity_min", "angular_velocity_max", g.angular_velocity_min,
+            g.angular_velocity_max);
   return g;
 }
 
@@ -174,8 +276,8 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
     throw Error(std::string(origin) + ": invalid JSON: " + e.what());
   }
   const Node root{doc, "", origin};
-  root.expect_object({"name", "precision", "method", "dt", "steps", "particles", "generate",
-                      "forces"});
+  root.expect_object({"name", "precision", "method", "dt", "steps", "particles",
+                      "rigid_bodies", "generate", "forces"});
   Scene s;
   if (root.has("name")) s.name = root.child("name").string();
   if (root.has("precision")) {
@@ -207,6 +309,13 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
       s.particles.push_back(parse_body(list.element(i)));
     }
   }
+  if (root.has("rigid_bodies")) {
+    const Node list = root.child("rigid_bodies");
+    if (!list.value.is_array()) list.fail("expected an array");
+    for (std::size_t i = 0; i < list.value.size(); ++i) {
+      s.rigid_bodies.push_back(parse_rigid(list.element(i)));
+    }
+  }
   if (root.has("generate")) s.generate = parse_generate(root.child("generate"));
   if (root.has("forces")) {
     const Node list = root.child("forces");
@@ -215,8 +324,8 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
       s.forces.push_back(parse_force(list.element(i)));
     }
   }
-  if (s.particles.empty() && (!s.generate || s.generate->count == 0)) {
-    root.fail("the scene has no bodies (give 'particles' or 'generate')");
+  if (s.particles.empty() && s.rigid_bodies.empty() && (!s.generate || s.generate->count == 0)) {
+    root.fail("the scene has no bodies (give 'particles', 'rigid_bodies' or 'generate')");
   }
   return s;
 }
@@ -229,11 +338,60 @@ Scene load_scene(const std::filesystem::path& path) {
   return parse_scene(text.str(), path.string());
 }
 
+namespace {
+
+template <class T>
+Vec3<T> narrow(const Vec3<double>& v) {
+  return {T(v[0]), T(v[1]), T(v[2])};
+}
+
+// A uniformly random rotation (Shoemake, "Uniform random rotations", Graphics Gems III).
+Quat<double> random_orientation(std::mt19937_64& rng) {
+  const double u1 = uniform(rng, 0, 1), u2 = uniform(rng, 0, 2 * std::numbers::pi),
+               u3 = uniform(rng, 0, 2 * std::numbers::pi);
+  const double a = std::sqrt(1 - u1), b = std::sqrt(u1);
+  return {b * std::cos(u3), a * std::sin(u2), a * std::cos(u2), b * std::sin(u3)};
+}
+
+}  // namespace
+
+template <class T>
+RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
+  RigidBodySet<T> set;
+  const bool generated = scene.generate && scene.generate->rigid;
+  set.reserve(scene.rigid_bodies.size() + (generated ? scene.generate->count : 0));
+  auto add = [&](const RigidSpec& b) {
+    set.add({narrow<T>(b.position), narrow<T>(b.velocity),
+             {T(b.orientation[0]), T(b.orientation[1]), T(b.orientation[2]), T(b.orientation[3])},
+             narrow<T>(b.angular_momentum), T(b.mass), narrow<T>(b.inertia)});
+  };
+  for (const RigidSpec& b : scene.rigid_bodies) add(b);
+  if (generated) {
+    const GenerateSpec& g = *scene.generate;
+    std::mt19937_64 rng(g.seed);
+    for (std::size_t i = 0; i < g.count; ++i) {
+      RigidSpec b;
+      for (int d = 0; d < 3; ++d) b.position[d] = uniform(rng, g.position_min[d], g.position_max[d]);
+      for (int d = 0; d < 3; ++d) b.velocity[d] = uniform(rng, g.velocity_min[d], g.velocity_max[d]);
+      Vec3<double> omega;
+      for (int d = 0; d < 3; ++d) {
+        omega[d] = uniform(rng, g.angular_velocity_min[d], g.angular_velocity_max[d]);
+      }
+      b.orientation = random_orientation(rng);
+      b.mass = g.mass;
+      b.inertia = g.inertia;
+      b.angular_momentum = momentum_from_velocity(b.orientation, b.inertia, omega);
+      add(b);
+    }
+  }
+  return set;
+}
+
 template <class T>
 ParticleSet<T> make_particles(const Scene& scene) {
-  auto v3 = [](const Vec3<double>& v) { return Vec3<T>{T(v[0]), T(v[1]), T(v[2])}; };
+  auto v3 = [](const Vec3<double>& v) { return narrow<T>(v); };
   ParticleSet<T> set;
-  const std::size_t generated = scene.generate ? scene.generate->count : 0;
+  const std::size_t generated = scene.generate && !scene.generate->rigid ? scene.generate->count : 0;
   set.reserve(scene.particles.size() + generated);
   for (const BodySpec& b : scene.particles) {
     if (b.kinematic) {
@@ -268,6 +426,8 @@ ForceModel<T> make_forces(const Scene& scene) {
   return model;
 }
 
+template RigidBodySet<float> make_rigid_bodies<float>(const Scene&);
+template RigidBodySet<double> make_rigid_bodies<double>(const Scene&);
 template ParticleSet<float> make_particles<float>(const Scene&);
 template ParticleSet<double> make_particles<double>(const Scene&);
 template ForceModel<float> make_forces<float>(const Scene&);

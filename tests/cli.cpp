@@ -123,6 +123,29 @@ TEST_CASE("the trajectory holds step 0, every K-th step and the last, bit for bi
   CHECK(r.out.find("body_steps_per_second") != std::string::npos);  // for people, too
 }
 
+TEST_CASE("rigid bodies add their columns to the trajectory", "[cli][rigid]") {
+  const fs::path p = write("mixed.json", R"({"precision": "double", "steps": 4, "dt": 0.25,
+      "particles": [{"position": [0,0,0], "velocity": [1,0,0]}],
+      "rigid_bodies": [{"position": [5,0,0], "angular_momentum": [0,0,2], "inertia": [1,1,2]}]})");
+  const fs::path csv = work_dir() / "mixed.csv";
+  REQUIRE(kinema_cli("run " + p.string() + " --every 2 --quiet --out " + csv.string()).code == 0);
+  std::istringstream in(read(csv));
+  std::vector<std::string> lines_read;
+  for (std::string line; std::getline(in, line);) lines_read.push_back(line);
+  REQUIRE(lines_read.size() == 1 + 3 * 2);  // steps 0, 2, 4; one particle, one rigid body
+  CHECK(lines_read[0] == "step,t,body,px,py,pz,vx,vy,vz,qw,qx,qy,qz,lx,ly,lz");
+  CHECK(lines_read[5] == "4,1,0,1,0,0,1,0,0,,,,,,,");
+  // Spin 1 rad/s about z for 1 s: q = (cos 0.5, 0, 0, sin 0.5).
+  std::vector<double> cells;
+  std::istringstream row(lines_read[6]);
+  for (std::string cell; std::getline(row, cell, ',');) cells.push_back(std::stod(cell));
+  REQUIRE(cells.size() == 16);
+  CHECK(cells[2] == 1);  // numbered after the particles
+  CHECK(cells[9] == Approx(std::cos(0.5)).epsilon(1e-4));
+  CHECK(cells[12] == Approx(std::sin(0.5)).epsilon(1e-4));
+  CHECK(cells[15] == 2);
+}
+
 TEST_CASE("options override the scene", "[cli]") {
   const fs::path summary = work_dir() / "override.json";
   const Result r = kinema_cli("run " + scene("damped_spring.json") +

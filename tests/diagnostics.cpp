@@ -47,3 +47,17 @@ TEST_CASE("undamped motion conserves energy to the method's accuracy", "[diagnos
   s.advance(b, 0.001, 1000);
   CHECK(energy(b, f).total() == Approx(e0).epsilon(1e-10));
 }
+
+TEST_CASE("rigid-body energy and angular momentum match hand computation", "[diagnostics][rigid]") {
+  RigidBodySet<double> b;
+  // Spin 2 about body z (I_z = 4): L = 8, rotational energy = 1/2 I w^2 = 8.
+  b.add({{1, 0, 0}, {0, 3, 0}, {1, 0, 0, 0}, {0, 0, 8}, 2, {1, 2, 4}});
+  ForceModel<double> f;
+  f.add(Gravity{{0, -10, 0}});
+  CHECK(rotational_energy(b) == Approx(8));
+  CHECK(energy(b, f).kinetic == Approx(8 + 0.5 * 2 * 9));
+  CHECK(energy(b, f).potential == Approx(0));
+  const auto l = angular_momentum(b);  // spin 8 plus m x cross v = 2 * (1,0,0) x (0,3,0) = (0,0,6)
+  CHECK(l[2] == Approx(14));
+  CHECK(all_finite(b));
+}

@@ -101,3 +101,53 @@ TEST_CASE("every shipped scene loads", "[scene]") {
     CHECK_NOTHROW(method_by_name(s.method));
   }
 }
+
+TEST_CASE("rigid bodies in scenes: angular velocity, full inertia tensors, generation", "[scene][rigid]") {
+  const Scene s = parse_scene(R"({
+    "rigid_bodies": [
+      {"position": [1, 2, 3], "angular_velocity": [0, 0, 2], "mass": 2, "inertia": [1, 2, 4]},
+      {"position": [0, 0, 0], "orientation": [0, 0, 0, 2], "angular_momentum": [1, 0, 0],
+       "inertia": [[2, 1, 0], [1, 2, 0], [0, 0, 3]]}],
+    "generate": {"kind": "rigid", "count": 50, "position_min": [0,0,0], "position_max": [1,1,1],
+                 "inertia": [1, 1, 1], "angular_velocity_min": [-1,-1,-1],
+                 "angular_velocity_max": [1,1,1]} })");
+  REQUIRE(s.rigid_bodies.size() == 2);
+  CHECK(s.rigid_bodies[0].angular_momentum == Vec3<double>{0, 0, 8});  // I_z omega
+  // [[2,1,0],[1,2,0],[0,0,3]] has principal moments 1, 3, 3.
+  std::vector<double> m(s.rigid_bodies[1].inertia.begin(), s.rigid_bodies[1].inertia.end());
+  std::sort(m.begin(), m.end());
+  CHECK(m[0] == Approx(1));
+  CHECK(m[1] == Approx(3));
+  CHECK(m[2] == Approx(3));
+  const RigidBodySet<double> b = make_rigid_bodies<double>(s);
+  REQUIRE(b.size() == 52);
+  CHECK(make_particles<double>(s).size() == 0);  // generated bodies are rigid here
+  CHECK(b.angular_velocity(0)[2] == Approx(2));
+  for (std::size_t i = 2; i < b.size(); ++i) {
+    const auto omega = b.angular_velocity(i);
+    for (double w : omega) REQUIRE(std::abs(w) <= 1 + 1e-12);
+    const auto q = b.orientation(i);
+    REQUIRE(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] == Approx(1));
+  }
+}
+
+TEST_CASE("rigid body scene errors name the JSON path", "[scene][rigid][errors]") {
+  const std::pair<const char*, const char*> cases[] = {
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[1,0,0],[0,-1,0],[0,0,1]]}]})",
+       "scene: rigid_bodies[0].inertia: the tensor is not positive definite"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [1, 0, 1]}]})",
+       "scene: rigid_bodies[0].inertia[1]: expected a number > 0"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "orientation": [0,0,0,0]}]})",
+       "scene: rigid_bodies[0].orientation: the quaternion is zero"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "angular_velocity": [1,0,0], "angular_momentum": [1,0,0]}]})",
+       "scene: rigid_bodies[0].angular_momentum: give angular_velocity or angular_momentum"},
+      {R"({"generate": {"count": 3, "position_min": [0,0,0], "position_max": [1,1,1], "inertia": [1,1,1]}})",
+       "scene: generate.inertia: only for \"kind\": \"rigid\""},
+      {R"({"rigid_bodies": [{"position": [0,0,0]}], "forces": [{"type": "torque", "torque": [1, 0]}]})",
+       "scene: forces[0].torque: expected an array of 3 numbers"},
+  };
+  for (const auto& [text, message] : cases) {
+    INFO(text);
+    CHECK_THROWS_WITH(parse_scene(text), Catch::StartsWith(message));
+  }
+}

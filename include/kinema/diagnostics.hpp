@@ -22,8 +22,23 @@ template <class T>
 EnergyReport energy(const ParticleSet<T>& bodies, const ForceModel<T>& forces);
 template <class T>
 Vec3<double> momentum(const ParticleSet<T>& bodies);
+// Total angular momentum about the origin: sum of m x cross v.
+template <class T>
+Vec3<double> angular_momentum(const ParticleSet<T>& bodies);
 // True when every position and velocity is finite.
 template <class T>
 bool all_finite(const ParticleSet<T>& bodies);
+
+// Rigid bodies: kinetic energy includes the rotational part 1/2 L . omega; the potential
+// is that of the centres of mass; angular momentum adds each body's spin L to m x cross v.
+template <class T>
+double rotational_energy(const RigidBodySet<T>& bodies);
+template <class T>
+EnergyReport energy(const RigidBodySet<T>& bodies, const ForceModel<T>& forces);
+template <class T>
+Vec3<double> angular_momentum(const RigidBodySet<T>& bodies);
+// True when every position, velocity, orientation and angular momentum is finite.
+template <class T>
+bool all_finite(const RigidBodySet<T>& bodies);
 
 }  // namespace kinema

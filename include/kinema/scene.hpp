@@ -17,13 +17,17 @@ enum class Precision { single, dual };  // float, double
 
 std::string_view precision_name(Precision p);  // "float" or "double"
 
-// Bodies drawn uniformly from boxes, reproducibly from `seed` on every platform.
+// Bodies drawn uniformly from boxes, reproducibly from `seed` on every platform. Rigid
+// ones also get a uniformly random orientation and an angular velocity from a box.
 struct GenerateSpec {
   std::size_t count = 0;
   std::uint64_t seed = 1;
   Vec3<double> position_min{}, position_max{};
   Vec3<double> velocity_min{}, velocity_max{};
   double mass = 1;
+  bool rigid = false;
+  Vec3<double> inertia{1, 1, 1};  // principal moments
+  Vec3<double> angular_velocity_min{}, angular_velocity_max{};
 };
 
 struct BodySpec {
@@ -33,6 +37,17 @@ struct BodySpec {
   bool kinematic = false;  // inv_mass 0: forces do not move it
 };
 
+// A rigid body resolved to principal axes: `orientation` is that of the principal frame and
+// `angular_momentum` is in the world frame, whichever form the scene used.
+struct RigidSpec {
+  Vec3<double> position{};
+  Vec3<double> velocity{};
+  Quat<double> orientation{1, 0, 0, 0};
+  Vec3<double> angular_momentum{};
+  double mass = 1;
+  Vec3<double> inertia{1, 1, 1};
+};
+
 struct Scene {
   std::string name = "scene";
   Precision precision = Precision::single;
@@ -40,6 +55,7 @@ struct Scene {
   double dt = 0.01;
   std::uint64_t steps = 100;
   std::vector<BodySpec> particles;
+  std::vector<RigidSpec> rigid_bodies;
   std::optional<GenerateSpec> generate;
   std::vector<LocalTerm> forces;
 };
@@ -49,9 +65,11 @@ struct Scene {
 Scene parse_scene(std::string_view json_text, std::string_view origin = "scene");
 Scene load_scene(const std::filesystem::path& path);
 
-// Listed bodies first, then generated ones.
+// Listed bodies first, then generated ones (of the matching kind).
 template <class T>
 ParticleSet<T> make_particles(const Scene& scene);
+template <class T>
+RigidBodySet<T> make_rigid_bodies(const Scene& scene);
 template <class T>
 ForceModel<T> make_forces(const Scene& scene);
 

@@ -12,7 +12,7 @@
 namespace kinema::kernels::KINEMA_ISA_NS {
 
 template <int N, class F>
-inline void static_for(F&& f) {
+KINEMA_INLINE void static_for(F&& f) {
   [&]<int... I>(std::integer_sequence<int, I...>) {
     (f(std::integral_constant<int, I>{}), ...);
   }(std::make_integer_sequence<int, N>{});
@@ -26,21 +26,21 @@ struct Vec {
 };
 
 template <int N, class V>
-inline Vec<V, N> load_n(const value_t<V>* const p[N], std::size_t i) {
+KINEMA_INLINE Vec<V, N> load_n(const value_t<V>* const p[N], std::size_t i) {
   Vec<V, N> v;
   for (int d = 0; d < N; ++d) v.c[d] = load<V>(p[d] + i);
   return v;
 }
 template <int N, class V>
-inline void store_n(value_t<V>* const p[N], std::size_t i, const Vec<V, N>& v) {
+KINEMA_INLINE void store_n(value_t<V>* const p[N], std::size_t i, const Vec<V, N>& v) {
   for (int d = 0; d < N; ++d) store(p[d] + i, v.c[d]);
 }
 template <class V>
-inline Vec<V> load3(const value_t<V>* const p[3], std::size_t i) {
+KINEMA_INLINE Vec<V> load3(const value_t<V>* const p[3], std::size_t i) {
   return load_n<3, V>(p, i);
 }
 template <class V>
-inline void store3(value_t<V>* const p[3], std::size_t i, const Vec<V>& v) {
+KINEMA_INLINE void store3(value_t<V>* const p[3], std::size_t i, const Vec<V>& v) {
   store_n<3, V>(p, i, v);
 }
 
@@ -78,7 +78,7 @@ struct BodyTerms {
 };
 
 template <class V>
-inline auto body_terms(const Forces<V>& f, const V& inv_mass) {
+KINEMA_INLINE auto body_terms(const Forces<V>& f, const V& inv_mass) {
   const auto dynamic = inv_mass != V(0);
   BodyTerms<V, decltype(dynamic)> b{f.neg_spring_k * inv_mass, f.neg_linear * inv_mass,
                                     f.neg_quadratic * inv_mass, {}, dynamic};
@@ -90,7 +90,7 @@ inline auto body_terms(const Forces<V>& f, const V& inv_mass) {
 // a = g - (k / m) (x - anchor) - ((c + q |v|) / m) v - sum mu r / |r|^3.
 // The operation order is part of the contract: every path and both step paths use this.
 template <bool Quadratic, bool Central, class V, class B>
-inline Vec<V> accel(const Forces<V>& f, const B& body, const Vec<V>& x, const Vec<V>& v) {
+KINEMA_INLINE Vec<V> accel(const Forces<V>& f, const B& body, const Vec<V>& x, const Vec<V>& v) {
   V neg_drag = body.neg_linear;
   if constexpr (Quadratic) {
     V speed = root(fused(v.c[0], v.c[0], fused(v.c[1], v.c[1], v.c[2] * v.c[2])));
@@ -114,7 +114,7 @@ inline Vec<V> accel(const Forces<V>& f, const B& body, const Vec<V>& x, const Ve
 }
 
 template <class V, int N>
-inline Vec<V, N> step_by(const V& h, const Vec<V, N>& dir, const Vec<V, N>& base) {
+KINEMA_INLINE Vec<V, N> step_by(const V& h, const Vec<V, N>& dir, const Vec<V, N>& base) {
   Vec<V, N> out;
   for (int d = 0; d < N; ++d) out.c[d] = fused(h, dir.c[d], base.c[d]);
   return out;
@@ -133,7 +133,7 @@ constexpr int first_nonzero(const Weights& w) {
 // pipes while the FMA pipes are the bottleneck; the bits are those of the fma either way
 // (k + k is exact, so (k + k) + sum rounds once, like fma(2, k, sum)).
 template <class V>
-inline V accumulate(value_t<V> ratio, const V& k, const V& sum) {
+KINEMA_INLINE V accumulate(value_t<V> ratio, const V& k, const V& sum) {
   if (ratio == 1) return sum + k;
   if (ratio == 2) return sum + (k + k);
   return fused(V(ratio), k, sum);
@@ -144,7 +144,7 @@ inline V accumulate(value_t<V> ratio, const V& k, const V& sum) {
 // One rounding into base, and one operation per term (RK4's ratios 2, 2, 1 are exact). The
 // staged path's `combined` follows the same rule at run time.
 template <Weights W, class V, int S, int N>
-inline Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Vec<V, N>& base) {
+KINEMA_INLINE Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Vec<V, N>& base) {
   using T = value_t<V>;
   constexpr int first = first_nonzero(W);
   if constexpr (first < 0) {
@@ -165,7 +165,7 @@ inline Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Vec<V, N>
 // hardware prefetcher alone leaves DRAM latency exposed (measured: 4M bodies, rk4 float,
 // AVX-512, 1.69 -> 1.46 ns per body-step on Zen 4).
 template <class V, class T>
-inline void prefetch(const BodyArrays<T>& b, std::size_t i) {
+KINEMA_INLINE void prefetch(const BodyArrays<T>& b, std::size_t i) {
   constexpr std::size_t ahead = 1024 / sizeof(T), line = 64 / sizeof(T);
   if constexpr (Lane<V>::width < line) {
     if (i % line != 0) return;
@@ -234,7 +234,7 @@ constexpr FusedFn<value_t<V>> fused_kernel() {
 
 // `advanced` with run-time coefficients: the same operations in the same order.
 template <class V>
-inline Vec<V> combined(const Combination<value_t<V>>& c, value_t<V> h, std::size_t i) {
+KINEMA_INLINE Vec<V> combined(const Combination<value_t<V>>& c, value_t<V> h, std::size_t i) {
   const Vec<V> base = load3<V>(c.in, i);
   if (c.terms == 0) return base;
   Vec<V> sum = load3<V>(c.k[0], i);

@@ -19,7 +19,7 @@ struct Rotation {
 
 // Rotation matrix of q / |q|: with s = 2 / |q|^2, R = I + s (w [u]x + [u]x^2), u = (x, y, z).
 template <class V>
-inline Rotation<V> rotation(const Quat4<V>& q) {
+KINEMA_INLINE Rotation<V> rotation(const Quat4<V>& q) {
   const V w = q.c[0], x = q.c[1], y = q.c[2], z = q.c[3];
   const V s = V(2) / fused(w, w, fused(x, x, fused(y, y, z * z)));
   const V xs = x * s, ys = y * s, zs = z * s;
@@ -31,7 +31,7 @@ inline Rotation<V> rotation(const Quat4<V>& q) {
 }
 
 template <class V>
-inline Vec<V> times(const Rotation<V>& r, const Vec<V>& v) {
+KINEMA_INLINE Vec<V> times(const Rotation<V>& r, const Vec<V>& v) {
   Vec<V> out;
   for (int d = 0; d < 3; ++d) {
     out.c[d] = fused(r.m[d][0], v.c[0], fused(r.m[d][1], v.c[1], r.m[d][2] * v.c[2]));
@@ -40,7 +40,7 @@ inline Vec<V> times(const Rotation<V>& r, const Vec<V>& v) {
 }
 
 template <class V>
-inline Vec<V> transposed_times(const Rotation<V>& r, const Vec<V>& v) {
+KINEMA_INLINE Vec<V> transposed_times(const Rotation<V>& r, const Vec<V>& v) {
   Vec<V> out;
   for (int d = 0; d < 3; ++d) {
     out.c[d] = fused(r.m[0][d], v.c[0], fused(r.m[1][d], v.c[1], r.m[2][d] * v.c[2]));
@@ -49,14 +49,14 @@ inline Vec<V> transposed_times(const Rotation<V>& r, const Vec<V>& v) {
 }
 
 template <class V>
-inline Vec<V> cross(const Vec<V>& a, const Vec<V>& b) {
+KINEMA_INLINE Vec<V> cross(const Vec<V>& a, const Vec<V>& b) {
   return {{fused(a.c[1], b.c[2], -(a.c[2] * b.c[1])), fused(a.c[2], b.c[0], -(a.c[0] * b.c[2])),
            fused(a.c[0], b.c[1], -(a.c[1] * b.c[0]))}};
 }
 
 // omega = R diag(1/I) R^T L
 template <class V>
-inline Vec<V> angular_velocity(const Rotation<V>& r, const Vec<V>& inv_inertia, const Vec<V>& l) {
+KINEMA_INLINE Vec<V> angular_velocity(const Rotation<V>& r, const Vec<V>& inv_inertia, const Vec<V>& l) {
   Vec<V> body = transposed_times(r, l);
   for (int d = 0; d < 3; ++d) body.c[d] = body.c[d] * inv_inertia.c[d];
   return times(r, body);
@@ -64,7 +64,7 @@ inline Vec<V> angular_velocity(const Rotation<V>& r, const Vec<V>& inv_inertia, 
 
 // dq/dt = 1/2 (0, omega) * q = 1/2 (-omega . u, w omega + omega x u)
 template <class V>
-inline Quat4<V> quaternion_rate(const Vec<V>& omega, const Quat4<V>& q) {
+KINEMA_INLINE Quat4<V> quaternion_rate(const Vec<V>& omega, const Quat4<V>& q) {
   const V half(0.5);
   Vec<V> o;
   for (int d = 0; d < 3; ++d) o.c[d] = half * omega.c[d];  // exact
@@ -92,7 +92,7 @@ struct Rotational {
 
 // torque = T0 - c omega + sum (R p) x F, zero where inv_mass is 0.
 template <class V, class B>
-inline Vec<V> torque(const Rotational<V>& f, const B& body, const Rotation<V>& r,
+KINEMA_INLINE Vec<V> torque(const Rotational<V>& f, const B& body, const Rotation<V>& r,
                      const Vec<V>& omega) {
   Vec<V> t;
   for (int d = 0; d < 3; ++d) t.c[d] = fused(f.neg_drag, omega.c[d], f.torque[d]);
@@ -112,7 +112,7 @@ struct RigidState {
 };
 
 template <class V>
-inline Quat4<V> normalized(const Quat4<V>& q) {
+KINEMA_INLINE Quat4<V> normalized(const Quat4<V>& q) {
   const V norm = root(fused(q.c[0], q.c[0], fused(q.c[1], q.c[1], fused(q.c[2], q.c[2], q.c[3] * q.c[3]))));
   Quat4<V> out;
   for (int k = 0; k < 4; ++k) out.c[k] = q.c[k] / norm;
@@ -120,13 +120,13 @@ inline Quat4<V> normalized(const Quat4<V>& q) {
 }
 
 template <class V>
-inline RigidState<V> load_rigid(const RigidJob<value_t<V>>& job, std::size_t i) {
+KINEMA_INLINE RigidState<V> load_rigid(const RigidJob<value_t<V>>& job, std::size_t i) {
   return {load3<V>(job.bodies.x, i), load3<V>(job.bodies.v, i), load_n<4, V>(job.q, i),
           load3<V>(job.l, i)};
 }
 
 template <class V>
-inline void store_rigid(const RigidJob<value_t<V>>& job, std::size_t i, RigidState<V> s) {
+KINEMA_INLINE void store_rigid(const RigidJob<value_t<V>>& job, std::size_t i, RigidState<V> s) {
   if (job.renormalize) s.q = normalized(s.q);
   store3(job.bodies.x, i, s.x);
   store3(job.bodies.v, i, s.v);

@@ -37,56 +37,92 @@ void print_summary(const nlohmann::ordered_json& summary) {
   }
 }
 
+// The scene's particles and rigid bodies, each with its stepper, on one job system.
+template <class T>
+struct World {
+  ParticleSet<T> particles;
+  RigidBodySet<T> rigid;
+  ForceModel<T> forces;
+  TbbJobSystem jobs;
+  Stepper<T> particle_stepper, rigid_stepper;
+
+  World(const Scene& scene, const RunOptions& o)
+      : particles(make_particles<T>(scene)),
+        rigid(make_rigid_bodies<T>(scene)),
+        forces(make_forces<T>(scene)),
+        jobs(o.threads),
+        particle_stepper(forces, method_by_name(scene.method), options(o)),
+        rigid_stepper(forces, method_by_name(scene.method), options(o)) {}
+
+  StepperOptions options(const RunOptions& o) {
+    StepperOptions s;
+    s.isa = o.isa;
+    s.jobs = &jobs;
+    s.relaxed_fma = o.relaxed_fma;
+    return s;
+  }
+  void advance(T h, std::uint64_t steps) {
+    if (particles.size() > 0) particle_stepper.advance(particles, h, steps);
+    if (rigid.size() > 0) rigid_stepper.advance(rigid, h, steps);
+  }
+  double time() const {
+    return particles.size() > 0 ? particle_stepper.time() : rigid_stepper.time();
+  }
+  double total_energy() const {
+    return (particles.size() > 0 ? energy(particles, forces).total() : 0) +
+           (rigid.size() > 0 ? energy(rigid, forces).total() : 0);
+  }
+  bool finite() const { return all_finite(particles) && all_finite(rigid); }
+};
+
 template <class T>
 int run_typed(const Scene& scene, const RunOptions& o) {
-  ParticleSet<T> bodies = make_particles<T>(scene);
-  StepperOptions stepper_options;
-  stepper_options.isa = o.isa;
-  stepper_options.threads = o.threads;
-  stepper_options.relaxed_fma = o.relaxed_fma;
-  Stepper<T> stepper(make_forces<T>(scene), method_by_name(scene.method), stepper_options);
+  World<T> world(scene, o);
   const T h = T(scene.dt);
-  const EnergyReport initial = energy(bodies, stepper.forces());
+  const double initial_energy = world.total_energy();
 
   double wall_seconds = 0;  // stepping only: loading and writing are not timed
   auto timed_advance = [&](std::uint64_t n) {
     const auto start = Clock::now();
-    stepper.advance(bodies, h, n);
+    world.advance(h, n);
     wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
   };
   if (o.trajectory_path.empty()) {
     timed_advance(scene.steps);
   } else {
-    TrajectoryWriter trajectory(o.trajectory_path);
-    trajectory.write(0, stepper.time(), bodies);
+    TrajectoryWriter trajectory(o.trajectory_path, world.rigid.size() > 0);
+    trajectory.write(0, world.time(), world.particles, world.rigid);
     for (std::uint64_t step = 0; step < scene.steps;) {
       const std::uint64_t n = std::min(o.every, scene.steps - step);
       timed_advance(n);
       step += n;
-      trajectory.write(step, stepper.time(), bodies);
+      trajectory.write(step, world.time(), world.particles, world.rigid);
     }
     trajectory.close();
   }
 
-  const EnergyReport final_energy = energy(bodies, stepper.forces());
-  const bool finite = all_finite(bodies);
-  const double body_steps = double(bodies.size()) * double(scene.steps);
+  const bool finite = world.finite();
+  const std::size_t bodies = world.particles.size() + world.rigid.size();
+  const double body_steps = double(bodies) * double(scene.steps);
+  const Stepper<T>& stepper = world.particle_stepper;
   nlohmann::ordered_json summary;
   summary["scene"] = scene.name;
-  summary["bodies"] = bodies.size();
+  summary["bodies"] = bodies;
+  summary["particles"] = world.particles.size();
+  summary["rigid_bodies"] = world.rigid.size();
   summary["steps"] = scene.steps;
   summary["method"] = std::string(stepper.method().name);
   summary["path"] = stepper.fused() ? "fused" : "staged";
   summary["dt"] = scene.dt;
-  summary["t_final"] = stepper.time();
+  summary["t_final"] = world.time();
   summary["precision"] = std::string(precision_name(scene.precision));
   summary["isa"] = std::string(isa_name(stepper.isa()));
   summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
   summary["wall_seconds"] = wall_seconds;
   summary["body_steps_per_second"] = wall_seconds > 0 ? body_steps / wall_seconds : 0.0;
-  summary["energy_initial"] = initial.total();
-  summary["energy_final"] = final_energy.total();
+  summary["energy_initial"] = initial_energy;
+  summary["energy_final"] = world.total_energy();
   summary["finite"] = finite;
 
   if (!o.summary_path.empty()) {

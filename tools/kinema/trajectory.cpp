@@ -7,27 +7,50 @@
 
 namespace kinema::cli {
 
-TrajectoryWriter::TrajectoryWriter(const std::string& path) : path_(path) {
+TrajectoryWriter::TrajectoryWriter(const std::string& path, bool rigid_columns)
+    : rigid_columns_(rigid_columns), path_(path) {
   file_ = std::fopen(path.c_str(), "w");
   if (file_ == nullptr) {
     throw Error(path + ": cannot write the trajectory: " + std::strerror(errno));
   }
-  std::fputs("step,t,body,px,py,pz,vx,vy,vz\n", file_);
+  std::fputs(rigid_columns ? "step,t,body,px,py,pz,vx,vy,vz,qw,qx,qy,qz,lx,ly,lz\n"
+                           : "step,t,body,px,py,pz,vx,vy,vz\n",
+             file_);
 }
 
 TrajectoryWriter::~TrajectoryWriter() {
   if (file_ != nullptr) std::fclose(file_);
 }
 
+namespace {
+
+// %.9g and %.17g are the shortest fixed widths that round-trip float and double.
 template <class T>
-void TrajectoryWriter::write(std::uint64_t step, double t, const ParticleSet<T>& b) {
-  // %.9g and %.17g are the shortest fixed widths that round-trip float and double.
-  const char* row = sizeof(T) == 4 ? "%llu,%.17g,%zu,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n"
-                                   : "%llu,%.17g,%zu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n";
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    std::fprintf(file_, row, static_cast<unsigned long long>(step), t, i, double(b.px()[i]),
-                 double(b.py()[i]), double(b.pz()[i]), double(b.vx()[i]), double(b.vy()[i]),
-                 double(b.vz()[i]));
+constexpr const char* kValue = sizeof(T) == 4 ? ",%.9g" : ",%.17g";
+
+template <class T>
+void write_centre(std::FILE* f, std::uint64_t step, double t, std::size_t body,
+                  const ParticleSet<T>& b, std::size_t i) {
+  std::fprintf(f, "%llu,%.17g,%zu", static_cast<unsigned long long>(step), t, body);
+  for (const T* a : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()}) {
+    std::fprintf(f, kValue<T>, double(a[i]));
+  }
+}
+
+}  // namespace
+
+template <class T>
+void TrajectoryWriter::write(std::uint64_t step, double t, const ParticleSet<T>& particles,
+                             const RigidBodySet<T>& rigid) {
+  for (std::size_t i = 0; i < particles.size(); ++i) {
+    write_centre(file_, step, t, i, particles, i);
+    std::fputs(rigid_columns_ ? ",,,,,,,\n" : "\n", file_);
+  }
+  for (std::size_t i = 0; i < rigid.size(); ++i) {
+    write_centre(file_, step, t, particles.size() + i, rigid.centers(), i);
+    for (int k = 0; k < 4; ++k) std::fprintf(file_, kValue<T>, double(rigid.q(k)[i]));
+    for (int d = 0; d < 3; ++d) std::fprintf(file_, kValue<T>, double(rigid.l(d)[i]));
+    std::fputc('\n', file_);
   }
 }
 
@@ -38,7 +61,9 @@ void TrajectoryWriter::close() {
   if (failed || close_failed) throw Error(path_ + ": writing the trajectory failed");
 }
 
-template void TrajectoryWriter::write(std::uint64_t, double, const ParticleSet<float>&);
-template void TrajectoryWriter::write(std::uint64_t, double, const ParticleSet<double>&);
+template void TrajectoryWriter::write(std::uint64_t, double, const ParticleSet<float>&,
+                                      const RigidBodySet<float>&);
+template void TrajectoryWriter::write(std::uint64_t, double, const ParticleSet<double>&,
+                                      const RigidBodySet<double>&);
 
 }  // namespace kinema::cli

@@ -1,5 +1,7 @@
 #pragma once
-// Trajectory CSV: step,t,body,px,py,pz,vx,vy,vz with round-trip precision.
+// Trajectory CSV: step,t,body,px,py,pz,vx,vy,vz with round-trip precision; scenes with
+// rigid bodies add qw,qx,qy,qz,lx,ly,lz (empty on particle rows). Particles are numbered
+// first, then rigid bodies.
 
 #include <cstdint>
 #include <cstdio>
@@ -11,17 +13,20 @@ namespace kinema::cli {
 
 class TrajectoryWriter {
  public:
-  explicit TrajectoryWriter(const std::string& path);  // throws kinema::Error
+  // Throws kinema::Error when the file cannot be written.
+  TrajectoryWriter(const std::string& path, bool rigid_columns);
   ~TrajectoryWriter();
   TrajectoryWriter(const TrajectoryWriter&) = delete;
   TrajectoryWriter& operator=(const TrajectoryWriter&) = delete;
 
   template <class T>
-  void write(std::uint64_t step, double t, const ParticleSet<T>& bodies);
+  void write(std::uint64_t step, double t, const ParticleSet<T>& particles,
+             const RigidBodySet<T>& rigid);
   void close();  // throws kinema::Error when the data did not reach the file
 
  private:
   std::FILE* file_ = nullptr;
+  bool rigid_columns_ = false;
   std::string path_;
 };
 

@@ -1,0 +1,72 @@
+// kinema's rigid-body path: the particle benchmark's scene with orientation and angular
+// momentum added (plus angular drag), step by step and temporally blocked.
+#include <benchmark/benchmark.h>
+
+#include <string>
+
+#include "bench_scene.hpp"
+
+namespace kinema::bench {
+namespace {
+
+Scene rigid_scene(std::size_t count) {
+  Scene s = bench_scene(count);
+  s.generate->rigid = true;
+  s.generate->inertia = {0.5, 0.8, 1.1};
+  s.generate->angular_velocity_min = {-3, -3, -3};
+  s.generate->angular_velocity_max = {3, 3, 3};
+  s.forces.push_back(AngularDrag{0.05});
+  return s;
+}
+
+// State bytes per rigid step: 17 arrays in (centre 7, q 4, L 3, inverse inertia 3), 13 out.
+template <class T>
+constexpr double rigid_step_bytes() {
+  return 30.0 * sizeof(T);
+}
+
+template <class T>
+void rigid_steps(benchmark::State& state, unsigned threads, bool blocked) {
+  const auto n = std::size_t(state.range(0));
+  const Scene scene = rigid_scene(n);
+  RigidBodySet<T> bodies = make_rigid_bodies<T>(scene);
+  TbbJobSystem jobs(threads);
+  SerialJobSystem serial;
+  StepperOptions o;
+  o.jobs = threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
+  Stepper<T> stepper(make_forces<T>(scene), rk4, o);
+  const std::uint64_t steps = blocked ? 64 : 1;
+  stepper.advance(bodies, T(kDt), 1);
+  for (auto _ : state) {
+    stepper.advance(bodies, T(kDt), steps);
+    benchmark::ClobberMemory();
+  }
+  if (!all_finite(bodies)) state.SkipWithError("state is not finite after the run");
+  report_body_steps(state, double(n) * double(steps), rigid_step_bytes<T>());
+}
+
+void register_all() {
+  const std::string isa(isa_name(best_isa()));
+  for (unsigned threads : {1u, 2u}) {
+    const std::string suffix = "/" + isa + "/threads:" + std::to_string(threads);
+    auto* f = benchmark::RegisterBenchmark(("rigid/rk4/float" + suffix).c_str(),
+                                           rigid_steps<float>, threads, false);
+    auto* d = benchmark::RegisterBenchmark(("rigid/rk4/double" + suffix).c_str(),
+                                           rigid_steps<double>, threads, false);
+    for (auto* b : {f, d}) {
+      for (std::int64_t n : {1 << 10, 100000, 1 << 22}) b->Arg(n);
+      b->UseRealTime()->Unit(benchmark::kMicrosecond);
+    }
+    for (auto* b : {benchmark::RegisterBenchmark(("rigid-ceiling/rk4/float" + suffix).c_str(),
+                                                 rigid_steps<float>, threads, true),
+                    benchmark::RegisterBenchmark(("rigid-ceiling/rk4/double" + suffix).c_str(),
+                                                 rigid_steps<double>, threads, true)}) {
+      b->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
+    }
+  }
+}
+
+const int registered = (register_all(), 0);
+
+}  // namespace
+}  // namespace kinema::bench
