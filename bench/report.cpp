@@ -139,6 +139,22 @@ class Report {
     }
   }
 
+  void rigid_table() {
+    std::printf("\nRigid bodies, RK4, %s: ns per body-step (cost relative to a particle)\n", isa_.c_str());
+    for (const std::string p : {"float", "double"}) {
+      for (int threads : {1, 2}) {
+        const std::string suffix = "/" + isa_ + "/threads:" + std::to_string(threads) + "/100000/real_time";
+        const auto rigid = find(runs_, "rigid/rk4/" + p + suffix, "ns_per_body_step");
+        const auto ceiling = find(runs_, "rigid-ceiling/rk4/" + p + suffix, "ns_per_body_step");
+        const auto particle = find(runs_, fused("fused", "rk4", p, isa_, threads, 100000), "ns_per_body_step");
+        if (!rigid) continue;
+        std::printf("%-6s N = 100000, %d thread%s: %.3f (%s a particle step; ceiling %s)\n", p.c_str(),
+                    threads, threads > 1 ? "s" : "", rigid->median, cell(ratio(rigid, particle), "%.1fx").c_str(),
+                    cell(percent(ratio(ceiling, rigid)), "%.0f%%").c_str());
+      }
+    }
+  }
+
   void limits() {
     std::printf("\nMachine limits in this run: FMA peak float %s / %s GFLOP/s (1 / 2 threads), double %s / %s;"
                 "\n  in-place streaming at 4M bodies' state: %s / %s GB/s\n",
@@ -233,6 +249,7 @@ int main(int argc, char** argv) {
   report.rk4_table();
   report.methods_table();
   report.isa_table();
+  report.rigid_table();
   report.limits();
   report.noise();
   if (csv != nullptr) std::fclose(csv);

@@ -77,12 +77,15 @@ struct BodyTerms {
   M dynamic;
 };
 
-template <class V>
+// `Pushed`: add the constant force of the point-force terms (rigid bodies only).
+template <bool Pushed = false, class V>
 KINEMA_INLINE auto body_terms(const Forces<V>& f, const V& inv_mass) {
   const auto dynamic = inv_mass != V(0);
   BodyTerms<V, decltype(dynamic)> b{f.neg_spring_k * inv_mass, f.neg_linear * inv_mass,
                                     f.neg_quadratic * inv_mass, {}, dynamic};
-  for (int d = 0; d < 3; ++d) b.g[d] = pick(dynamic, fused(inv_mass, f.force[d], f.g[d]), V(0));
+  for (int d = 0; d < 3; ++d) {
+    b.g[d] = pick(dynamic, Pushed ? fused(inv_mass, f.force[d], f.g[d]) : f.g[d], V(0));
+  }
   return b;
 }
 

@@ -143,7 +143,7 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& job, std::size_t begin, std::
   const value_t<V> h = job.h;
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const RigidState<V> s0 = load_rigid<V>(job, i);
-    const auto body = body_terms(f, load<V>(job.bodies.inv_mass + i));
+    const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
     const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
     Vec<V> kx[S], kv[S], kl[S];
     Quat4<V> kq[S];
@@ -181,7 +181,7 @@ void rigid_kick_drift(const RigidJob<value_t<V>>& job, std::size_t begin, std::s
   }
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     RigidState<V> s = load_rigid<V>(job, i);
-    const auto body = body_terms(f, load<V>(job.bodies.inv_mass + i));
+    const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
     const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
     auto rate = [&](const Quat4<V>& q) {
       return quaternion_rate(angular_velocity(rotation(q), inv_inertia, s.l), q);
