@@ -26,7 +26,7 @@ template <class T>
 class NaiveSystem {
  public:
   explicit NaiveSystem(std::size_t n) : particles_(n) {
-    const ParticleSet<T> soa = make_particles<T>(bench_scene(n));
+    const ParticleSet<T>& soa = cached_particles<T>(n);
     for (std::size_t i = 0; i < n; ++i) {
       Particle<T>& p = particles_[i];
       p.x[0] = soa.px()[i], p.x[1] = soa.py()[i], p.x[2] = soa.pz()[i];
@@ -128,7 +128,7 @@ struct OdeintSystem {
 template <class T>
 void odeint_rk4(benchmark::State& state) {
   const auto n = std::size_t(state.range(0));
-  const ParticleSet<T> soa = make_particles<T>(bench_scene(n));
+  const ParticleSet<T>& soa = cached_particles<T>(n);
   std::vector<T> s(6 * n), inv_mass(n);
   for (std::size_t i = 0; i < n; ++i) {
     s[3 * i] = soa.px()[i], s[3 * i + 1] = soa.py()[i], s[3 * i + 2] = soa.pz()[i];

@@ -5,6 +5,9 @@
 #include <benchmark/benchmark.h>
 
 #include <cstddef>
+#include <cstring>
+#include <map>
+#include <mutex>
 
 #include "kinema/kinema.hpp"
 
@@ -34,6 +37,29 @@ inline void report_body_steps(benchmark::State& state, double body_steps_per_ite
   state.counters["body_steps_per_s"] = Counter(total, Counter::kIsRate);
   state.counters["GB_per_s"] = Counter(total * bytes_per_body_step * 1e-9, Counter::kIsRate);
 }
+
+// The benchmark bodies for N, generated once per process (4M bodies take a while).
+template <class T>
+const ParticleSet<T>& cached_particles(std::size_t count) {
+  static std::map<std::size_t, ParticleSet<T>> cache;
+  static std::mutex mutex;
+  std::lock_guard lock(mutex);
+  auto [it, fresh] = cache.try_emplace(count);
+  if (fresh) it->second = make_particles<T>(bench_scene(count));
+  return it->second;
+}
+
+// Puts the initial state back without allocating. Benchmarks do so every few thousand
+// steps: drag would otherwise decay velocities into subnormals over a long run, which some
+// CPUs process far more slowly (the cost of the copy is spread over those steps).
+template <class T>
+void restore(ParticleSet<T>& bodies, const ParticleSet<T>& initial) {
+  T* dst[] = {bodies.px(), bodies.py(), bodies.pz(), bodies.vx(), bodies.vy(), bodies.vz()};
+  const T* src[] = {initial.px(), initial.py(), initial.pz(), initial.vx(), initial.vy(), initial.vz()};
+  for (int a = 0; a < 6; ++a) std::memcpy(dst[a], src[a], bodies.padded_size() * sizeof(T));
+}
+
+inline constexpr std::int64_t kRestoreEvery = 4096;
 
 // Fails the run (visible in the output) when a benchmark left a non-finite state behind.
 template <class T>

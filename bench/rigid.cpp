@@ -26,10 +26,20 @@ constexpr double rigid_step_bytes() {
 }
 
 template <class T>
+const RigidBodySet<T>& cached_rigid(std::size_t count) {
+  static std::map<std::size_t, RigidBodySet<T>> cache;
+  static std::mutex mutex;
+  std::lock_guard lock(mutex);
+  auto [it, fresh] = cache.try_emplace(count);
+  if (fresh) it->second = make_rigid_bodies<T>(rigid_scene(count));
+  return it->second;
+}
+
+template <class T>
 void rigid_steps(benchmark::State& state, unsigned threads, bool blocked) {
   const auto n = std::size_t(state.range(0));
   const Scene scene = rigid_scene(n);
-  RigidBodySet<T> bodies = make_rigid_bodies<T>(scene);
+  RigidBodySet<T> bodies = cached_rigid<T>(n);
   TbbJobSystem jobs(threads);
   SerialJobSystem serial;
   StepperOptions o;

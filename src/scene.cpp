@@ -276,7 +276,7 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
     throw Error(std::string(origin) + ": invalid JSON: " + e.what());
   }
   const Node root{doc, "", origin};
-  root.expect_object({"name", "precision", "method", "dt", "steps", "particles",
+  root.expect_object({"name", "precision", "method", "tolerance", "dt", "steps", "particles",
                       "rigid_bodies", "generate", "forces"});
   Scene s;
   if (root.has("name")) s.name = root.child("name").string();
@@ -295,13 +295,14 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
     const Node m = root.child("method");
     s.method = m.string();
     try {
-      method_by_name(s.method);
+      if (s.method != "auto") method_by_name(s.method);
     } catch (const Error& e) {
-      m.fail(e.what());
+      m.fail(std::string(e.what()) + " or auto");
     }
   }
   if (root.has("dt")) s.dt = root.child("dt").positive();
   if (root.has("steps")) s.steps = root.child("steps").count(true);
+  if (root.has("tolerance")) s.tolerance = root.child("tolerance").positive();
   if (root.has("particles")) {
     const Node list = root.child("particles");
     if (!list.value.is_array()) list.fail("expected an array");

@@ -1,6 +1,7 @@
 #pragma once
 // kinema: a data-oriented time integrator for particles in games and simulations.
 
+#include "kinema/accuracy.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"

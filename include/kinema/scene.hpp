@@ -51,7 +51,8 @@ struct RigidSpec {
 struct Scene {
   std::string name = "scene";
   Precision precision = Precision::single;
-  std::string method = "rk4";
+  std::string method = "rk4";  // or "auto", with a tolerance (see choose_method)
+  std::optional<double> tolerance;
   double dt = 0.01;
   std::uint64_t steps = 100;
   std::vector<BodySpec> particles;

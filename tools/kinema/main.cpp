@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "chart_command.hpp"
 #include "kinema/error.hpp"
 #include "run_command.hpp"
 
@@ -21,7 +22,11 @@ void add_run_command(CLI::App& app, kinema::cli::RunOptions& o, TextOptions& tex
   run->add_option("scene", o.scene_path, "Scene file (JSON); see tools/scenes/")->required();
   run->add_option("--method", o.method,
                   "Override the scene's method: euler, midpoint, heun, rk4, symplectic_euler, "
-                  "velocity_verlet");
+                  "velocity_verlet, or auto (the cheapest method and step for --tolerance)");
+  run->add_option("--tolerance", o.tolerance,
+                  "With auto: the largest error allowed at the end (length units; radians for "
+                  "rigid orientations)")
+      ->check(CLI::PositiveNumber);
   run->add_option("--dt", o.dt, "Override the step size (seconds, > 0)")
       ->check(CLI::PositiveNumber);
   run->add_option("--steps", o.steps, "Override the number of steps");
@@ -43,6 +48,38 @@ void add_run_command(CLI::App& app, kinema::cli::RunOptions& o, TextOptions& tex
   run->add_flag("--quiet,-q", o.quiet, "Print nothing on success");
 }
 
+void add_chart_command(CLI::App& app, kinema::cli::ChartOptions& o) {
+  CLI::App* chart = app.add_subcommand(
+      "chart", "Work-precision diagram: error against cost for each method over a range of steps");
+  chart->add_option("scene", o.scene_path, "Scene file (JSON)")->required();
+  chart->add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  chart->add_option("--dts", o.dts, "Step sizes (default: the scene's dt times 1/8 .. 16)")
+      ->delimiter(',')
+      ->check(CLI::PositiveNumber);
+  chart->add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
+      ->check(CLI::PositiveNumber);
+  chart->add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
+      ->check(CLI::PositiveNumber);
+  chart->add_option("--repeat", o.repeat, "Timed runs per point; the fastest counts (default 3)")
+      ->check(CLI::Range(1, 100));
+  chart->add_option("--out", o.out, "Output folder (default: charts)");
+  chart->add_flag("--quiet,-q", o.quiet, "No progress bar and no summary");
+}
+
+void add_stability_command(CLI::App& app, kinema::cli::StabilityOptions& o) {
+  CLI::App* s = app.add_subcommand(
+      "stability", "Energy error against time, trajectories, and the stability regions");
+  s->add_option("scene", o.scene_path, "Scene file (JSON)")->required();
+  s->add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  s->add_option("--dt", o.dt, "Step size (default: the scene's)")->check(CLI::PositiveNumber);
+  s->add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
+      ->check(CLI::PositiveNumber);
+  s->add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
+      ->check(CLI::PositiveNumber);
+  s->add_option("--out", o.out, "Output folder (default: stability)");
+  s->add_flag("--quiet,-q", o.quiet, "No progress bar and no summary");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -53,6 +90,10 @@ int main(int argc, char** argv) {
   kinema::cli::RunOptions options;
   TextOptions text;
   add_run_command(app, options, text);
+  kinema::cli::ChartOptions chart;
+  add_chart_command(app, chart);
+  kinema::cli::StabilityOptions stability;
+  add_stability_command(app, stability);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -66,6 +107,8 @@ int main(int argc, char** argv) {
       options.precision =
           text.precision == "float" ? kinema::Precision::single : kinema::Precision::dual;
     }
+    if (app.got_subcommand("chart")) return kinema::cli::chart_scene(chart);
+    if (app.got_subcommand("stability")) return kinema::cli::stability_scene(stability);
     return kinema::cli::run_scene(options);
   } catch (const kinema::Error& e) {
     std::fprintf(stderr, "kinema: error: %s\n", e.what());

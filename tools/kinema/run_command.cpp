@@ -18,15 +18,24 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+}  // namespace
+
 Scene scene_with_overrides(const RunOptions& o) {
   Scene scene = load_scene(o.scene_path);
   if (o.method) scene.method = *o.method;
+  if (o.tolerance) scene.tolerance = *o.tolerance;
   if (o.dt) scene.dt = *o.dt;
   if (o.steps) scene.steps = *o.steps;
   if (o.precision) scene.precision = *o.precision;
   if (!(std::isfinite(scene.dt) && scene.dt > 0)) throw Error("dt must be positive and finite");
+  if (scene.method != "auto") method_by_name(scene.method);
+  if (scene.method == "auto" && !scene.tolerance) {
+    throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
+  }
   return scene;
 }
+
+namespace {
 
 void print_summary(const nlohmann::ordered_json& summary) {
   std::printf("kinema run: %s\n", summary["scene"].get<std::string>().c_str());
@@ -75,8 +84,13 @@ struct World {
   bool finite() const { return all_finite(particles) && all_finite(rigid); }
 };
 
+// What happened before stepping that the summary reports.
+struct RunContext {
+  std::optional<nlohmann::ordered_json> auto_choice;
+};
+
 template <class T>
-int run_typed(const Scene& scene, const RunOptions& o) {
+int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
   World<T> world(scene, o);
   const T h = T(scene.dt);
   const double initial_energy = world.total_energy();
@@ -124,6 +138,7 @@ int run_typed(const Scene& scene, const RunOptions& o) {
   summary["energy_initial"] = initial_energy;
   summary["energy_final"] = world.total_energy();
   summary["finite"] = finite;
+  if (context.auto_choice) summary["auto"] = *context.auto_choice;
 
   if (!o.summary_path.empty()) {
     std::ofstream out(o.summary_path);
@@ -143,9 +158,23 @@ int run_typed(const Scene& scene, const RunOptions& o) {
 }  // namespace
 
 int run_scene(const RunOptions& o) {
-  const Scene scene = scene_with_overrides(o);
-  return scene.precision == Precision::single ? run_typed<float>(scene, o)
-                                              : run_typed<double>(scene, o);
+  Scene scene = scene_with_overrides(o);
+  std::optional<nlohmann::ordered_json> choice;
+  if (scene.method == "auto") {
+    const auto start = Clock::now();
+    const MethodChoice c = choose_method(scene, *scene.tolerance);
+    choice = nlohmann::ordered_json{
+        {"method", std::string(c.method->name)}, {"dt", c.dt}, {"steps", c.steps},
+        {"tolerance", *scene.tolerance}, {"estimated_error", c.estimated_error},
+        {"seconds", std::chrono::duration<double>(Clock::now() - start).count()},
+        {"reason", c.reason}};
+    scene.method = std::string(c.method->name);
+    scene.dt = c.dt;
+    scene.steps = c.steps;
+  }
+  const RunContext context{choice};
+  return scene.precision == Precision::single ? run_typed<float>(scene, o, context)
+                                              : run_typed<double>(scene, o, context);
 }
 
 }  // namespace kinema::cli

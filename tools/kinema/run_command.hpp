@@ -15,6 +15,7 @@ struct RunOptions {
   std::optional<std::string> method;
   std::optional<double> dt;
   std::optional<std::uint64_t> steps;
+  std::optional<double> tolerance;
   std::optional<Precision> precision;
   std::string trajectory_path;  // empty: no trajectory
   std::uint64_t every = 1;
@@ -27,5 +28,8 @@ struct RunOptions {
 
 // Returns the process exit code: 0, or 3 when the state stopped being finite.
 int run_scene(const RunOptions& options);
+
+// The scene file with the command line's overrides applied (and checked).
+Scene scene_with_overrides(const RunOptions& options);
 
 }  // namespace kinema::cli

@@ -1,0 +1,67 @@
+#pragma once
+// Accuracy: reference solutions, error measures, and the cheapest method for a tolerance.
+//
+// Errors are measured at the end of a run, in phase space: the largest over bodies of
+// |x - x_ref| + |v - v_ref| (scene units, seconds as the time unit) plus, for rigid
+// bodies, the orientation error in radians. Velocities count because positions alone
+// hide first-order errors (semi-implicit Euler's positions are second order).
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "kinema/methods.hpp"
+#include "kinema/scene.hpp"
+
+namespace kinema {
+
+// Final positions and velocities (particles, then rigid bodies) and rigid orientations.
+struct BodyStates {
+  std::vector<Vec3<double>> positions, velocities;
+  std::vector<Quat<double>> orientations;
+};
+
+// The scene with its bodies made explicit (generated ones listed) and at most `max_bodies`
+// of each kind kept, picked evenly. Local forces act body by body, so a sample of bodies
+// measures the error of the whole scene.
+Scene sample_bodies(const Scene& scene, std::size_t max_bodies);
+
+// Runs `steps` steps of duration / steps with `method` on one thread, in the scene's precision.
+BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t steps, double duration);
+
+// max over bodies of |x - x_ref| + |v - v_ref| (+ the rotation angle between q and q_ref).
+double state_error(const BodyStates& states, const BodyStates& reference);
+
+// Closed-form final states when the scene has them: every body under one central
+// attractor on an elliptic orbit (Kepler's equation), or under any mix of gravity, linear
+// drag and one spring (a damped oscillator). nullopt otherwise.
+std::optional<BodyStates> analytic_states(const Scene& scene, double duration);
+
+struct Reference {
+  BodyStates states;
+  double error = 0;   // estimated error of the reference itself (0 when analytic)
+  bool analytic = false;
+  std::uint64_t steps = 0;  // of the numerical reference
+};
+
+// The analytic solution, else rk4 in double with `steps` steps, its own error estimated
+// from a run at half as many steps (Richardson: difference / 15).
+Reference reference_states(const Scene& scene, double duration, std::uint64_t steps);
+
+struct MethodChoice {
+  const Method* method = nullptr;
+  std::uint64_t steps = 0;  // dt = duration / steps exactly
+  double dt = 0;
+  double estimated_error = 0;
+  std::string reason;       // one line: what each candidate would cost
+};
+
+// The built-in method and step count with the fewest force evaluations whose estimated
+// error over the scene's duration (dt x steps) stays under `tolerance`. Each method's
+// error comes from pilot runs on a sample of bodies at N, 2N and 4N steps (Richardson,
+// with the observed order), and the choice is checked again at its own step count.
+// Throws kinema::Error when the tolerance is not positive or cannot be reached.
+MethodChoice choose_method(const Scene& scene, double tolerance);
+
+}  // namespace kinema

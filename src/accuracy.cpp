@@ -1,0 +1,298 @@
+#include "kinema/accuracy.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "kinema/diagnostics.hpp"
+#include "kinema/error.hpp"
+#include "kinema/job_system.hpp"
+#include "kinema/stepper.hpp"
+
+namespace kinema {
+namespace {
+
+template <class T>
+BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
+  ParticleSet<T> particles = make_particles<T>(scene);
+  RigidBodySet<T> rigid = make_rigid_bodies<T>(scene);
+  const ForceModel<T> forces = make_forces<T>(scene);
+  SerialJobSystem serial;
+  StepperOptions options;
+  options.jobs = &serial;
+  const T h = T(duration / double(steps));
+  if (particles.size() > 0) Stepper<T>(forces, method, options).advance(particles, h, steps);
+  if (rigid.size() > 0) Stepper<T>(forces, method, options).advance(rigid, h, steps);
+  BodyStates out;
+  auto widen = [](const auto& v) { return Vec3<double>{v[0], v[1], v[2]}; };
+  for (std::size_t i = 0; i < particles.size(); ++i) {
+    out.positions.push_back(widen(particles.position(i)));
+    out.velocities.push_back(widen(particles.velocity(i)));
+  }
+  for (std::size_t i = 0; i < rigid.size(); ++i) {
+    const auto q = rigid.orientation(i);
+    out.positions.push_back(widen(rigid.centers().position(i)));
+    out.velocities.push_back(widen(rigid.centers().velocity(i)));
+    out.orientations.push_back({q[0], q[1], q[2], q[3]});
+  }
+  return out;
+}
+
+// Every body under exactly one central attractor on a bound orbit: Kepler's equation in
+// terms of the change of eccentric anomaly dE, solved by Newton, then the f and g functions.
+struct Motion {
+  Vec3<double> x, v;
+};
+
+std::optional<Motion> kepler(const Central& c, const BodySpec& b, double t) {
+  Vec3<double> r0;
+  for (int d = 0; d < 3; ++d) r0[d] = b.position[d] - c.center[d];
+  const Vec3<double>& v0 = b.velocity;
+  const double r = std::hypot(r0[0], r0[1], r0[2]);
+  const double v2 = v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2];
+  const double energy = v2 / 2 - c.mu / r;
+  if (!(energy < 0) || !(r > 0)) return std::nullopt;  // not an ellipse
+  const double a = -c.mu / (2 * energy), n = std::sqrt(c.mu / (a * a * a));
+  const double e_sin = (r0[0] * v0[0] + r0[1] * v0[1] + r0[2] * v0[2]) / std::sqrt(c.mu * a);
+  const double e_cos = 1 - r / a;
+  // n t = dE + e sin E0 (1 - cos dE) - e cos E0 sin dE; its derivative r / a is positive.
+  double de = n * t;
+  for (int i = 0; i < 100; ++i) {
+    const double f = de + e_sin * (1 - std::cos(de)) - e_cos * std::sin(de) - n * t;
+    const double step = f / (1 + e_sin * std::sin(de) - e_cos * std::cos(de));
+    de -= step;
+    if (std::abs(step) < 1e-15 * std::max(1.0, std::abs(de))) break;
+  }
+  const double f = 1 - a / r * (1 - std::cos(de)), g = t - (de - std::sin(de)) / n;
+  // r(t) = a (1 - e cos E); the time derivatives of f and g follow from dE/dt = n a / r.
+  const double r1 = a * (1 - e_cos * std::cos(de) + e_sin * std::sin(de));
+  const double fdot = -std::sqrt(c.mu * a) * std::sin(de) / (r * r1);
+  const double gdot = 1 - a / r1 * (1 - std::cos(de));
+  Motion m;
+  for (int d = 0; d < 3; ++d) {
+    m.x[d] = c.center[d] + f * r0[d] + g * v0[d];
+    m.v[d] = fdot * r0[d] + gdot * v0[d];
+  }
+  return m;
+}
+
+// y'' + gamma y' + w2 y = accel, one component: {y(t), y'(t)}.
+std::pair<double, double> linear_motion(double y0, double v0, double gamma, double w2,
+                                        double accel, double t) {
+  if (w2 == 0) {
+    if (gamma == 0) return {y0 + v0 * t + 0.5 * accel * t * t, v0 + accel * t};
+    const double vt = accel / gamma, decay = std::exp(-gamma * t);
+    return {y0 + vt * t + (v0 - vt) * (1 - decay) / gamma, vt + (v0 - vt) * decay};
+  }
+  const double eq = accel / w2, y = y0 - eq, beta = gamma / 2, disc = beta * beta - w2;
+  const double decay = std::exp(-beta * t);
+  if (disc < 0) {
+    const double wd = std::sqrt(-disc), b = (v0 + beta * y) / wd;
+    const double c = std::cos(wd * t), s = std::sin(wd * t);
+    return {eq + decay * (y * c + b * s), decay * (-beta * (y * c + b * s) + wd * (b * c - y * s))};
+  }
+  if (disc == 0) {
+    const double b = v0 + beta * y;
+    return {eq + (y + b * t) * decay, (b - beta * (y + b * t)) * decay};
+  }
+  const double root = std::sqrt(disc), r1 = -beta + root, r2 = -beta - root;
+  const double a = (v0 - r2 * y) / (r1 - r2), e1 = std::exp(r1 * t), e2 = std::exp(r2 * t);
+  return {eq + a * e1 + (y - a) * e2, r1 * a * e1 + r2 * (y - a) * e2};
+}
+
+}  // namespace
+
+Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
+  Scene out = scene;
+  out.generate.reset();
+  out.particles.clear();
+  out.rigid_bodies.clear();
+  const ParticleSet<double> p = make_particles<double>(scene);
+  const std::size_t np = std::min(p.size(), max_bodies);
+  for (std::size_t j = 0; j < np; ++j) {
+    const std::size_t i = j * p.size() / np;
+    const double inv = p.inv_mass()[i];
+    out.particles.push_back({p.position(i), p.velocity(i), inv == 0 ? 1 : 1 / inv, inv == 0});
+  }
+  const RigidBodySet<double> r = make_rigid_bodies<double>(scene);
+  const std::size_t nr = std::min(r.size(), max_bodies);
+  for (std::size_t j = 0; j < nr; ++j) {
+    const std::size_t i = j * r.size() / nr;
+    RigidSpec b;
+    b.position = r.centers().position(i);
+    b.velocity = r.centers().velocity(i);
+    b.orientation = r.orientation(i);
+    b.angular_momentum = r.angular_momentum(i);
+    b.mass = 1 / r.centers().inv_mass()[i];
+    for (int d = 0; d < 3; ++d) b.inertia[d] = 1 / r.inv_inertia(d)[i];
+    out.rigid_bodies.push_back(b);
+  }
+  return out;
+}
+
+BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t steps,
+                    double duration) {
+  if (steps == 0) throw Error("simulate: steps must be at least 1");
+  return scene.precision == Precision::single ? run<float>(scene, method, steps, duration)
+                                              : run<double>(scene, method, steps, duration);
+}
+
+double state_error(const BodyStates& a, const BodyStates& b) {
+  double worst = 0;
+  auto distance = [](const Vec3<double>& p, const Vec3<double>& q) {
+    return std::hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]);
+  };
+  for (std::size_t i = 0; i < a.positions.size(); ++i) {
+    const double e = distance(a.positions[i], b.positions[i]) + distance(a.velocities[i], b.velocities[i]);
+    if (!std::isfinite(e)) return std::numeric_limits<double>::infinity();
+    worst = std::max(worst, e);
+  }
+  for (std::size_t i = 0; i < a.orientations.size(); ++i) {
+    double minus = 0, plus = 0;
+    for (int k = 0; k < 4; ++k) {
+      minus += std::pow(a.orientations[i][k] - b.orientations[i][k], 2);
+      plus += std::pow(a.orientations[i][k] + b.orientations[i][k], 2);
+    }
+    // |q - r| = 2 sin(angle / 4) for unit quaternions.
+    const double chord = std::sqrt(std::min(minus, plus));
+    if (!std::isfinite(chord)) return std::numeric_limits<double>::infinity();
+    worst = std::max(worst, 4 * std::asin(std::min(1.0, chord / 2)));
+  }
+  return worst;
+}
+
+std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
+  if (!scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid)) return std::nullopt;
+  const Central* central = nullptr;
+  int centrals = 0, others = 0;
+  Vec3<double> g{}, weighted_anchor{};
+  double drag = 0, spring_k = 0;
+  for (const LocalTerm& term : scene.forces) {
+    if (auto* c = std::get_if<Central>(&term)) {
+      central = c, ++centrals;
+    } else if (auto* gr = std::get_if<Gravity>(&term)) {
+      for (int d = 0; d < 3; ++d) g[d] += gr->g[d];
+    } else if (auto* l = std::get_if<LinearDrag>(&term)) {
+      drag += l->k;
+    } else if (auto* s = std::get_if<Spring>(&term)) {
+      spring_k += s->k, drag += s->damping;
+      for (int d = 0; d < 3; ++d) weighted_anchor[d] += s->k * s->anchor[d];
+    } else if (!std::holds_alternative<Torque>(term) && !std::holds_alternative<AngularDrag>(term) &&
+               !std::holds_alternative<PointForce>(term)) {
+      ++others;  // quadratic drag: no closed form here
+    }
+  }
+  const bool linear = centrals == 0 && others == 0;
+  const bool kepler_only = centrals == 1 && others == 0 && drag == 0 && spring_k == 0 &&
+                           g == Vec3<double>{};
+  if (!linear && !kepler_only) return std::nullopt;
+  const Scene explicit_scene = sample_bodies(scene, std::numeric_limits<std::size_t>::max());
+  BodyStates out;
+  for (const BodySpec& b : explicit_scene.particles) {
+    Motion m;
+    if (b.kinematic) {
+      for (int d = 0; d < 3; ++d) m.x[d] = b.position[d] + b.velocity[d] * t, m.v[d] = b.velocity[d];
+    } else if (kepler_only) {
+      const auto k = kepler(*central, b, t);
+      if (!k) return std::nullopt;
+      m = *k;
+    } else {
+      const double gamma = drag / b.mass, w2 = spring_k / b.mass;
+      for (int d = 0; d < 3; ++d) {
+        // y = x - anchor under y'' + gamma y' + w2 y = g (the spring pulls to its anchor).
+        const double anchor = spring_k > 0 ? weighted_anchor[d] / spring_k : 0;
+        const auto [y, v] = linear_motion(b.position[d] - anchor, b.velocity[d], gamma, w2, g[d], t);
+        m.x[d] = anchor + y, m.v[d] = v;
+      }
+    }
+    out.positions.push_back(m.x);
+    out.velocities.push_back(m.v);
+  }
+  return out;
+}
+
+Reference reference_states(const Scene& scene, double duration, std::uint64_t steps) {
+  if (auto exact = analytic_states(scene, duration)) return {*exact, 0, true, 0};
+  Scene precise = scene;
+  precise.precision = Precision::dual;
+  const std::uint64_t half = std::max<std::uint64_t>(1, steps / 2);
+  Reference ref;
+  ref.states = simulate(precise, rk4, 2 * half, duration);
+  ref.error = state_error(ref.states, simulate(precise, rk4, half, duration)) / 15;
+  ref.steps = 2 * half;
+  return ref;
+}
+
+namespace {
+
+struct Estimate {
+  const Method* method;
+  std::uint64_t steps;
+  double cost;  // force evaluations per body
+};
+
+// Steps `method` needs for `tolerance`, from pilot runs at n, 2n and 4n steps: the error
+// of the 4n run is d2 / (2^p - 1) with d2 the difference of the last two runs and p the
+// observed order (capped by the nominal one); error ~ steps^-p then gives the count.
+std::optional<std::uint64_t> steps_needed(const Scene& pilot, const Method& m, double duration,
+                                          std::uint64_t n, double tolerance) {
+  const BodyStates a = simulate(pilot, m, n, duration), b = simulate(pilot, m, 2 * n, duration),
+                   c = simulate(pilot, m, 4 * n, duration);
+  const double d1 = state_error(a, b), d2 = state_error(b, c);
+  if (!std::isfinite(d1) || !std::isfinite(d2)) return std::nullopt;  // unstable at n
+  if (d2 == 0) return std::max<std::uint64_t>(1, n / 4);  // exact for this motion
+  const double order = std::clamp(d1 > 0 ? std::log2(d1 / d2) : double(m.order), 0.5, double(m.order));
+  const double error = d2 / (std::pow(2.0, order) - 1);
+  const double need = 4.0 * double(n) * std::pow(error / (0.5 * tolerance), 1 / order);
+  if (!(need < 1e9)) return std::nullopt;
+  return std::max<std::uint64_t>(1, std::uint64_t(std::ceil(need)));
+}
+
+// Richardson estimate of the error of an n-step run.
+double estimated_error(const Scene& pilot, const Method& m, double duration, std::uint64_t n) {
+  const double d = state_error(simulate(pilot, m, n, duration), simulate(pilot, m, 2 * n, duration));
+  return d * std::pow(2.0, m.order) / (std::pow(2.0, m.order) - 1);
+}
+
+}  // namespace
+
+MethodChoice choose_method(const Scene& scene, double tolerance) {
+  if (!(std::isfinite(tolerance) && tolerance > 0)) {
+    throw Error("tolerance must be positive and finite");
+  }
+  if (scene.steps == 0) throw Error("auto: the scene has no steps to choose a step size for");
+  const double duration = scene.dt * double(scene.steps);
+  const Scene pilot = sample_bodies(scene, 64);
+  const std::uint64_t n = std::max<std::uint64_t>(8, scene.steps / 16);
+  std::vector<Estimate> estimates;
+  std::string reason;
+  for (const Method* m : builtin_methods) {
+    const auto steps = steps_needed(pilot, *m, duration, n, tolerance);
+    reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " ";
+    if (!steps) {
+      reason += "cannot";
+      continue;
+    }
+    estimates.push_back({m, *steps, double(*steps) * m->evaluations()});
+    reason += std::to_string(*steps) + " steps";
+  }
+  if (estimates.empty()) throw Error("auto: no method reaches tolerance " + std::to_string(tolerance));
+  const Estimate best = *std::min_element(estimates.begin(), estimates.end(), [](auto& a, auto& b) {
+    return a.cost < b.cost || (a.cost == b.cost && a.method->order > b.method->order);
+  });
+  MethodChoice choice{best.method, best.steps};
+  // Check the choice at its own step count; the pilot's extrapolation may be optimistic.
+  for (int tries = 0;; ++tries) {
+    choice.estimated_error = estimated_error(pilot, *choice.method, duration, choice.steps);
+    if (choice.estimated_error <= tolerance) break;
+    if (tries == 20) throw Error("auto: " + std::string(choice.method->name) + " cannot reach tolerance");
+    choice.steps *= 2;
+  }
+  choice.dt = duration / double(choice.steps);
+  choice.reason = "for error <= " + std::to_string(tolerance) + " over " + std::to_string(duration) +
+                  " s: " + reason + "; picked " + std::string(choice.method->name) + " (" +
+                  std::to_string(choice.method->evaluations()) + " force evaluations per step)";
+  return choice;
+}
+
+}  // namespace kinema

@@ -1,0 +1,210 @@
+// `kinema stability`: energy error against time per method, the trajectories of planar
+// motions, and the stability regions of the explicit Runge-Kutta methods with the measured
+// limits of the test equation x' = -lambda x marked.
+#include <cmath>
+#include <complex>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "chart_command.hpp"
+#include "kinema/kinema.hpp"
+#include "plot.hpp"
+#include "progress.hpp"
+
+namespace kinema::cli {
+namespace fs = std::filesystem;
+
+std::vector<const Method*> pick_methods(const std::vector<std::string>& names);
+
+namespace {
+
+using Complex = std::complex<double>;
+
+// R(z) = sum_k c_k z^k with c_0 = 1, c_k = b^T A^(k-1) 1: the growth factor of an explicit
+// Runge-Kutta method on x' = lambda x, z = h lambda.
+std::vector<double> stability_polynomial(const ButcherTableau& t) {
+  std::vector<double> c{1};
+  std::array<double, kMaxStages> v{};
+  for (int i = 0; i < t.stages; ++i) v[i] = 1;  // A^0 1
+  for (int k = 1; k <= t.stages; ++k) {
+    double ck = 0;
+    for (int i = 0; i < t.stages; ++i) ck += t.b[i] * v[i];
+    c.push_back(ck);
+    std::array<double, kMaxStages> next{};
+    for (int i = 0; i < t.stages; ++i) {
+      for (int j = 0; j < t.stages; ++j) next[i] += t.a[i][j] * v[j];
+    }
+    v = next;
+  }
+  while (c.size() > 1 && c.back() == 0) c.pop_back();
+  return c;
+}
+
+// Roots of sum_k p_k z^k (Durand-Kerner), for the boundary locus R(z) = e^(i phi).
+std::vector<Complex> roots(const std::vector<Complex>& p) {
+  const int n = int(p.size()) - 1;
+  std::vector<Complex> z(n);
+  for (int i = 0; i < n; ++i) z[i] = std::pow(Complex(0.4, 0.9), i);
+  for (int iter = 0; iter < 500; ++iter) {
+    for (int i = 0; i < n; ++i) {
+      Complex value = p[n], denom = p[n];
+      for (int k = n - 1; k >= 0; --k) value = value * z[i] + p[k];
+      for (int j = 0; j < n; ++j) {
+        if (j != i) denom *= z[i] - z[j];
+      }
+      z[i] -= value / denom;
+    }
+  }
+  return z;
+}
+
+// The largest h lambda for which linear drag alone (v' = -lambda v) does not grow, by
+// bisection on runs of the library itself.
+double measured_threshold(const Method& m) {
+  auto stable = [&](double z) {
+    ParticleSet<double> b;
+    b.add({0, 0, 0}, {1, 0, 0}, 1);
+    ForceModel<double> f;
+    f.add(LinearDrag{1});
+    SerialJobSystem serial;
+    StepperOptions o;
+    o.jobs = &serial;
+    Stepper<double>(f, m, o).advance(b, z, 4000);
+    return std::isfinite(b.vx()[0]) && std::abs(b.vx()[0]) <= 1;
+  };
+  double lo = 0.5, hi = 4;
+  while (hi - lo > 1e-6) (stable(0.5 * (lo + hi)) ? lo : hi) = 0.5 * (lo + hi);
+  return lo;
+}
+
+void write_regions(const fs::path& dir, const std::vector<const Method*>& methods) {
+  std::ofstream csv(dir / "stability_region.csv"), limits(dir / "thresholds.csv");
+  csv.precision(17);
+  limits.precision(17);
+  csv << "method,re,im\n";
+  limits << "method,measured_threshold\n";
+  std::string plot = "set grid\nset size ratio -1\nset key outside right\n"
+                     "set title 'Stability regions |R(h lambda)| <= 1 of the explicit methods'\n"
+                     "set xlabel 'Re(h lambda)'\nset ylabel 'Im(h lambda)'\nplot ";
+  bool first = true;
+  int color = 0;
+  for (const Method* m : methods) {
+    if (m->kind != MethodKind::runge_kutta) continue;
+    ++color;
+    const std::vector<double> c = stability_polynomial(m->tableau);
+    std::ofstream dat(dir / ("region_" + std::string(m->name) + ".dat"));
+    for (int k = 0; k < 720; ++k) {
+      std::vector<Complex> p(c.begin(), c.end());
+      p[0] -= std::polar(1.0, 2 * M_PI * k / 720);
+      for (const Complex& z : roots(p)) {
+        dat << z.real() << ' ' << z.imag() << '\n';
+        csv << m->name << ',' << z.real() << ',' << z.imag() << '\n';
+      }
+    }
+    const double limit = measured_threshold(*m);
+    limits << m->name << ',' << limit << '\n';
+    std::ofstream mark(dir / ("threshold_" + std::string(m->name) + ".dat"));
+    mark << -limit << " 0\n";
+    const std::string name(m->name), lc = " lc " + std::to_string(color);
+    char label[96];
+    std::snprintf(label, sizeof label, "%s: measured limit h lambda = %.4g", name.c_str(), limit);
+    plot += std::string(first ? "" : ", \\\n  ") +
+            gnuplot_quote((dir / ("region_" + name + ".dat")).string()) + " with points pt 7 ps 0.15" + lc +
+            " title " + gnuplot_quote("|R| = 1, " + name) + ", " +
+            gnuplot_quote((dir / ("threshold_" + name + ".dat")).string()) + " with points pt 2 ps 2 lw 2" + lc +
+            " title " + gnuplot_quote(label);
+    first = false;
+  }
+  if (!first) render_chart(dir, "stability_region", plot);
+}
+
+template <class T>
+void record(const Scene& scene, const Method& m, double dt, std::uint64_t steps,
+            std::ofstream& energy_csv, std::ofstream& path_csv, std::ofstream& energy_dat,
+            std::ofstream& path_dat, double& max_z) {
+  ParticleSet<T> p = make_particles<T>(scene);
+  RigidBodySet<T> r = make_rigid_bodies<T>(scene);
+  const ForceModel<T> f = make_forces<T>(scene);
+  SerialJobSystem serial;
+  StepperOptions o;
+  o.jobs = &serial;
+  Stepper<T> sp(f, m, o), sr(f, m, o);
+  auto total = [&] {
+    return (p.size() ? energy(p, f).total() : 0) + (r.size() ? energy(r, f).total() : 0);
+  };
+  const double e0 = total();
+  const std::uint64_t every = std::max<std::uint64_t>(1, steps / 2000);
+  const ParticleSet<T>& centres = p.size() ? p : r.centers();
+  for (std::uint64_t k = 0; k <= steps; k += every) {
+    const double t = double(k) * dt, e = total(), rel = (e - e0) / std::abs(e0);
+    const auto x = centres.position(0);
+    energy_csv << m.name << ',' << t << ',' << e << ',' << rel << '\n';
+    path_csv << m.name << ',' << t << ',' << x[0] << ',' << x[1] << ',' << x[2] << '\n';
+    if (std::isfinite(rel)) energy_dat << t << ' ' << std::max(std::abs(rel), 1e-17) << '\n';
+    path_dat << x[0] << ' ' << x[1] << '\n';
+    max_z = std::max(max_z, double(std::abs(x[2])));
+    const std::uint64_t n = std::min(every, steps - std::min(steps, k));
+    if (n == 0) break;
+    if (p.size()) sp.advance(p, T(dt), n);
+    if (r.size()) sr.advance(r, T(dt), n);
+  }
+}
+
+}  // namespace
+
+int stability_scene(const StabilityOptions& o) {
+  const Scene full = load_scene(o.scene_path);
+  const Scene scene = sample_bodies(full, o.max_bodies);
+  const double dt = o.dt.value_or(full.dt);
+  const double duration = o.duration.value_or(full.dt * double(full.steps));
+  const std::uint64_t steps = std::max<std::uint64_t>(1, std::llround(duration / dt));
+  const std::vector<const Method*> methods = pick_methods(o.methods);
+  const fs::path dir = o.out;
+  fs::create_directories(dir);
+  std::ofstream energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
+  energy_csv.precision(17);
+  path_csv.precision(17);
+  energy_csv << "method,t,energy,relative_error\n";
+  path_csv << "method,t,x,y,z\n";
+  std::string energy_plot = "set logscale y\nset grid\nset key outside right\nset format y '%.0e'\n"
+                            "set title " + gnuplot_quote("Energy error: " + scene.name + ", h = " + std::to_string(dt)) +
+                            "\nset xlabel 't (s)'\nset ylabel '|E - E_0| / |E_0|'\nplot ";
+  std::string path_plot = "set grid\nset size ratio -1\nset key outside right\n"
+                          "set title " + gnuplot_quote("Trajectory of body 0: " + scene.name) +
+                          "\nset xlabel 'x'\nset ylabel 'y'\nplot ";
+  double max_z = 0;
+  Progress progress("kinema stability", o.quiet);
+  for (std::size_t i = 0; i < methods.size(); ++i) {
+    const std::string name(methods[i]->name);
+    std::ofstream energy_dat(dir / ("energy_" + name + ".dat")), path_dat(dir / ("path_" + name + ".dat"));
+    if (scene.precision == Precision::single) {
+      record<float>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z);
+    } else {
+      record<double>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z);
+    }
+    const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
+    const std::string lc = " lc " + std::to_string(i + 1);
+    energy_plot += gnuplot_quote((dir / ("energy_" + name + ".dat")).string()) + " with lines lw 2" +
+                   lc + " title " + gnuplot_quote(name) + sep;
+    path_plot += gnuplot_quote((dir / ("path_" + name + ".dat")).string()) + " with lines" + lc +
+                 " title " + gnuplot_quote(name) + sep;
+    progress.update(double(i + 1) / double(methods.size() + 1));
+  }
+  energy_csv.close();
+  path_csv.close();
+  render_chart(dir, "energy", energy_plot);
+  const bool planar = max_z == 0;
+  if (planar) render_chart(dir, "trajectory", path_plot);
+  write_regions(dir, methods);
+  progress.finish();
+  if (!o.quiet) {
+    std::printf("kinema stability: %s, h = %g, %llu steps; wrote %s/{energy,trajectory,"
+                "stability_region,thresholds}.csv and charts%s\n",
+                scene.name.c_str(), dt, static_cast<unsigned long long>(steps), o.out.c_str(),
+                planar ? "" : " (no trajectory chart: the motion is not planar)");
+  }
+  return 0;
+}
+
+}  // namespace kinema::cli
