@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
@@ -225,33 +226,54 @@ Reference reference_states(const Scene& scene, double duration, std::uint64_t st
 
 namespace {
 
-struct Estimate {
-  const Method* method;
-  std::uint64_t steps;
-  double cost;  // force evaluations per body
+// Pilot runs of one method on a sample of bodies, memoized by step count.
+class Pilot {
+ public:
+  Pilot(const Scene& scene, const Method& method, double duration)
+      : scene_(scene), method_(method), duration_(duration) {}
+
+  // Error estimate of the n-step run, from runs at n, 2n and 4n: the difference d of the
+  // first two times 2^p / (2^p - 1), p the observed order (capped by the nominal one).
+  double estimate(std::uint64_t n) {
+    const double d1 = state_error(at(n), at(2 * n)), d2 = state_error(at(2 * n), at(4 * n));
+    if (!std::isfinite(d1) || !std::isfinite(d2)) return std::numeric_limits<double>::infinity();
+    const double nominal = method_.order;
+    const double p = d1 > 0 && d2 > 0 ? std::clamp(std::log2(d1 / d2), 0.5, nominal) : nominal;
+    return d1 * std::pow(2.0, p) / (std::pow(2.0, p) - 1);
+  }
+
+ private:
+  const BodyStates& at(std::uint64_t n) {
+    auto it = runs_.find(n);
+    if (it == runs_.end()) it = runs_.emplace(n, simulate(scene_, method_, n, duration_)).first;
+    return it->second;
+  }
+
+  const Scene& scene_;
+  const Method& method_;
+  double duration_;
+  std::map<std::uint64_t, BodyStates> runs_;
 };
 
-// Steps `method` needs for `tolerance`, from pilot runs at n, 2n and 4n steps: the error
-// of the 4n run is d2 / (2^p - 1) with d2 the difference of the last two runs and p the
-// observed order (capped by the nominal one); error ~ steps^-p then gives the count.
-std::optional<std::uint64_t> steps_needed(const Scene& pilot, const Method& m, double duration,
-                                          std::uint64_t n, double tolerance) {
-  const BodyStates a = simulate(pilot, m, n, duration), b = simulate(pilot, m, 2 * n, duration),
-                   c = simulate(pilot, m, 4 * n, duration);
-  const double d1 = state_error(a, b), d2 = state_error(b, c);
-  if (!std::isfinite(d1) || !std::isfinite(d2)) return std::nullopt;  // unstable at n
-  if (d2 == 0) return std::max<std::uint64_t>(1, n / 4);  // exact for this motion
-  const double order = std::clamp(d1 > 0 ? std::log2(d1 / d2) : double(m.order), 0.5, double(m.order));
-  const double error = d2 / (std::pow(2.0, order) - 1);
-  const double need = 4.0 * double(n) * std::pow(error / (0.5 * tolerance), 1 / order);
-  if (!(need < 1e9)) return std::nullopt;
-  return std::max<std::uint64_t>(1, std::uint64_t(std::ceil(need)));
-}
-
-// Richardson estimate of the error of an n-step run.
-double estimated_error(const Scene& pilot, const Method& m, double duration, std::uint64_t n) {
-  const double d = state_error(simulate(pilot, m, n, duration), simulate(pilot, m, 2 * n, duration));
-  return d * std::pow(2.0, m.order) / (std::pow(2.0, m.order) - 1);
+// The fewest steps (to within a factor 4/3) whose estimated error stays under the
+// tolerance: halve or double from n, then try three quarters of the last good count.
+// Gives up once the steps would cost more force evaluations than `budget`.
+std::optional<std::uint64_t> steps_needed(Pilot& pilot, const Method& m, std::uint64_t n,
+                                          double tolerance, double budget) {
+  auto fits = [&](std::uint64_t k) { return pilot.estimate(k) <= tolerance; };
+  auto affordable = [&](std::uint64_t k) { return double(k) * m.evaluations() <= budget; };
+  if (fits(n)) {
+    while (n > 1 && fits(n / 2)) n /= 2;
+  } else {
+    do {
+      n *= 2;
+      if (!affordable(n) || n > (std::uint64_t(1) << 26)) return std::nullopt;
+    } while (!fits(n));
+  }
+  const std::uint64_t three_quarters = std::max<std::uint64_t>(1, 3 * n / 4);
+  if (three_quarters < n && fits(three_quarters)) n = three_quarters;
+  if (!affordable(n)) return std::nullopt;
+  return n;
 }
 
 }  // namespace
@@ -262,31 +284,35 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
   }
   if (scene.steps == 0) throw Error("auto: the scene has no steps to choose a step size for");
   const double duration = scene.dt * double(scene.steps);
-  const Scene pilot = sample_bodies(scene, 64);
-  const std::uint64_t n = std::max<std::uint64_t>(8, scene.steps / 16);
-  std::vector<Estimate> estimates;
+  const Scene pilot_scene = sample_bodies(scene, 64);
+  const std::uint64_t start = std::max<std::uint64_t>(8, scene.steps / 16);
+  MethodChoice choice;
+  double best_cost = std::numeric_limits<double>::infinity();
   std::string reason;
-  for (const Method* m : builtin_methods) {
-    const auto steps = steps_needed(pilot, *m, duration, n, tolerance);
+  // Highest order first: it usually sets the budget the others must beat.
+  std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
+  std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
+  for (const Method* m : order) {
+    Pilot pilot(pilot_scene, *m, duration);
+    const auto steps = steps_needed(pilot, *m, start, tolerance, best_cost);
     reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " ";
     if (!steps) {
-      reason += "cannot";
+      reason += std::isfinite(best_cost) ? "costlier" : "cannot";
       continue;
     }
-    estimates.push_back({m, *steps, double(*steps) * m->evaluations()});
     reason += std::to_string(*steps) + " steps";
+    choice.candidates.push_back({m, *steps});
+    const double cost = double(*steps) * m->evaluations();
+    if (cost < best_cost) {
+      best_cost = cost;
+      choice.method = m;
+      choice.steps = *steps;
+      choice.estimated_error = pilot.estimate(*steps);
+    }
   }
-  if (estimates.empty()) throw Error("auto: no method reaches tolerance " + std::to_string(tolerance));
-  const Estimate best = *std::min_element(estimates.begin(), estimates.end(), [](auto& a, auto& b) {
-    return a.cost < b.cost || (a.cost == b.cost && a.method->order > b.method->order);
-  });
-  MethodChoice choice{best.method, best.steps};
-  // Check the choice at its own step count; the pilot's extrapolation may be optimistic.
-  for (int tries = 0;; ++tries) {
-    choice.estimated_error = estimated_error(pilot, *choice.method, duration, choice.steps);
-    if (choice.estimated_error <= tolerance) break;
-    if (tries == 20) throw Error("auto: " + std::string(choice.method->name) + " cannot reach tolerance");
-    choice.steps *= 2;
+  if (choice.method == nullptr) {
+    throw Error("auto: no method reaches tolerance " + std::to_string(tolerance) +
+                " within 2^26 steps (in float, round-off may stand in the way: try double)");
   }
   choice.dt = duration / double(choice.steps);
   choice.reason = "for error <= " + std::to_string(tolerance) + " over " + std::to_string(duration) +

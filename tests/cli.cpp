@@ -3,7 +3,10 @@
 #include <catch2/catch.hpp>
 
 #include <cstdlib>
+#include <complex>
 #include <filesystem>
+#include <map>
+#include <numbers>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -225,4 +228,122 @@ TEST_CASE("every malformed scene or option fails with one clear line", "[cli][er
     CHECK(lines(r.err) == 1);
     CHECK(r.err.find(message) != std::string::npos);
   }
+}
+
+namespace {
+
+// Rows of a CSV file as maps from column name to text.
+std::vector<std::map<std::string, std::string>> csv_rows(const fs::path& path) {
+  std::istringstream in(read(path));
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> header;
+  std::istringstream h(line);
+  for (std::string cell; std::getline(h, cell, ',');) header.push_back(cell);
+  std::vector<std::map<std::string, std::string>> rows;
+  while (std::getline(in, line)) {
+    std::istringstream cells(line);
+    std::map<std::string, std::string> row;
+    std::size_t i = 0;
+    for (std::string cell; std::getline(cells, cell, ',') && i < header.size(); ++i) row[header[i]] = cell;
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+double number(const std::map<std::string, std::string>& row, const char* key) {
+  return std::stod(row.at(key));
+}
+
+}  // namespace
+
+TEST_CASE("chart: the CSV holds each point's true error and cost", "[cli][chart]") {
+  const fs::path out = work_dir() / "chart_spring";
+  const Result r = kinema_cli("chart " + scene("damped_spring.json") +
+                              " --methods euler,rk4 --dts 0.02,0.01,0.005 --duration 2 --repeat 1 -q --out " +
+                              out.string());
+  REQUIRE(r.code == 0);
+  const auto rows = csv_rows(out / "work_precision.csv");
+  REQUIRE(rows.size() == 6);
+  const Scene s = load_scene(scene("damped_spring.json"));
+  const BodyStates exact = *analytic_states(s, 2);
+  for (const auto& row : rows) {
+    const Method& m = method_by_name(row.at("method"));
+    const auto steps = std::uint64_t(number(row, "steps"));
+    INFO(row.at("method") << " at " << steps << " steps");
+    CHECK(number(row, "dt") * double(steps) == Approx(2));
+    CHECK(row.at("analytic_reference") == "true");
+    // The same number the library computes for that run.
+    CHECK(number(row, "error") == Approx(state_error(simulate(s, m, steps, 2), exact)).epsilon(1e-12));
+    CHECK(number(row, "force_evaluations") == double(steps * m.evaluations()));
+    CHECK(number(row, "seconds_per_simulated_second") > 0);
+  }
+  // rk4's error falls 16-fold per halving of h, euler's 2-fold.
+  CHECK(number(rows[3], "error") / number(rows[4], "error") == Approx(16).epsilon(0.1));
+  CHECK(number(rows[0], "error") / number(rows[1], "error") == Approx(2).epsilon(0.1));
+  for (const char* file : {"work_precision.svg", "work_precision.png", "error_vs_step.svg", "error_vs_step.png"}) {
+    INFO(file);
+    CHECK(fs::file_size(out / file) > 1000);
+  }
+}
+
+TEST_CASE("chart: fitted orders 1, 2, 2, 4, 1, 2 on the eccentric orbit", "[cli][chart]") {
+  const fs::path out = work_dir() / "chart_orbit";
+  REQUIRE(kinema_cli("chart " + scene("kepler_eccentric.json") + " --repeat 1 -q --out " + out.string()).code == 0);
+  const auto orders = csv_rows(out / "orders.csv");
+  REQUIRE(orders.size() == 6);
+  for (const auto& row : orders) {
+    INFO(row.at("method"));
+    REQUIRE_FALSE(row.at("fitted_order").empty());
+    CHECK(number(row, "fitted_order") == Approx(number(row, "nominal_order")).margin(0.15));
+  }
+  CHECK(read(out / "error_vs_step.gp").find("rk4 (fitted order 4.0") != std::string::npos);
+}
+
+TEST_CASE("stability: Euler spirals out, rk4 holds, Verlet stays bounded; measured limits", "[cli][stability]") {
+  const fs::path out = work_dir() / "stability_orbit";
+  // Ten orbits at h = T/100.
+  const double period = 2 * std::numbers::pi;
+  const Result r = kinema_cli("stability " + scene("kepler_circular.json") +
+                              " --methods euler,rk4,velocity_verlet -q --dt " + std::to_string(period / 100) +
+                              " --duration " + std::to_string(10 * period) + " --out " + out.string());
+  REQUIRE(r.code == 0);
+  std::map<std::string, double> last, worst;
+  for (const auto& row : csv_rows(out / "energy.csv")) {
+    const double e = std::abs(number(row, "relative_error"));
+    last[row.at("method")] = e;
+    worst[row.at("method")] = std::max(worst[row.at("method")], e);
+  }
+  CHECK(last["euler"] > 0.1);   // energy -1/(2r): r grew by more than 10%
+  CHECK(worst["rk4"] < 1e-4);
+  CHECK(worst["velocity_verlet"] < 1e-3);
+  for (const auto& row : csv_rows(out / "trajectory.csv")) {
+    const double radius = std::hypot(number(row, "x"), number(row, "y"));
+    if (row.at("method") == "rk4") REQUIRE(radius == Approx(1).margin(1e-4));
+  }
+  const auto limits = csv_rows(out / "thresholds.csv");
+  REQUIRE(limits.size() == 2);  // the explicit Runge-Kutta methods among those asked for
+  CHECK(number(limits[0], "measured_threshold") == Approx(2).epsilon(1e-4));
+  CHECK(number(limits[1], "measured_threshold") == Approx(2.785).epsilon(0.005));
+  // Every boundary point lies on |R(z)| = 1: |1 + z| for Euler, the Taylor polynomial for rk4.
+  for (const auto& row : csv_rows(out / "stability_region.csv")) {
+    const std::complex<double> z(number(row, "re"), number(row, "im"));
+    const std::complex<double> growth = row.at("method") == "euler"
+        ? 1.0 + z : 1.0 + z + z * z / 2.0 + z * z * z / 6.0 + z * z * z * z / 24.0;
+    REQUIRE(std::abs(growth) == Approx(1).epsilon(1e-9));
+  }
+  for (const char* file : {"energy.svg", "trajectory.svg", "stability_region.svg"}) CHECK(fs::file_size(out / file) > 1000);
+}
+
+TEST_CASE("run --method auto reports its choice and meets the tolerance", "[cli][auto]") {
+  const fs::path summary = work_dir() / "auto.json";
+  REQUIRE(kinema_cli("run " + scene("damped_spring.json") + " --method auto --tolerance 1e-6 -q --summary " +
+                     summary.string()).code == 0);
+  const auto j = nlohmann::json::parse(read(summary));
+  CHECK(j["method"] == j["auto"]["method"]);
+  CHECK(j["steps"] == j["auto"]["steps"]);
+  CHECK(j["t_final"].get<double>() == Approx(20));
+  CHECK(j["auto"]["estimated_error"].get<double>() <= 1e-6);
+  CHECK(kinema_cli("run " + scene("damped_spring.json") + " --method auto").err.find("needs a tolerance") !=
+        std::string::npos);
 }

@@ -55,6 +55,12 @@ struct MethodChoice {
   double dt = 0;
   double estimated_error = 0;
   std::string reason;       // one line: what each candidate would cost
+  // Every method that can reach the tolerance, with the step count the pilots estimate.
+  struct Candidate {
+    const Method* method;
+    std::uint64_t steps;
+  };
+  std::vector<Candidate> candidates;
 };
 
 // The built-in method and step count with the fewest force evaluations whose estimated

@@ -109,8 +109,8 @@ void write_charts(const fs::path& dir, const Scene& scene, const std::vector<con
     const std::string lc = " lc " + std::to_string(i + 1);
     wp += data + " using 5:6 with linespoints pt 7" + lc + " title " +
           gnuplot_quote(std::string(methods[i]->name)) + ", " + data +
-          " using 5:6:(sprintf('h=%.3g', $2)) with labels offset 0.6,0.6 font ',8'" + lc +
-          " notitle" + sep;
+          " using 5:6:(sprintf('h=%.3g', $2)) with labels offset 0.6,0.6 font ',8' tc lt " +
+          std::to_string(i + 1) + " notitle" + sep;
     ev += data + " using 2:5 with linespoints pt 7" + lc + " title " + gnuplot_quote(legends[i]) + sep;
   }
   if (!ref.analytic && ref.error > 0) {

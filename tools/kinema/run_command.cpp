@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "kinema/kinema.hpp"
+#include "progress.hpp"
 #include "trajectory.hpp"
 
 namespace kinema::cli {
@@ -96,13 +97,21 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   const double initial_energy = world.total_energy();
 
   double wall_seconds = 0;  // stepping only: loading and writing are not timed
+  Progress progress("kinema run", o.quiet);
+  std::uint64_t done = 0;
   auto timed_advance = [&](std::uint64_t n) {
     const auto start = Clock::now();
     world.advance(h, n);
     wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
+    done += n;
+    progress.update(double(done) / double(std::max<std::uint64_t>(1, scene.steps)));
   };
   if (o.trajectory_path.empty()) {
-    timed_advance(scene.steps);
+    // In chunks, for the progress bar: the same bits as one call.
+    const std::uint64_t chunk = std::max<std::uint64_t>(1, scene.steps / 100);
+    for (std::uint64_t step = 0; step < scene.steps; step += chunk) {
+      timed_advance(std::min(chunk, scene.steps - step));
+    }
   } else {
     TrajectoryWriter trajectory(o.trajectory_path, world.rigid.size() > 0);
     trajectory.write(0, world.time(), world.particles, world.rigid);
@@ -115,6 +124,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     trajectory.close();
   }
 
+  progress.finish();
   const bool finite = world.finite();
   const std::size_t bodies = world.particles.size() + world.rigid.size();
   const double body_steps = double(bodies) * double(scene.steps);

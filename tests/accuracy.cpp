@@ -1,0 +1,101 @@
+// Reference solutions and the automatic choice of method and step.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+namespace {
+
+Scene one_body_scene(std::vector<LocalTerm> forces, Vec3<double> x, Vec3<double> v, double mass = 1) {
+  Scene s;
+  s.precision = Precision::dual;
+  s.particles.push_back({x, v, mass, false});
+  s.forces = std::move(forces);
+  return s;
+}
+
+double numerical_error(const Scene& s, double t, std::uint64_t steps) {
+  return state_error(simulate(s, rk4, steps, t), *analytic_states(s, t));
+}
+
+}  // namespace
+
+TEST_CASE("Kepler's equation gives the orbit: back home after whole periods", "[accuracy]") {
+  const Scene circular = one_body_scene({Central{{0, 0, 0}, 1}}, {1, 0, 0}, {0, 1, 0});
+  const auto home = analytic_states(circular, 6 * std::numbers::pi);  // three periods
+  REQUIRE(home);
+  CHECK(state_error(*home, {{{1, 0, 0}}, {{0, 1, 0}}, {}}) < 1e-12);
+  // Eccentric, off-centre, tilted: the analytic state agrees with a fine rk4 run.
+  const Scene eccentric = one_body_scene({Central{{1, -2, 0.5}, 2}}, {1.4, -2, 0.5}, {0, 2.4, 0.6});
+  CHECK(numerical_error(eccentric, 3.7, 40000) < 1e-9);
+  // Unbound: no closed form here.
+  CHECK_FALSE(analytic_states(one_body_scene({Central{{0, 0, 0}, 1}}, {1, 0, 0}, {0, 2, 0}), 1));
+}
+
+TEST_CASE("linear forces have closed forms: under-, over- and critically damped", "[accuracy]") {
+  for (double damping : {0.5, 4.0, 8.0, 0.0}) {  // k/m = 4: critical at 4 with m = 1? c = 2 sqrt(k m)
+    const Scene s = one_body_scene({Gravity{{0, -9.81, 1}}, Spring{{1, 2, 3}, 4, damping}, LinearDrag{0.3}},
+                                   {0.5, 0, 1}, {1, 2, -1}, 1.5);
+    INFO("damping " << damping);
+    CHECK(numerical_error(s, 2.5, 20000) < 1e-9);
+  }
+  CHECK(numerical_error(one_body_scene({Gravity{{0, -9.81, 0}}, LinearDrag{0.7}}, {0, 0, 0}, {3, 4, 0}), 2, 20000) < 1e-9);
+  CHECK_FALSE(analytic_states(one_body_scene({QuadraticDrag{0.1}}, {0, 0, 0}, {1, 0, 0}), 1));
+}
+
+TEST_CASE("the numerical reference estimates its own error", "[accuracy]") {
+  const Scene s = one_body_scene({QuadraticDrag{0.2}, Gravity{{0, -9.81, 0}}}, {0, 0, 0}, {10, 10, 0});
+  const Reference coarse = reference_states(s, 2, 200), fine = reference_states(s, 2, 20000);
+  CHECK_FALSE(coarse.analytic);
+  const double true_error = state_error(coarse.states, fine.states);
+  CHECK(coarse.error == Approx(true_error).epsilon(0.2));  // Richardson is close to the truth
+}
+
+namespace {
+
+std::string scene_path(const char* name) { return std::string(KINEMA_SCENES) + "/" + name + ".json"; }
+
+}  // namespace
+
+TEST_CASE("auto meets the tolerance on every shipped scene, for no more work than rk4", "[accuracy][auto]") {
+  const std::pair<const char*, double> cases[] = {
+      {"kepler_circular", 1e-4}, {"kepler_eccentric", 1e-4}, {"damped_spring", 1e-6},
+      {"projectiles", 1e-2},     {"drag_field", 1e-3},      {"tumbling_book", 1e-3},
+      {"spinning_debris", 1e-2}};
+  for (const auto& [name, tolerance] : cases) {
+    const Scene scene = load_scene(scene_path(name));
+    const double duration = scene.dt * double(scene.steps);
+    const MethodChoice choice = choose_method(scene, tolerance);
+    INFO(name << ": " << choice.reason);
+    REQUIRE(choice.method != nullptr);
+    CHECK(choice.dt * double(choice.steps) == Approx(duration).epsilon(1e-12));
+    // Against the reference on the same sample of bodies the pilots used.
+    const Scene sample = sample_bodies(scene, 64);
+    const Reference ref = reference_states(sample, duration, 64 * choice.steps);
+    const double error = state_error(simulate(sample, *choice.method, choice.steps, duration), ref.states);
+    CHECK(error <= tolerance);
+    // Never more work than rk4 at the step auto found rk4 would need (rk4 is always a
+    // candidate: the other methods are only followed while they are cheaper).
+    const auto rk = std::find_if(choice.candidates.begin(), choice.candidates.end(),
+                                 [](const auto& c) { return c.method == &rk4; });
+    REQUIRE(rk != choice.candidates.end());
+    CHECK(double(choice.steps) * choice.method->evaluations() <= 4.0 * double(rk->steps));
+    // And that rk4 estimate is sound: rk4 at that step meets the tolerance too.
+    CHECK(state_error(simulate(sample, rk4, rk->steps, duration), ref.states) <= tolerance);
+  }
+}
+
+TEST_CASE("tighter tolerances take more steps", "[accuracy][auto]") {
+  const Scene scene = load_scene(scene_path("damped_spring"));
+  const MethodChoice loose = choose_method(scene, 1e-2), tight = choose_method(scene, 1e-9);
+  CHECK(tight.method == &rk4);
+  CHECK(tight.steps > 4 * loose.steps);
+  CHECK(loose.estimated_error <= 1e-2);
+  CHECK(tight.estimated_error <= 1e-9);
+  CHECK_THROWS_WITH(choose_method(scene, -1), "tolerance must be positive and finite");
+}
