@@ -94,9 +94,9 @@ void write_regions(const fs::path& dir, const std::vector<const Method*>& method
     ++color;
     const std::vector<double> c = stability_polynomial(m->tableau);
     std::ofstream dat(dir / ("region_" + std::string(m->name) + ".dat"));
-    for (int k = 0; k < 720; ++k) {
+    for (int k = 0; k < 240; ++k) {
       std::vector<Complex> p(c.begin(), c.end());
-      p[0] -= std::polar(1.0, 2 * M_PI * k / 720);
+      p[0] -= std::polar(1.0, 2 * M_PI * k / 240);
       for (const Complex& z : roots(p)) {
         dat << z.real() << ' ' << z.imag() << '\n';
         csv << m->name << ',' << z.real() << ',' << z.imag() << '\n';
