@@ -38,15 +38,20 @@ inline void report_body_steps(benchmark::State& state, double body_steps_per_ite
   state.counters["GB_per_s"] = Counter(total * bytes_per_body_step * 1e-9, Counter::kIsRate);
 }
 
-// The benchmark bodies for N, generated once per process (4M bodies take a while).
-template <class T>
-const ParticleSet<T>& cached_particles(std::size_t count) {
-  static std::map<std::size_t, ParticleSet<T>> cache;
+// Bodies made by make(count) once per process and count (4M bodies take a while).
+template <class Set, class Make>
+const Set& cached(std::size_t count, Make make) {
+  static std::map<std::size_t, Set> cache;
   static std::mutex mutex;
   std::lock_guard lock(mutex);
   auto [it, fresh] = cache.try_emplace(count);
-  if (fresh) it->second = make_particles<T>(bench_scene(count));
+  if (fresh) it->second = make(count);
   return it->second;
+}
+
+template <class T>
+const ParticleSet<T>& cached_particles(std::size_t count) {
+  return cached<ParticleSet<T>>(count, [](std::size_t n) { return make_particles<T>(bench_scene(n)); });
 }
 
 // Puts the initial state back without allocating. Benchmarks do so every few thousand

@@ -21,20 +21,33 @@ struct Case {
   bool relaxed = false;
 };
 
+// The stepper a case describes, with the job system it runs on.
+template <class T>
+struct CaseStepper {
+  TbbJobSystem jobs;
+  SerialJobSystem serial;
+  Stepper<T> stepper;
+
+  CaseStepper(const Case& c, std::size_t n)
+      : jobs(c.threads), stepper(make_forces<T>(bench_scene(n)), *c.method, options(c)) {}
+
+  StepperOptions options(const Case& c) {
+    StepperOptions o;
+    o.isa = c.isa;
+    o.jobs = c.threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
+    o.force_staged = c.staged;
+    o.relaxed_fma = c.relaxed;
+    return o;
+  }
+};
+
 template <class T>
 void step_by_step(benchmark::State& state, Case c) {
   const auto n = std::size_t(state.range(0));
-  const Scene scene = bench_scene(n);
   const ParticleSet<T>& initial = cached_particles<T>(n);
   ParticleSet<T> bodies = initial;
-  TbbJobSystem jobs(c.threads);
-  SerialJobSystem serial;
-  StepperOptions o;
-  o.isa = c.isa;
-  o.jobs = c.threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
-  o.force_staged = c.staged;
-  o.relaxed_fma = c.relaxed;
-  Stepper<T> stepper(make_forces<T>(scene), *c.method, o);
+  CaseStepper<T> run(c, n);
+  Stepper<T>& stepper = run.stepper;
   stepper.step(bodies, T(kDt));  // warm: first-touch, scratch
   std::int64_t k = 0;
   for (auto _ : state) {
@@ -50,15 +63,10 @@ void step_by_step(benchmark::State& state, Case c) {
 template <class T>
 void temporally_blocked(benchmark::State& state, Case c) {
   const auto n = std::size_t(state.range(0));
-  const Scene scene = bench_scene(n);
   const ParticleSet<T>& initial = cached_particles<T>(n);
   ParticleSet<T> bodies = initial;
-  TbbJobSystem jobs(c.threads);
-  SerialJobSystem serial;
-  StepperOptions o;
-  o.isa = c.isa;
-  o.jobs = c.threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
-  Stepper<T> stepper(make_forces<T>(scene), *c.method, o);
+  CaseStepper<T> run(c, n);
+  Stepper<T>& stepper = run.stepper;
   std::int64_t k = 0;
   for (auto _ : state) {
     if (++k % (kRestoreEvery / kCeilingSteps) == 0) restore(bodies, initial);

@@ -27,12 +27,7 @@ constexpr double rigid_step_bytes() {
 
 template <class T>
 const RigidBodySet<T>& cached_rigid(std::size_t count) {
-  static std::map<std::size_t, RigidBodySet<T>> cache;
-  static std::mutex mutex;
-  std::lock_guard lock(mutex);
-  auto [it, fresh] = cache.try_emplace(count);
-  if (fresh) it->second = make_rigid_bodies<T>(rigid_scene(count));
-  return it->second;
+  return cached<RigidBodySet<T>>(count, [](std::size_t n) { return make_rigid_bodies<T>(rigid_scene(n)); });
 }
 
 template <class T>
