@@ -9,21 +9,20 @@
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/stepper.hpp"
+#include "kinema/world.hpp"
 
 namespace kinema {
 namespace {
 
 template <class T>
 BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
-  ParticleSet<T> particles = make_particles<T>(scene);
-  RigidBodySet<T> rigid = make_rigid_bodies<T>(scene);
-  const ForceModel<T> forces = make_forces<T>(scene);
   SerialJobSystem serial;
   StepperOptions options;
   options.jobs = &serial;
-  const T h = T(duration / double(steps));
-  if (particles.size() > 0) Stepper<T>(forces, method, options).advance(particles, h, steps);
-  if (rigid.size() > 0) Stepper<T>(forces, method, options).advance(rigid, h, steps);
+  World<T> world(scene, method, options);
+  world.advance(T(duration / double(steps)), steps);
+  const ParticleSet<T>& particles = world.particles;
+  const RigidBodySet<T>& rigid = world.rigid;
   BodyStates out;
   auto widen = [](const auto& v) { return Vec3<double>{v[0], v[1], v[2]}; };
   for (std::size_t i = 0; i < particles.size(); ++i) {

@@ -11,3 +11,4 @@
 #include "kinema/methods.hpp"
 #include "kinema/scene.hpp"
 #include "kinema/stepper.hpp"
+#include "kinema/world.hpp"

@@ -46,20 +46,14 @@ struct Point {
 template <class T>
 double timed(const Scene& scene, const Method& method, std::uint64_t steps, double duration,
              int repeat) {
-  const ParticleSet<T> particles = make_particles<T>(scene);
-  const RigidBodySet<T> rigid = make_rigid_bodies<T>(scene);
-  const ForceModel<T> forces = make_forces<T>(scene);
   SerialJobSystem serial;
   StepperOptions o;
   o.jobs = &serial;
   double best = std::numeric_limits<double>::infinity();
   for (int r = 0; r < repeat; ++r) {
-    ParticleSet<T> p = particles;
-    RigidBodySet<T> b = rigid;
-    Stepper<T> sp(forces, method, o), sr(forces, method, o);
+    World<T> world(scene, method, o);
     const auto start = std::chrono::steady_clock::now();
-    if (p.size() > 0) sp.advance(p, T(duration / double(steps)), steps);
-    if (b.size() > 0) sr.advance(b, T(duration / double(steps)), steps);
+    world.advance(T(duration / double(steps)), steps);
     best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
   return best;

@@ -47,44 +47,6 @@ void print_summary(const nlohmann::ordered_json& summary) {
   }
 }
 
-// The scene's particles and rigid bodies, each with its stepper, on one job system.
-template <class T>
-struct World {
-  ParticleSet<T> particles;
-  RigidBodySet<T> rigid;
-  ForceModel<T> forces;
-  TbbJobSystem jobs;
-  Stepper<T> particle_stepper, rigid_stepper;
-
-  World(const Scene& scene, const RunOptions& o)
-      : particles(make_particles<T>(scene)),
-        rigid(make_rigid_bodies<T>(scene)),
-        forces(make_forces<T>(scene)),
-        jobs(o.threads),
-        particle_stepper(forces, method_by_name(scene.method), options(o)),
-        rigid_stepper(forces, method_by_name(scene.method), options(o)) {}
-
-  StepperOptions options(const RunOptions& o) {
-    StepperOptions s;
-    s.isa = o.isa;
-    s.jobs = &jobs;
-    s.relaxed_fma = o.relaxed_fma;
-    return s;
-  }
-  void advance(T h, std::uint64_t steps) {
-    if (particles.size() > 0) particle_stepper.advance(particles, h, steps);
-    if (rigid.size() > 0) rigid_stepper.advance(rigid, h, steps);
-  }
-  double time() const {
-    return particles.size() > 0 ? particle_stepper.time() : rigid_stepper.time();
-  }
-  double total_energy() const {
-    return (particles.size() > 0 ? energy(particles, forces).total() : 0) +
-           (rigid.size() > 0 ? energy(rigid, forces).total() : 0);
-  }
-  bool finite() const { return all_finite(particles) && all_finite(rigid); }
-};
-
 // What happened before stepping that the summary reports.
 struct RunContext {
   std::optional<nlohmann::ordered_json> auto_choice;
@@ -92,7 +54,11 @@ struct RunContext {
 
 template <class T>
 int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
-  World<T> world(scene, o);
+  StepperOptions options;
+  options.isa = o.isa;
+  options.threads = o.threads;
+  options.relaxed_fma = o.relaxed_fma;
+  World<T> world(scene, method_by_name(scene.method), options);
   const T h = T(scene.dt);
   const double initial_energy = world.total_energy();
 
@@ -128,7 +94,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   const bool finite = world.finite();
   const std::size_t bodies = world.particles.size() + world.rigid.size();
   const double body_steps = double(bodies) * double(scene.steps);
-  const Stepper<T>& stepper = world.particle_stepper;
+  const Stepper<T>& stepper = world.stepper();
   nlohmann::ordered_json summary;
   summary["scene"] = scene.name;
   summary["bodies"] = bodies;

@@ -123,21 +123,15 @@ template <class T>
 void record(const Scene& scene, const Method& m, double dt, std::uint64_t steps,
             std::ofstream& energy_csv, std::ofstream& path_csv, std::ofstream& energy_dat,
             std::ofstream& path_dat, double& max_z) {
-  ParticleSet<T> p = make_particles<T>(scene);
-  RigidBodySet<T> r = make_rigid_bodies<T>(scene);
-  const ForceModel<T> f = make_forces<T>(scene);
   SerialJobSystem serial;
   StepperOptions o;
   o.jobs = &serial;
-  Stepper<T> sp(f, m, o), sr(f, m, o);
-  auto total = [&] {
-    return (p.size() ? energy(p, f).total() : 0) + (r.size() ? energy(r, f).total() : 0);
-  };
-  const double e0 = total();
+  World<T> world(scene, m, o);
+  const double e0 = world.total_energy();
   const std::uint64_t every = std::max<std::uint64_t>(1, steps / 2000);
-  const ParticleSet<T>& centres = p.size() ? p : r.centers();
+  const ParticleSet<T>& centres = world.particles.size() ? world.particles : world.rigid.centers();
   for (std::uint64_t k = 0; k <= steps; k += every) {
-    const double t = double(k) * dt, e = total(), rel = (e - e0) / std::abs(e0);
+    const double t = double(k) * dt, e = world.total_energy(), rel = (e - e0) / std::abs(e0);
     const auto x = centres.position(0);
     energy_csv << m.name << ',' << t << ',' << e << ',' << rel << '\n';
     path_csv << m.name << ',' << t << ',' << x[0] << ',' << x[1] << ',' << x[2] << '\n';
@@ -146,8 +140,7 @@ void record(const Scene& scene, const Method& m, double dt, std::uint64_t steps,
     max_z = std::max(max_z, double(std::abs(x[2])));
     const std::uint64_t n = std::min(every, steps - std::min(steps, k));
     if (n == 0) break;
-    if (p.size()) sp.advance(p, T(dt), n);
-    if (r.size()) sr.advance(r, T(dt), n);
+    world.advance(T(dt), n);
   }
 }
 
