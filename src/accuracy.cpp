@@ -1,6 +1,7 @@
 #include "kinema/accuracy.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -266,7 +267,8 @@ std::optional<std::uint64_t> steps_needed(Pilot& pilot, const Method& m, std::ui
   } else {
     do {
       n *= 2;
-      if (!affordable(n) || n > (std::uint64_t(1) << 26)) return std::nullopt;
+      // Pilots run 4n steps: stop at 2^24 (a pilot of 2^26 steps).
+      if (!affordable(n) || n > (std::uint64_t(1) << 24)) return std::nullopt;
     } while (!fits(n));
   }
   const std::uint64_t three_quarters = std::max<std::uint64_t>(1, 3 * n / 4);
@@ -310,12 +312,16 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
     }
   }
   if (choice.method == nullptr) {
-    throw Error("auto: no method reaches tolerance " + std::to_string(tolerance) +
-                " within 2^26 steps (in float, round-off may stand in the way: try double)");
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  "auto: no method reaches tolerance %g within 2^24 steps (in float, round-off "
+                  "may stand in the way: try double)", tolerance);
+    throw Error(text);
   }
   choice.dt = duration / double(choice.steps);
-  choice.reason = "for error <= " + std::to_string(tolerance) + " over " + std::to_string(duration) +
-                  " s: " + reason + "; picked " + std::string(choice.method->name) + " (" +
+  char head[96];
+  std::snprintf(head, sizeof head, "for error <= %g over %g s: ", tolerance, duration);
+  choice.reason = head + reason + "; picked " + std::string(choice.method->name) + " (" +
                   std::to_string(choice.method->evaluations()) + " force evaluations per step)";
   return choice;
 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <new>
 #include <string>
 
@@ -37,6 +38,9 @@ void AlignedArray<T>::Free::operator()(T* p) const {
 
 template <class T>
 void AlignedArray<T>::resize(std::size_t count) {
+  if (count > (std::numeric_limits<std::size_t>::max() - kSimdBytes) / sizeof(T)) {
+    throw Error("cannot hold " + std::to_string(count) + " bodies: the arrays would overflow memory");
+  }
   count = padded_count<T>(count);
   if (count <= size_) return;
   T* fresh = static_cast<T*>(::operator new[](count * sizeof(T), std::align_val_t{kSimdBytes}));

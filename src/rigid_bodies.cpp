@@ -127,6 +127,7 @@ std::size_t RigidBodySet<T>::add(const RigidBodyDesc<T>& b) {
   check_finite(b.inertia, i, "inertia");
   for (T m : b.inertia) {
     if (!(m > 0)) fail(i, "inertia moments must be positive");
+    if (!std::isfinite(T(1) / m)) fail(i, "an inertia moment has no finite inverse in this precision");
   }
   double norm = 0;
   for (T c : b.orientation) norm += double(c) * double(c);

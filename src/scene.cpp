@@ -229,6 +229,8 @@ GenerateSpec parse_generate(const Node& n) {
                    "angular_velocity_max"});
   GenerateSpec g;
   g.count = n.required("count").count(true);
+  // 2^32 bodies of 7 double arrays is 240 GB: far past any machine this runs on.
+  if (g.count > (std::uint64_t(1) << 32)) n.child("count").fail("expected at most 2^32 bodies");
   if (n.has("seed")) g.seed = n.child("seed").count(true);
   g.position_min = n.required("position_min").vec3();
   g.position_max = n.required("position_max").vec3();

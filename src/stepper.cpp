@@ -47,6 +47,25 @@ kernels::LocalForces<T> resolve(std::span<const LocalTerm> terms) {
   return out;
 }
 
+// Parameters valid in double can overflow float: refuse them here rather than let inf
+// times a zero inverse mass make NaN out of a kinematic body.
+template <class T>
+void require_representable(const kernels::LocalForces<T>& f) {
+  bool finite = std::isfinite(f.spring_k) && std::isfinite(f.linear) && std::isfinite(f.quadratic);
+  for (int d = 0; d < 3; ++d) {
+    finite = finite && std::isfinite(f.gravity[d]) && std::isfinite(f.anchor[d]) &&
+             std::isfinite(f.constant_force[d]);
+  }
+  for (int c = 0; c < f.central_count; ++c) {
+    finite = finite && std::isfinite(f.mu[c]);
+    for (int d = 0; d < 3; ++d) finite = finite && std::isfinite(f.center[c][d]);
+  }
+  if (!finite) {
+    throw Error(std::string("force parameters overflow ") + (sizeof(T) == 4 ? "float" : "double") +
+                " (their sum, per kind of term, must be finite in the stepper's precision)");
+  }
+}
+
 // The rotational terms; rigid bodies only.
 template <class T>
 kernels::RotationalForces<T> resolve_rotational(std::span<const LocalTerm> terms) {
@@ -133,10 +152,16 @@ struct Stepper<T>::Impl {
       jobs = options.jobs;
     }
     local = resolve<T>(forces.local_terms());
+    require_representable(local);
     // Particles have no orientation: the point forces' push is for rigid bodies only.
     rigid_local = local;
     local.constant_force = {};
     rotational = resolve_rotational<T>(forces.local_terms());
+    for (int d = 0; d < 3; ++d) {
+      if (!std::isfinite(rotational.torque[d]) || !std::isfinite(rotational.angular_drag)) {
+        throw Error("torque parameters overflow the stepper's precision");
+      }
+    }
     const int quad = local.has_quadratic(), central = local.has_central();
     stage_fn = table->stage[quad][central];
     const int builtin = builtin_index(method);
@@ -223,8 +248,8 @@ struct Stepper<T>::Impl {
       throw Error("rigid bodies need a built-in method and local force terms only (no "
                   "callbacks, no coupled terms)");
     }
-    start_steps(b.centers(), step_size);
-    kernels::RigidJob<T> job{arrays(b.centers()), {b.q(0), b.q(1), b.q(2), b.q(3)},
+    start_steps(b.centers_, step_size);
+    kernels::RigidJob<T> job{arrays(b.centers_), {b.q(0), b.q(1), b.q(2), b.q(3)},
                              {b.l(0), b.l(1), b.l(2)},
                              {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
                              rigid_local, rotational, h, options.renormalize_quaternions};
@@ -281,14 +306,20 @@ struct Stepper<T>::Impl {
     });
   }
 
-  // Stage state s: the bodies themselves for stage 0 (and for every kick-drift stage).
+  // Stage s's state is the bodies' own for stage 0, for a stage whose tableau row is all
+  // zero (nothing to add), and for every kick-drift stage; else its stage buffers.
+  bool own_state(int s) const {
+    if (s == 0 || method.kind == MethodKind::kick_drift) return true;
+    for (int j = 0; j < s; ++j) {
+      if (method.tableau.a[s][j] != 0) return false;
+    }
+    return true;
+  }
   const T* state_x(int s, int d) {
-    return s == 0 || method.kind == MethodKind::kick_drift ? arrays(*bodies).x[d]
-                                                           : stage_x[s][d].data();
+    return own_state(s) ? arrays(*bodies).x[d] : stage_x[s][d].data();
   }
   const T* state_v(int s, int d) {
-    return s == 0 || method.kind == MethodKind::kick_drift ? arrays(*bodies).v[d]
-                                                           : stage_v[s][d].data();
+    return own_state(s) ? arrays(*bodies).v[d] : stage_v[s][d].data();
   }
   // Stage s's velocities (the x derivative) and accelerations, as three component arrays.
   std::array<const T*, 3> velocities(int s) {

@@ -197,6 +197,11 @@ TEST_CASE("every malformed scene or option fails with one clear line", "[cli][er
       {R"({"particles": []})", "the scene has no bodies"},
       {"{\"partciles\": [{\"position\": [1,0,0]}]}", "partciles: unknown key"},
       {"{" + body + ", \"forces\": {\"type\": \"gravity\"}}", "forces: expected an array"},
+      {R"({"generate": {"count": 2305843009213693952, "position_min": [0,0,0], "position_max": [1,1,1]}})",
+       "generate.count: expected at most 2^32 bodies"},
+      {"{" + body + R"(, "forces": [{"type": "linear_drag", "k": 1e39}]})", "force parameters overflow float"},
+      {R"({"precision": "float", "rigid_bodies": [{"position": [0,0,0], "inertia": [1e-39, 1, 1]}]})",
+       "an inertia moment has no finite inverse"},
   };
   int i = 0;
   for (const auto& [text, message] : scenes) {
@@ -218,6 +223,8 @@ TEST_CASE("every malformed scene or option fails with one clear line", "[cli][er
       {"run " + good + " --precision half", "--precision"},
       {"run " + good + " --method bogus", "unknown method 'bogus'"},
       {"run " + good + " --steps many", "--steps"},
+      {"run " + good + " --steps -1", "--steps: must not be negative"},
+      {"chart " + good + " --dts 1e-30", "takes more than 2^32 steps"},
       {"fly " + good, "subcommand"},
       {"", "A subcommand is required"},
   };
@@ -278,9 +285,9 @@ TEST_CASE("chart: the CSV holds each point's true error and cost", "[cli][chart]
     CHECK(number(row, "force_evaluations") == double(steps * m.evaluations()));
     CHECK(number(row, "seconds_per_simulated_second") > 0);
   }
-  // rk4's error falls 16-fold per halving of h, euler's 2-fold.
-  CHECK(number(rows[3], "error") / number(rows[4], "error") == Approx(16).epsilon(0.1));
-  CHECK(number(rows[0], "error") / number(rows[1], "error") == Approx(2).epsilon(0.1));
+  // Steps sweep from the smallest: rk4's error grows 16-fold per doubling of h, euler's 2-fold.
+  CHECK(number(rows[4], "error") / number(rows[3], "error") == Approx(16).epsilon(0.1));
+  CHECK(number(rows[1], "error") / number(rows[0], "error") == Approx(2).epsilon(0.1));
   for (const char* file : {"work_precision.svg", "work_precision.png", "error_vs_step.svg", "error_vs_step.png"}) {
     INFO(file);
     CHECK(fs::file_size(out / file) > 1000);
@@ -333,6 +340,16 @@ TEST_CASE("stability: Euler spirals out, rk4 holds, Verlet stays bounded; measur
     REQUIRE(std::abs(growth) == Approx(1).epsilon(1e-9));
   }
   for (const char* file : {"energy.svg", "trajectory.svg", "stability_region.svg"}) CHECK(fs::file_size(out / file) > 1000);
+}
+
+TEST_CASE("chart runs no shell: names and paths are text, never commands", "[cli][chart]") {
+  const fs::path marker = work_dir() / "pwned";
+  const fs::path p = write("inject.json", "{\"name\": \"x`touch " + marker.string() + "`\", "
+                           "\"particles\": [{\"position\": [1,0,0], \"velocity\": [0,1,0]}], "
+                           "\"forces\": [{\"type\": \"central\", \"mu\": 1}], \"steps\": 50}");
+  const std::string out = (work_dir() / "o$(touch ").string() + marker.string() + ")";
+  CHECK(kinema_cli("chart " + p.string() + " --repeat 1 -q --out '" + out + "'").code == 0);
+  CHECK_FALSE(fs::exists(marker));
 }
 
 TEST_CASE("run --method auto reports its choice and meets the tolerance", "[cli][auto]") {

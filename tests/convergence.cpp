@@ -86,3 +86,14 @@ TEST_CASE("a user tableau (Ralston's RK2) runs and converges at order 2", "[conv
                  {2, {{{}, {2.0 / 3}}}, {0.25, 0.75}, {0, 2.0 / 3}}, {}};
   CHECK(measured_order(ralston, 0.5) == Approx(2).margin(0.1));
 }
+
+TEST_CASE("a user tableau with an all-zero row reads the bodies' own state there", "[convergence]") {
+  // Two stages at t0 (c = 0, a row of zeros), weights 1/2 + 1/2: Euler in disguise.
+  const Method twice{"twice_euler", MethodKind::runge_kutta, 1, {2, {{{}, {0}}}, {0.5, 0.5}, {0, 0}}, {}};
+  ForceModel<double> f;
+  f.add(Gravity{{0, -9.81, 0}}).add(LinearDrag{0.3});
+  const auto a = test::run_one<double>(twice, f, {0, 0, 0}, {1, 0, 0}, 1, 0.1, 10);
+  const auto b = test::run_one<double>(euler, f, {0, 0, 0}, {1, 0, 0}, 1, 0.1, 10);
+  CHECK(test::distance(a.x, b.x) < 1e-15);
+  CHECK(test::distance(a.v, b.v) < 1e-15);
+}

@@ -16,6 +16,9 @@ namespace kinema {
 template <class T>
 using Vec3 = std::array<T, 3>;
 
+template <class T>
+class Stepper;
+
 // Storage alignment and padding unit, in bytes: one AVX-512 register.
 inline constexpr std::size_t kSimdBytes = 64;
 
@@ -148,8 +151,8 @@ class RigidBodySet {
   std::size_t size() const { return centers_.size(); }
   std::size_t padded_size() const { return centers_.padded_size(); }
 
-  // The centre-of-mass arrays, as a ParticleSet (px ... vz, inv_mass).
-  ParticleSet<T>& centers() { return centers_; }
+  // The centre-of-mass arrays, as a ParticleSet (px ... vz, inv_mass). Read-only: bodies
+  // come through add(), which keeps the rotation arrays as long as these.
   const ParticleSet<T>& centers() const { return centers_; }
   T* q(int k) { return q_[k].data(); }  // k = 0..3: w, x, y, z
   const T* q(int k) const { return q_[k].data(); }
@@ -163,6 +166,8 @@ class RigidBodySet {
   Vec3<double> angular_velocity(std::size_t i) const;
 
  private:
+  template <class>
+  friend class Stepper;  // steps the centre arrays in place
   void grow_rotation_arrays();
 
   ParticleSet<T> centers_;

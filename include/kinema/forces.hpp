@@ -68,7 +68,9 @@ inline constexpr int kMaxPointForces = 4;
 
 // What a callback or coupled term sees: the bodies [begin, begin + count) of one block at
 // one stage, as SoA pointers already offset to `begin`. It adds forces into fx, fy, fz
-// (zeroed before the call); they are divided by mass afterwards.
+// (zeroed before the call); they are divided by mass afterwards. Counts include the inert
+// padding bodies at the end of the set (at the origin, inv_mass 0); forces on them are
+// ignored.
 template <class T>
 struct ParticleBlock {
   std::size_t begin = 0;

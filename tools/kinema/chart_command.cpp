@@ -22,6 +22,18 @@ std::vector<const Method*> pick_methods(const std::vector<std::string>& names) {
   return out;
 }
 
+// Steps of size about dt over `duration`; kinema::Error past 2^32 steps.
+std::uint64_t step_count(double duration, double dt) {
+  const double steps = std::round(duration / dt);
+  if (!(steps <= 4294967296.0)) {
+    char text[128];
+    std::snprintf(text, sizeof text, "a step of %g s over %g s takes more than 2^32 steps", dt,
+                  duration);
+    throw Error(text);
+  }
+  return std::max<std::uint64_t>(1, std::uint64_t(steps));
+}
+
 double least_squares_slope(const std::vector<double>& x, const std::vector<double>& y) {
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
   const double n = double(x.size());
@@ -126,8 +138,13 @@ int chart_scene(const ChartOptions& o) {
     for (int k = -3; k <= 4; ++k) dts.push_back(full.dt * std::ldexp(1.0, k));
   }
   const std::vector<const Method*> methods = pick_methods(o.methods);
+  std::sort(dts.begin(), dts.end());
+  dts.erase(std::unique(dts.begin(), dts.end(), [&](double a, double b) {
+              return step_count(duration, a) == step_count(duration, b);
+            }),
+            dts.end());
   std::uint64_t most_steps = 1;
-  for (double dt : dts) most_steps = std::max(most_steps, std::uint64_t(std::llround(duration / dt)));
+  for (double dt : dts) most_steps = std::max(most_steps, step_count(duration, dt));
   const Reference ref = reference_states(scene, duration, 64 * most_steps);
 
   fs::create_directories(o.out);
@@ -146,7 +163,7 @@ int chart_scene(const ChartOptions& o) {
     std::ofstream dat(fs::path(o.out) / ("points_" + std::string(m->name) + ".dat"));
     dat << "# steps dt seconds evaluations error seconds_per_simulated_second\n";
     for (double dt : dts) {
-      const std::uint64_t steps = std::max<std::uint64_t>(1, std::llround(duration / dt));
+      const std::uint64_t steps = step_count(duration, dt);
       const double h = duration / double(steps);
       const double error = state_error(simulate(scene, *m, steps, duration), ref.states);
       const double seconds = scene.precision == Precision::single

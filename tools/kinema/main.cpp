@@ -29,7 +29,13 @@ void add_run_command(CLI::App& app, kinema::cli::RunOptions& o, TextOptions& tex
       ->check(CLI::PositiveNumber);
   run->add_option("--dt", o.dt, "Override the step size (seconds, > 0)")
       ->check(CLI::PositiveNumber);
-  run->add_option("--steps", o.steps, "Override the number of steps");
+  // CLI11 2.1 would read "-1" into an unsigned count as 2^64 - 1.
+  run->add_option("--steps", o.steps, "Override the number of steps")
+      ->check(CLI::Validator(
+          [](const std::string& text) {
+            return text.find('-') == std::string::npos ? std::string() : "must not be negative";
+          },
+          "COUNT"));
   run->add_option("--precision", text.precision, "Override the scene's precision: float or double")
       ->check(CLI::IsMember({"float", "double"}));
   run->add_option("--out", o.trajectory_path,

@@ -1,20 +1,47 @@
 #include "plot.hpp"
 
-#include <cstdlib>
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+
 #include <fstream>
 
 #include "kinema/error.hpp"
 
+extern char** environ;
+
 namespace kinema::cli {
 
+// Single quotes: gnuplot expands neither backquotes nor escapes inside them; a quote
+// inside is written twice.
 std::string gnuplot_quote(const std::string& text) {
-  std::string out = "\"";
+  std::string out = "'";
   for (char c : text) {
-    if (c == '"' || c == '\\') out += '\\';
     out += c;
+    if (c == '\'') out += '\'';
   }
-  return out + "\"";
+  return out + "'";
 }
+
+namespace {
+
+// Runs gnuplot on `script` without a shell, its stderr into `log`. True on success.
+bool run_gnuplot(const std::string& script, const std::string& log) {
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 2, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  std::string program = "gnuplot";
+  char* argv[] = {program.data(), const_cast<char*>(script.c_str()), nullptr};
+  pid_t pid = 0;
+  const int spawned = posix_spawnp(&pid, "gnuplot", &actions, nullptr, argv, environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawned != 0) return false;
+  int status = 0;
+  if (waitpid(pid, &status, 0) < 0) return false;
+  return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+}
+
+}  // namespace
 
 void render_chart(const std::filesystem::path& dir, const std::string& name,
                   const std::string& script) {
@@ -29,9 +56,7 @@ void render_chart(const std::filesystem::path& dir, const std::string& name,
         << "replot\n";
     if (!out) throw Error(gp.string() + ": cannot write the chart script");
   }
-  const std::string command = "gnuplot " + gnuplot_quote(gp.string()) + " 2>" +
-                              gnuplot_quote((dir / (name + ".log")).string());
-  if (std::system(command.c_str()) != 0) {
+  if (!run_gnuplot(gp.string(), (dir / (name + ".log")).string())) {
     throw Error("gnuplot failed on " + gp.string() + " (is gnuplot-nox installed? see " +
                 (dir / (name + ".log")).string() + ")");
   }

@@ -58,7 +58,13 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   options.isa = o.isa;
   options.threads = o.threads;
   options.relaxed_fma = o.relaxed_fma;
-  World<T> world(scene, method_by_name(scene.method), options);
+  World<T> world = [&] {
+    try {
+      return World<T>(scene, method_by_name(scene.method), options);
+    } catch (const Error& e) {  // bodies or forces the precision cannot hold: name the file
+      throw Error(o.scene_path + ": " + e.what());
+    }
+  }();
   const T h = T(scene.dt);
   const double initial_energy = world.total_energy();
 

@@ -16,6 +16,7 @@ namespace kinema::cli {
 namespace fs = std::filesystem;
 
 std::vector<const Method*> pick_methods(const std::vector<std::string>& names);
+std::uint64_t step_count(double duration, double dt);
 
 namespace {
 
@@ -151,7 +152,7 @@ int stability_scene(const StabilityOptions& o) {
   const Scene scene = sample_bodies(full, o.max_bodies);
   const double dt = o.dt.value_or(full.dt);
   const double duration = o.duration.value_or(full.dt * double(full.steps));
-  const std::uint64_t steps = std::max<std::uint64_t>(1, std::llround(duration / dt));
+  const std::uint64_t steps = step_count(duration, dt);
   const std::vector<const Method*> methods = pick_methods(o.methods);
   const fs::path dir = o.out;
   fs::create_directories(dir);
