@@ -11,6 +11,19 @@
 namespace kinema {
 namespace {
 
+// A force parameter (or a sum of them) in the stepper's precision. Values valid in double
+// can overflow float: refuse them here rather than let inf times a zero inverse mass make
+// NaN out of a kinematic body.
+template <class T>
+T narrow(double x) {
+  const T out = T(x);
+  if (!std::isfinite(out)) {
+    throw Error(std::string("force parameters overflow ") + (sizeof(T) == 4 ? "float" : "double") +
+                " (their sum, per kind of term, must be finite in the stepper's precision)");
+  }
+  return out;
+}
+
 template <class T>
 kernels::LocalForces<T> resolve(std::span<const LocalTerm> terms) {
   Vec3<double> g{}, weighted_anchor{}, point_force_sum{};
@@ -30,40 +43,21 @@ kernels::LocalForces<T> resolve(std::span<const LocalTerm> terms) {
       for (int d = 0; d < 3; ++d) weighted_anchor[d] += t->k * t->anchor[d];
     } else if (auto* t = std::get_if<Central>(&term)) {
       const int c = out.central_count++;
-      for (int d = 0; d < 3; ++d) out.center[c][d] = T(t->center[d]);
-      out.mu[c] = T(t->mu);
+      for (int d = 0; d < 3; ++d) out.center[c][d] = narrow<T>(t->center[d]);
+      out.mu[c] = narrow<T>(t->mu);
     } else if (auto* t = std::get_if<PointForce>(&term)) {
       for (int d = 0; d < 3; ++d) point_force_sum[d] += t->force[d];
     }
   }
   for (int d = 0; d < 3; ++d) {
-    out.gravity[d] = T(g[d]);
-    out.constant_force[d] = T(point_force_sum[d]);
-    out.anchor[d] = spring_k > 0 ? T(weighted_anchor[d] / spring_k) : T(0);
+    out.gravity[d] = narrow<T>(g[d]);
+    out.constant_force[d] = narrow<T>(point_force_sum[d]);
+    out.anchor[d] = spring_k > 0 ? narrow<T>(weighted_anchor[d] / spring_k) : T(0);
   }
-  out.spring_k = T(spring_k);
-  out.linear = T(linear);
-  out.quadratic = T(quadratic);
+  out.spring_k = narrow<T>(spring_k);
+  out.linear = narrow<T>(linear);
+  out.quadratic = narrow<T>(quadratic);
   return out;
-}
-
-// Parameters valid in double can overflow float: refuse them here rather than let inf
-// times a zero inverse mass make NaN out of a kinematic body.
-template <class T>
-void require_representable(const kernels::LocalForces<T>& f) {
-  bool finite = std::isfinite(f.spring_k) && std::isfinite(f.linear) && std::isfinite(f.quadratic);
-  for (int d = 0; d < 3; ++d) {
-    finite = finite && std::isfinite(f.gravity[d]) && std::isfinite(f.anchor[d]) &&
-             std::isfinite(f.constant_force[d]);
-  }
-  for (int c = 0; c < f.central_count; ++c) {
-    finite = finite && std::isfinite(f.mu[c]);
-    for (int d = 0; d < 3; ++d) finite = finite && std::isfinite(f.center[c][d]);
-  }
-  if (!finite) {
-    throw Error(std::string("force parameters overflow ") + (sizeof(T) == 4 ? "float" : "double") +
-                " (their sum, per kind of term, must be finite in the stepper's precision)");
-  }
 }
 
 // The rotational terms; rigid bodies only.
@@ -79,11 +73,14 @@ kernels::RotationalForces<T> resolve_rotational(std::span<const LocalTerm> terms
       drag += t->c;
     } else if (auto* t = std::get_if<PointForce>(&term)) {
       const int p = out.point_count++;
-      for (int d = 0; d < 3; ++d) out.point[p][d] = T(t->point[d]), out.force[p][d] = T(t->force[d]);
+      for (int d = 0; d < 3; ++d) {
+        out.point[p][d] = narrow<T>(t->point[d]);
+        out.force[p][d] = narrow<T>(t->force[d]);
+      }
     }
   }
-  for (int d = 0; d < 3; ++d) out.torque[d] = T(torque[d]);
-  out.angular_drag = T(drag);
+  for (int d = 0; d < 3; ++d) out.torque[d] = narrow<T>(torque[d]);
+  out.angular_drag = narrow<T>(drag);
   return out;
 }
 
@@ -152,16 +149,10 @@ struct Stepper<T>::Impl {
       jobs = options.jobs;
     }
     local = resolve<T>(forces.local_terms());
-    require_representable(local);
     // Particles have no orientation: the point forces' push is for rigid bodies only.
     rigid_local = local;
     local.constant_force = {};
     rotational = resolve_rotational<T>(forces.local_terms());
-    for (int d = 0; d < 3; ++d) {
-      if (!std::isfinite(rotational.torque[d]) || !std::isfinite(rotational.angular_drag)) {
-        throw Error("torque parameters overflow the stepper's precision");
-      }
-    }
     const int quad = local.has_quadratic(), central = local.has_central();
     stage_fn = table->stage[quad][central];
     const int builtin = builtin_index(method);
