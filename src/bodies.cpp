@@ -33,8 +33,21 @@ AlignedArray<T>& AlignedArray<T>::operator=(const AlignedArray& other) {
 
 template <class T>
 void AlignedArray<T>::Free::operator()(T* p) const {
-  ::operator delete[](p, std::align_val_t{kSimdBytes});
+  ::operator delete[](p, std::align_val_t{alignment});
 }
+
+namespace {
+
+// Arrays of a page or more start on a page boundary, so a set's arrays share their offset
+// within a page. Measured on Zen 4 (rk4 double, AVX-512, 100k bodies, 1 thread), arrays at
+// scattered page offsets step 6% slower.
+constexpr std::size_t kPageBytes = 4096;
+
+constexpr std::size_t alignment_for(std::size_t bytes) {
+  return bytes >= kPageBytes ? kPageBytes : kSimdBytes;
+}
+
+}  // namespace
 
 template <class T>
 void AlignedArray<T>::resize(std::size_t count) {
@@ -43,10 +56,11 @@ void AlignedArray<T>::resize(std::size_t count) {
   }
   count = padded_count<T>(count);
   if (count <= size_) return;
-  T* fresh = static_cast<T*>(::operator new[](count * sizeof(T), std::align_val_t{kSimdBytes}));
+  const Free free{alignment_for(count * sizeof(T))};
+  T* fresh = static_cast<T*>(::operator new[](count * sizeof(T), std::align_val_t{free.alignment}));
   std::fill(fresh, fresh + count, T(0));
   if (size_ > 0) std::memcpy(fresh, data_.get(), size_ * sizeof(T));
-  data_.reset(fresh);
+  data_ = std::unique_ptr<T[], Free>(fresh, free);
   size_ = count;
 }
 

@@ -46,6 +46,7 @@ class AlignedArray {
 
  private:
   struct Free {
+    std::size_t alignment = kSimdBytes;
     void operator()(T* p) const;
   };
   std::unique_ptr<T[], Free> data_;
