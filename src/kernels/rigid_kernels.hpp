@@ -143,19 +143,21 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& job, std::size_t begin, std::
   const value_t<V> h = job.h;
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const RigidState<V> s0 = load_rigid<V>(job, i);
+    const Vec<V> xr = anchored(f, s0.x);
     const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
     const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
     Vec<V> kx[S], kv[S], kl[S];
     Quat4<V> kq[S];
     static_for<S>([&](auto s) {
       constexpr Weights row = tab.a[s];
-      const Vec<V> xs = advanced<row>(h, kx, s0.x), vs = advanced<row>(h, kv, s0.v);
+      const Vec<V> xrs = advanced<row>(h, kx, xr), vs = advanced<row>(h, kv, s0.v);
+      const Vec<V> xs = Central ? advanced<row>(h, kx, s0.x) : xrs;
       const Quat4<V> qs = advanced<row>(h, kq, s0.q);
       const Vec<V> ls = advanced<row>(h, kl, s0.l);
       const Rotation<V> r = rotation(qs);
       const Vec<V> omega = angular_velocity(r, inv_inertia, ls);
       kx[s] = vs;
-      kv[s] = accel<Quadratic, Central>(f, body, xs, vs);
+      kv[s] = accel<Quadratic, Central>(f, body, xrs, xs, vs);
       kq[s] = quaternion_rate(omega, qs);
       kl[s] = torque(rf, body, r, omega);
     });
@@ -191,7 +193,7 @@ void rigid_kick_drift(const RigidJob<value_t<V>>& job, std::size_t begin, std::s
         const Rotation<V> r = rotation(s.q);
         const Vec<V> omega = angular_velocity(r, inv_inertia, s.l);
         const Vec<V> tau = torque(rf, body, r, omega);
-        s.v = step_by(wh[k], accel<Quadratic, Central>(f, body, s.x, s.v), s.v);
+        s.v = step_by(wh[k], accel_at<Quadratic, Central>(f, body, s.x, s.v), s.v);
         s.l = step_by(wh[k], tau, s.l);
       } else {
         s.x = step_by(wh[k], s.v, s.x);
