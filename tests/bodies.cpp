@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <limits>
+#include <set>
 
 #include "support.hpp"
 
@@ -24,6 +25,21 @@ TEMPLATE_TEST_CASE("arrays are 64-byte aligned and padded to whole lines", "[bod
       REQUIRE(reinterpret_cast<std::uintptr_t>(a) % 64 == 0);
     }
   }
+}
+
+TEMPLATE_TEST_CASE("a large set's arrays sit at distinct offsets within a page", "[bodies]",
+                   float, double) {
+  ParticleSet<TestType> set = test::cloud<TestType>(100000);
+  ParticleSet<TestType> copy = set;  // copies place their arrays the same way
+  for (const ParticleSet<TestType>* s : {&set, &copy}) {
+    std::set<std::uintptr_t> offsets;
+    for (const TestType* a : {s->px(), s->py(), s->pz(), s->vx(), s->vy(), s->vz(), s->inv_mass()}) {
+      REQUIRE(reinterpret_cast<std::uintptr_t>(a) % 64 == 0);
+      offsets.insert(reinterpret_cast<std::uintptr_t>(a) % 4096);
+    }
+    CHECK(offsets.size() == 7);
+  }
+  CHECK(test::state_hash(copy) == test::state_hash(set));
 }
 
 TEMPLATE_TEST_CASE("padding bodies are inert and stay put", "[bodies]", float, double) {

@@ -47,6 +47,7 @@ class AlignedArray {
  private:
   struct Free {
     std::size_t alignment = kSimdBytes;
+    std::size_t shift = 0;  // elements between the allocation and data()
     void operator()(T* p) const;
   };
   std::unique_ptr<T[], Free> data_;
