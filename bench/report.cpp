@@ -107,7 +107,8 @@ class Report {
     std::printf("ceiling: the same kernel with its memory traffic removed (each cache-resident block "
                 "takes all steps in turn), as ceiling time / step time.\nBW: state bytes read + "
                 "written per second against in-place streaming (x += h v) at the same size and "
-                "thread count.\n");
+                "thread count.\n2 threads at N = 1024: below StepperOptions::inline_below the "
+                "step runs inline on the calling thread, so both columns time the same code.\n");
   }
 
   void methods_table() {
