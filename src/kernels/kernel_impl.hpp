@@ -205,7 +205,7 @@ void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::
   constexpr int S = tab.stages;
   const Forces<V> f(job.forces);
   const value_t<V> h = job.h;
-  const auto& b = job.bodies;
+  const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     prefetch<V>(b, i);
     const Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i), xr = anchored(f, x);
@@ -229,7 +229,7 @@ void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::s
   using T = value_t<V>;
   constexpr KickDriftScheme scheme = M.scheme;
   const Forces<V> f(job.forces);
-  const auto& b = job.bodies;
+  const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
   V wh[kMaxStages];
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * job.h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {

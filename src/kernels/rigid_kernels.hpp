@@ -135,7 +135,8 @@ KINEMA_INLINE void store_rigid(const RigidJob<value_t<V>>& job, std::size_t i, R
 }
 
 template <const Method& M, bool Quadratic, bool Central, class V>
-void rigid_runge_kutta(const RigidJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, std::size_t end) {
+  const RigidJob<value_t<V>> job = shared;  // a copy: stores cannot alias its pointers
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
   const Forces<V> f(job.forces);
@@ -171,7 +172,8 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& job, std::size_t begin, std::
 // current L, by Euler for first-order schemes and by the midpoint rule for second-order
 // ones, so the rotation keeps the scheme's order.
 template <const Method& M, bool Quadratic, bool Central, class V>
-void rigid_kick_drift(const RigidJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+void rigid_kick_drift(const RigidJob<value_t<V>>& shared, std::size_t begin, std::size_t end) {
+  const RigidJob<value_t<V>> job = shared;  // a copy: stores cannot alias its pointers
   using T = value_t<V>;
   constexpr KickDriftScheme scheme = M.scheme;
   const Forces<V> f(job.forces);
