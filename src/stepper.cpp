@@ -342,7 +342,7 @@ struct Stepper<T>::Impl {
   void run_stage(const Phase& p, std::size_t begin, std::size_t end) {
     const int s = accel_slot(p);
     kernels::StageJob<T> job{};
-    job.h = h;
+    job.accel_scale = accel_scale();
     job.inv_mass = bodies->inv_mass();
     job.forces = local;
     auto body = arrays(*bodies);
@@ -361,12 +361,26 @@ struct Stepper<T>::Impl {
       job.x.add(a, first, velocities(j));
       job.v.add(a, first, accelerations(j));
     }
+    set_steps(job.x, job.v, first);
     stage_fn(job, begin, end);
     if (!needs_force_scratch()) return;
     for (auto& f : force) std::fill(f.data() + begin, f.data() + end, T(0));
     const ParticleBlock<T> block = block_view(s, begin, end, phase_time(p));
     for (const auto& callback : forces.callbacks()) callback(block);
     if (!coupled()) add_forces(s, begin, end);
+  }
+
+  // What the stage accelerations are multiplied by: sigma h for Runge-Kutta methods (see
+  // kernels::acceleration_scale), 1 for kicks, which scale by their own weight.
+  T accel_scale() const {
+    if (method.kind != MethodKind::runge_kutta) return 1;
+    return T(kernels::acceleration_scale(method.tableau)) * h;
+  }
+
+  // The step of a position and a velocity combination whose first weight is w.
+  void set_steps(kernels::Combination<T>& x, kernels::Combination<T>& v, double w) const {
+    x.step = T(w) * h;
+    v.step = T(w / kernels::acceleration_scale(method.tableau));
   }
 
   ParticleBlock<T> block_view(int s, std::size_t begin, std::size_t end, double t) {
@@ -385,6 +399,7 @@ struct Stepper<T>::Impl {
     kernels::ForceJob<T> job{};
     for (int d = 0; d < 3; ++d) job.acc[d] = stage_a[s][d].data(), job.force[d] = force[d].data();
     job.inv_mass = bodies->inv_mass();
+    job.scale = accel_scale();
     table->add_forces(job, begin, end);
   }
 
@@ -400,7 +415,6 @@ struct Stepper<T>::Impl {
   void run_finish(std::size_t begin, std::size_t end) {
     auto body = arrays(*bodies);
     kernels::CombineJob<T> x{}, v{};
-    x.h = v.h = h;
     for (int d = 0; d < 3; ++d) {
       x.c.in[d] = x.c.out[d] = body.x[d];
       v.c.in[d] = v.c.out[d] = body.v[d];
@@ -413,6 +427,7 @@ struct Stepper<T>::Impl {
       x.c.add(b, first, velocities(s));
       v.c.add(b, first, accelerations(s));
     }
+    set_steps(x.c, v.c, first);
     // Positions first: they read the stage-0 velocities, which are the bodies' own.
     table->combine(x, begin, end);
     table->combine(v, begin, end);
@@ -422,9 +437,9 @@ struct Stepper<T>::Impl {
     auto body = arrays(*bodies);
     const bool kick = p.kind == PhaseKind::kick;
     kernels::CombineJob<T> job{};
-    job.h = T(method.scheme.ops[p.index].weight) * h;
     for (int d = 0; d < 3; ++d) job.c.in[d] = job.c.out[d] = kick ? body.v[d] : body.x[d];
     job.c.add(1, 1, kick ? accelerations(0) : velocities(0));
+    job.c.step = T(method.scheme.ops[p.index].weight) * h;
     table->combine(job, begin, end);
   }
 };

@@ -44,7 +44,8 @@ KINEMA_INLINE void store3(value_t<V>* const p[3], std::size_t i, const Vec<V>& v
   store_n<3, V>(p, i, v);
 }
 
-// The local force terms, broadcast to lanes once per call.
+// The local force terms, broadcast to lanes once per call, each multiplied by `scale` (the
+// accelerations come out scaled: see acceleration_scale in kernels.hpp).
 template <class V>
 struct Forces {
   using T = value_t<V>;
@@ -52,17 +53,17 @@ struct Forces {
   int central_count;
   V center[4][3], neg_mu[4];
 
-  explicit Forces(const LocalForces<T>& f)
-      : neg_spring_k(-f.spring_k), neg_linear(-f.linear), neg_quadratic(-f.quadratic),
-        central_count(f.central_count) {
+  explicit Forces(const LocalForces<T>& f, T scale = 1)
+      : neg_spring_k(-(f.spring_k * scale)), neg_linear(-(f.linear * scale)),
+        neg_quadratic(-(f.quadratic * scale)), central_count(f.central_count) {
     for (int d = 0; d < 3; ++d) {
-      g[d] = V(f.gravity[d]);
-      force[d] = V(f.constant_force[d]);
+      g[d] = V(f.gravity[d] * scale);
+      force[d] = V(f.constant_force[d] * scale);
       anchor[d] = V(f.anchor[d]);
     }
     for (int c = 0; c < central_count; ++c) {
       for (int d = 0; d < 3; ++d) center[c][d] = V(f.center[c][d]);
-      neg_mu[c] = V(-f.mu[c]);
+      neg_mu[c] = V(-(f.mu[c] * scale));
     }
   }
 };
@@ -135,10 +136,28 @@ KINEMA_INLINE Vec<V> accel_at(const Forces<V>& f, const B& body, const Vec<V>& x
   return accel<Quadratic, Central>(f, body, anchored(f, x), x, v);
 }
 
+// sum + ratio * k. Ratios 1 and 2 (RK4's, Heun's) become adds, which run on the FP add
+// pipes while the FMA pipes are the bottleneck; the bits are those of the fma either way
+// (k + k is exact, so (k + k) + sum rounds once, like fma(2, k, sum)).
+template <class V>
+KINEMA_INLINE V accumulate(value_t<V> ratio, const V& k, const V& sum) {
+  if (ratio == 1) return sum + k;
+  if (ratio == 2) return sum + (k + k);
+  return fused(V(ratio), k, sum);
+}
+
 template <class V, int N>
 KINEMA_INLINE Vec<V, N> step_by(const V& h, const Vec<V, N>& dir, const Vec<V, N>& base) {
   Vec<V, N> out;
   for (int d = 0; d < N; ++d) out.c[d] = fused(h, dir.c[d], base.c[d]);
+  return out;
+}
+
+// base + coef * dir, by `accumulate`: an add where coef is 1.
+template <class V, int N>
+KINEMA_INLINE Vec<V, N> stepped(value_t<V> coef, const Vec<V, N>& dir, const Vec<V, N>& base) {
+  Vec<V, N> out;
+  for (int d = 0; d < N; ++d) out.c[d] = accumulate(coef, dir.c[d], base.c[d]);
   return out;
 }
 
@@ -151,21 +170,12 @@ constexpr int first_nonzero(const Weights& w) {
   return -1;
 }
 
-// sum + ratio * k. Ratios 1 and 2 (RK4's, Heun's) become adds, which run on the FP add
-// pipes while the FMA pipes are the bottleneck; the bits are those of the fma either way
-// (k + k is exact, so (k + k) + sum rounds once, like fma(2, k, sum)).
-template <class V>
-KINEMA_INLINE V accumulate(value_t<V> ratio, const V& k, const V& sum) {
-  if (ratio == 1) return sum + k;
-  if (ratio == 2) return sum + (k + k);
-  return fused(V(ratio), k, sum);
-}
-
 // base + h * sum_j w_j k_j, formed with the first nonzero weight w_f factored out:
-// sum = k_f, then sum = fma(w_j / w_f, k_j, sum) in j order, then fma(w_f h, sum, base).
-// One rounding into base, and one operation per term (RK4's ratios 2, 2, 1 are exact). The
-// staged path's `combined` follows the same rule at run time.
-template <Weights W, class V, int S, int N>
+// sum = k_f, then sum = fma(w_j / w_f, k_j, sum) in j order, then base + (w_f h) sum.
+// One rounding into base, and one operation per term (RK4's ratios 2, 2, 1 are exact).
+// With a Divisor sigma the k are accelerations already scaled by sigma h, and the last
+// step is base + (w_f / sigma) sum. The staged path's `combined` follows the same rule.
+template <Weights W, double Divisor = 0.0, class V, int S, int N>
 KINEMA_INLINE Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Vec<V, N>& base) {
   using T = value_t<V>;
   constexpr int first = first_nonzero(W);
@@ -179,7 +189,11 @@ KINEMA_INLINE Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Ve
         for (int d = 0; d < N; ++d) sum.c[d] = accumulate(ratio, k[j].c[d], sum.c[d]);
       }
     });
-    return step_by(V(T(W[first]) * h), sum, base);
+    if constexpr (Divisor != 0.0) {
+      return stepped(T(W[first] / Divisor), sum, base);  // a constant: no test at run time
+    } else {
+      return step_by(V(T(W[first]) * h), sum, base);
+    }
   }
 }
 
@@ -203,8 +217,9 @@ template <const Method& M, bool Quadratic, bool Central, class V>
 void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
-  const Forces<V> f(job.forces);
+  constexpr double sigma = acceleration_scale(tab);
   const value_t<V> h = job.h;
+  const Forces<V> f(job.forces, value_t<V>(sigma) * h);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     prefetch<V>(b, i);
@@ -213,14 +228,14 @@ void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::
     Vec<V> kx[S], kv[S];  // stage velocities and accelerations
     static_for<S>([&](auto s) {
       constexpr Weights row = tab.a[s];
-      const Vec<V> xrs = advanced<row>(h, kx, xr), vs = advanced<row>(h, kv, v);
+      const Vec<V> xrs = advanced<row>(h, kx, xr), vs = advanced<row, sigma>(h, kv, v);
       // The world position only where a central term needs it (same sum: computed once).
       const Vec<V> xs = Central ? advanced<row>(h, kx, x) : xrs;
       kx[s] = vs;
       kv[s] = accel<Quadratic, Central>(f, body, xrs, xs, vs);
     });
     store3(b.x, i, advanced<tab.b>(h, kx, x));
-    store3(b.v, i, advanced<tab.b>(h, kv, v));
+    store3(b.v, i, advanced<tab.b, sigma>(h, kv, v));
   }
 }
 
@@ -269,24 +284,23 @@ KINEMA_INLINE Vec<V> summed(const Combination<value_t<V>>& c, std::size_t i) {
 }
 
 template <class V>
-KINEMA_INLINE Vec<V> combined(const Combination<value_t<V>>& c, value_t<V> h, std::size_t i) {
+KINEMA_INLINE Vec<V> combined(const Combination<value_t<V>>& c, std::size_t i) {
   const Vec<V> base = load3<V>(c.in, i);
   if (c.terms == 0) return base;
-  return step_by(V(c.scale * h), summed<V>(c, i), base);
+  return stepped(c.step, summed<V>(c, i), base);
 }
 
 template <bool Quadratic, bool Central, class V>
 void stage(const StageJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
-  const Forces<V> f(job.forces);
-  const V x_step(job.x.scale * job.h);
+  const Forces<V> f(job.forces, job.accel_scale);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const Vec<V> x = load3<V>(job.x.in, i);
     Vec<V> xs = x, xr = anchored(f, x);
-    const Vec<V> vs = combined<V>(job.v, job.h, i);
+    const Vec<V> vs = combined<V>(job.v, i);
     if (job.x.terms > 0) {
       const Vec<V> sum = summed<V>(job.x, i);
-      xs = step_by(x_step, sum, x);
-      xr = step_by(x_step, sum, xr);
+      xs = stepped(job.x.step, sum, x);
+      xr = stepped(job.x.step, sum, xr);
       store3(job.x.out, i, xs);
       store3(job.v.out, i, vs);
     }
@@ -298,18 +312,18 @@ void stage(const StageJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
 template <class V>
 void combine(const CombineJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    store3(job.c.out, i, combined<V>(job.c, job.h, i));
+    store3(job.c.out, i, combined<V>(job.c, i));
   }
 }
 
 template <class V>
 void add_forces(const ForceJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    const V inv_mass = load<V>(job.inv_mass + i);
+    const V inv_mass = load<V>(job.inv_mass + i), scale(job.scale);
     const Vec<V> a = load3<V>(job.acc, i), force = load3<V>(job.force, i);
     Vec<V> sum;
     for (int d = 0; d < 3; ++d) {
-      sum.c[d] = pick(inv_mass != V(0), fused(inv_mass, force.c[d], a.c[d]), a.c[d]);
+      sum.c[d] = pick(inv_mass != V(0), fused(inv_mass, scale * force.c[d], a.c[d]), a.c[d]);
     }
     store3(job.acc, i, sum);
   }

@@ -139,9 +139,10 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, st
   const RigidJob<value_t<V>> job = shared;  // a copy: stores cannot alias its pointers
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
-  const Forces<V> f(job.forces);
-  const Rotational<V> rf(job.rotation);
+  constexpr double sigma = acceleration_scale(tab);
   const value_t<V> h = job.h;
+  const Forces<V> f(job.forces, value_t<V>(sigma) * h);
+  const Rotational<V> rf(job.rotation);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const RigidState<V> s0 = load_rigid<V>(job, i);
     const Vec<V> xr = anchored(f, s0.x);
@@ -151,7 +152,7 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, st
     Quat4<V> kq[S];
     static_for<S>([&](auto s) {
       constexpr Weights row = tab.a[s];
-      const Vec<V> xrs = advanced<row>(h, kx, xr), vs = advanced<row>(h, kv, s0.v);
+      const Vec<V> xrs = advanced<row>(h, kx, xr), vs = advanced<row, sigma>(h, kv, s0.v);
       const Vec<V> xs = Central ? advanced<row>(h, kx, s0.x) : xrs;
       const Quat4<V> qs = advanced<row>(h, kq, s0.q);
       const Vec<V> ls = advanced<row>(h, kl, s0.l);
@@ -163,7 +164,7 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, st
       kl[s] = torque(rf, body, r, omega);
     });
     store_rigid<V>(job, i,
-                   {advanced<tab.b>(h, kx, s0.x), advanced<tab.b>(h, kv, s0.v),
+                   {advanced<tab.b>(h, kx, s0.x), advanced<tab.b, sigma>(h, kv, s0.v),
                     advanced<tab.b>(h, kq, s0.q), advanced<tab.b>(h, kl, s0.l)});
   }
 }
