@@ -163,36 +163,44 @@ KINEMA_INLINE Vec<V, N> stepped(value_t<V> coef, const Vec<V, N>& dir, const Vec
 
 using Weights = std::array<double, kMaxStages>;
 
-constexpr int first_nonzero(const Weights& w) {
-  for (int j = 0; j < kMaxStages; ++j) {
-    if (w[j] != 0) return j;
-  }
-  return -1;
+// G_0 + r_1 G_1 + ... for the nonzero weights of W (see TermGroups in kernels.hpp).
+template <Weights W, class V, int S, int N>
+KINEMA_INLINE Vec<V, N> grouped_sum(const Vec<V, N> (&k)[S]) {
+  constexpr TermGroups G = group_terms(W);
+  Vec<V, N> sum = k[G.lead[0]];
+  static_for<G.count>([&](auto g) {
+    constexpr int lead = G.lead[g];
+    Vec<V, N> part = k[lead];
+    static_for<S>([&](auto j) {
+      if constexpr (j > lead && G.group[j] == g) {
+        for (int d = 0; d < N; ++d) part.c[d] = part.c[d] + k[j].c[d];
+      }
+    });
+    if constexpr (g == 0) {
+      sum = part;
+    } else {
+      for (int d = 0; d < N; ++d) sum.c[d] = accumulate(value_t<V>(G.ratio[g]), part.c[d], sum.c[d]);
+    }
+  });
+  return sum;
 }
 
-// base + h * sum_j w_j k_j, formed with the first nonzero weight w_f factored out:
-// sum = k_f, then sum = fma(w_j / w_f, k_j, sum) in j order, then base + (w_f h) sum.
-// One rounding into base, and one operation per term (RK4's ratios 2, 2, 1 are exact).
-// With a Divisor sigma the k are accelerations already scaled by sigma h, and the last
-// step is base + (w_f / sigma) sum. The staged path's `combined` follows the same rule.
+// base + h * sum_j w_j k_j, formed as base + (w_f h) (G_0 + r_1 G_1 + ...): one rounding
+// into base. With a Divisor sigma the k are accelerations already scaled by sigma h, and
+// the last step is base + (w_f / sigma) (...). The staged path's `combined` follows the
+// same rule at run time.
 template <Weights W, double Divisor = 0.0, class V, int S, int N>
 KINEMA_INLINE Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Vec<V, N>& base) {
   using T = value_t<V>;
-  constexpr int first = first_nonzero(W);
-  if constexpr (first < 0) {
+  constexpr TermGroups G = group_terms(W);
+  if constexpr (G.count == 0) {
     return base;
   } else {
-    Vec<V, N> sum = k[first];
-    static_for<S>([&](auto j) {
-      if constexpr (j > first && W[j] != 0) {
-        constexpr T ratio = T(W[j] / W[first]);
-        for (int d = 0; d < N; ++d) sum.c[d] = accumulate(ratio, k[j].c[d], sum.c[d]);
-      }
-    });
+    constexpr double first = W[G.lead[0]];
     if constexpr (Divisor != 0.0) {
-      return stepped(T(W[first] / Divisor), sum, base);  // a constant: no test at run time
+      return stepped(T(first / Divisor), grouped_sum<W>(k), base);  // constant: no run-time test
     } else {
-      return step_by(V(T(W[first]) * h), sum, base);
+      return step_by(V(T(first) * h), grouped_sum<W>(k), base);
     }
   }
 }
@@ -274,11 +282,23 @@ constexpr FusedFn<value_t<V>> fused_kernel() {
 // `advanced` with run-time coefficients, in two parts: the weighted sum of the k, then the
 // step from a base. The same operations in the same order.
 template <class V>
-KINEMA_INLINE Vec<V> summed(const Combination<value_t<V>>& c, std::size_t i) {
-  Vec<V> sum = load3<V>(c.k[0], i);
-  for (int j = 1; j < c.terms; ++j) {
+KINEMA_INLINE Vec<V> group_sum(const Combination<value_t<V>>& c, int g, std::size_t i) {
+  const int lead = c.groups.lead[g];
+  Vec<V> part = load3<V>(c.k[lead], i);
+  for (int j = lead + 1; j < c.terms; ++j) {
+    if (c.groups.group[j] != g) continue;
     const Vec<V> k = load3<V>(c.k[j], i);
-    for (int d = 0; d < 3; ++d) sum.c[d] = accumulate(c.ratio[j], k.c[d], sum.c[d]);
+    for (int d = 0; d < 3; ++d) part.c[d] = part.c[d] + k.c[d];
+  }
+  return part;
+}
+
+template <class V>
+KINEMA_INLINE Vec<V> summed(const Combination<value_t<V>>& c, std::size_t i) {
+  Vec<V> sum = group_sum<V>(c, 0, i);
+  for (int g = 1; g < c.groups.count; ++g) {
+    const Vec<V> part = group_sum<V>(c, g, i);
+    for (int d = 0; d < 3; ++d) sum.c[d] = accumulate(c.ratio[g], part.c[d], sum.c[d]);
   }
   return sum;
 }
