@@ -7,6 +7,7 @@
 #include <limits>
 #include <new>
 #include <string>
+#include <utility>
 
 #include "kinema/error.hpp"
 
@@ -141,6 +142,16 @@ template <class T>
 void ParticleSet<T>::add(std::span<const ParticleDesc<T>> bodies) {
   reserve(size_ + bodies.size());
   for (const auto& b : bodies) add(b);
+}
+
+template <class T>
+ParticleSet<T>& ParticleSet<T>::operator=(ParticleSet&& other) noexcept {
+  if (this == &other) return *this;
+  px_ = std::move(other.px_), py_ = std::move(other.py_), pz_ = std::move(other.pz_);
+  vx_ = std::move(other.vx_), vy_ = std::move(other.vy_), vz_ = std::move(other.vz_);
+  inv_mass_ = std::move(other.inv_mass_);
+  size_ = std::exchange(other.size_, 0);
+  return *this;
 }
 
 template <class T>

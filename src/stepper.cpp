@@ -226,12 +226,31 @@ struct Stepper<T>::Impl {
       throw Error("step size h must be positive and finite, got " + std::to_string(step_size));
     }
     if (step_size != last_h) {
+      h = step_size;
+      check_scaled_forces();
       origin = time();
       steps_since_origin = 0;
       last_h = step_size;
     }
     bodies = &b;
     h = step_size;
+  }
+
+  // Runge-Kutta kernels multiply the force parameters by sigma h (accel_scale): with a large
+  // step, parameters near the type's limit would overflow there.
+  void check_scaled_forces() const {
+    const T scale = accel_scale();
+    bool finite = std::isfinite(local.spring_k * scale) && std::isfinite(local.linear * scale) &&
+                  std::isfinite(local.quadratic * scale);
+    for (int d = 0; d < 3; ++d) {
+      finite = finite && std::isfinite(local.gravity[d] * scale) &&
+               std::isfinite(local.constant_force[d] * scale);
+    }
+    for (int c = 0; c < local.central_count; ++c) finite = finite && std::isfinite(local.mu[c] * scale);
+    if (!finite) {
+      throw Error("step size h = " + std::to_string(h) +
+                  " times the force parameters overflows; take a smaller step");
+    }
   }
 
   void advance(RigidBodySet<T>& b, T step_size, std::uint64_t steps) {

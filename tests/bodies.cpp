@@ -42,6 +42,18 @@ TEMPLATE_TEST_CASE("a large set's arrays sit at distinct offsets within a page",
   CHECK(test::state_hash(copy) == test::state_hash(set));
 }
 
+TEMPLATE_TEST_CASE("a moved-from set is empty and takes new bodies", "[bodies]", float, double) {
+  ParticleSet<TestType> from = test::cloud<TestType>(100);
+  const std::uint64_t hash = test::state_hash(from);
+  ParticleSet<TestType> to = std::move(from);
+  CHECK(test::state_hash(to) == hash);
+  CHECK(from.size() == 0);
+  CHECK(from.padded_size() == 0);
+  from.add({1, 2, 3}, {0, 0, 0}, 1);
+  CHECK(from.size() == 1);
+  CHECK(from.position(0) == Vec3<TestType>{1, 2, 3});
+}
+
 TEMPLATE_TEST_CASE("padding bodies are inert and stay put", "[bodies]", float, double) {
   ParticleSet<TestType> set;
   set.add({1, 2, 3}, {4, 5, 6}, 2);

@@ -87,6 +87,19 @@ TEST_CASE("a user tableau (Ralston's RK2) runs and converges at order 2", "[conv
   CHECK(measured_order(ralston, 0.5) == Approx(2).margin(0.1));
 }
 
+TEST_CASE("a user tableau whose first weight is tiny keeps its other stages exact", "[convergence]") {
+  // Midpoint with a first stage nudged by 1e-39: in float that weight is subnormal, and no
+  // other row may be scaled by it.
+  const Method nudged{"nudged_midpoint", MethodKind::runge_kutta, 2,
+                      {3, {{{}, {1e-39}, {0, 0.5}}}, {0, 0, 1}, {0, 1e-39, 0.5}}, {}};
+  ForceModel<float> f;
+  f.add(Spring{{0, 0, 0}, 4, 0.5});
+  const auto a = test::run_one<float>(nudged, f, {1, 0, 0}, {0, 0, 0}, 1, 0.01f, 100);
+  const auto b = test::run_one<float>(midpoint, f, {1, 0, 0}, {0, 0, 0}, 1, 0.01f, 100);
+  CHECK(test::distance(a.x, b.x) < 1e-6);
+  CHECK(test::distance(a.v, b.v) < 1e-6);
+}
+
 TEST_CASE("a user tableau with an all-zero row reads the bodies' own state there", "[convergence]") {
   // Two stages at t0 (c = 0, a row of zeros), weights 1/2 + 1/2: Euler in disguise.
   const Method twice{"twice_euler", MethodKind::runge_kutta, 1, {2, {{{}, {0}}}, {0.5, 0.5}, {0, 0}}, {}};

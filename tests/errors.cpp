@@ -36,6 +36,20 @@ TEST_CASE("bad force parameters name the term and field", "[errors]") {
                     "coupled force: null term");
 }
 
+TEST_CASE("a step that would scale force parameters past the type's range is refused", "[errors]") {
+  ForceModel<float> f;
+  f.add(Spring{{0, 0, 0}, 2e38, 0});  // finite in float
+  ParticleSet<float> b;
+  b.add({1, 0, 0}, {0, 0, 0}, 1);
+  b.add_kinematic({2, 0, 0});
+  Stepper<float> s(f, rk4, test::serial_options());
+  CHECK_THROWS_WITH(s.step(b, 4.0f), Catch::Contains("overflows; take a smaller step"));
+  CHECK(b.position(0) == Vec3<float>{1, 0, 0});
+  s.step(b, 1e-20f);  // a step small enough works, and the kinematic body stays finite
+  CHECK(all_finite(b));
+  CHECK(b.position(1) == Vec3<float>{2, 0, 0});
+}
+
 TEST_CASE("unknown instruction sets are refused by name", "[errors]") {
   CHECK_THROWS_WITH(isa_by_name("neon"), Catch::StartsWith("unknown isa 'neon'"));
   CHECK(isa_by_name("avx2") == Isa::avx2);

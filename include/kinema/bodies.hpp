@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <memory>
 #include <span>
+#include <utility>
 
 namespace kinema {
 
@@ -30,8 +31,13 @@ class AlignedArray {
   explicit AlignedArray(std::size_t count);
   AlignedArray(const AlignedArray& other);
   AlignedArray& operator=(const AlignedArray& other);
-  AlignedArray(AlignedArray&&) noexcept = default;
-  AlignedArray& operator=(AlignedArray&&) noexcept = default;
+  // A moved-from array is empty.
+  AlignedArray(AlignedArray&& other) noexcept
+      : data_(std::move(other.data_)), size_(std::exchange(other.size_, 0)) {}
+  AlignedArray& operator=(AlignedArray&& other) noexcept {
+    if (this != &other) data_ = std::move(other.data_), size_ = std::exchange(other.size_, 0);
+    return *this;
+  }
 
   T* data() { return data_.get(); }
   const T* data() const { return data_.get(); }
@@ -72,6 +78,11 @@ template <class T>
 class ParticleSet {
  public:
   ParticleSet() = default;
+  ParticleSet(const ParticleSet&) = default;
+  ParticleSet& operator=(const ParticleSet&) = default;
+  // A moved-from set is empty and usable.
+  ParticleSet(ParticleSet&& other) noexcept { *this = std::move(other); }
+  ParticleSet& operator=(ParticleSet&& other) noexcept;
 
   // Adds one body and returns its index. Throws kinema::Error on non-finite values or a
   // mass that is not positive and finite.
