@@ -145,21 +145,22 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, st
   const Rotational<V> rf(job.rotation);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const RigidState<V> s0 = load_rigid<V>(job, i);
-    const Vec<V> xr = anchored(f, s0.x);
     const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
+    const Vec<V> p = linear_part(body, anchored(f, s0.x));
     const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
     Vec<V> kx[S], kv[S], kl[S];
     Quat4<V> kq[S];
     static_for<S>([&](auto s) {
       constexpr Weights row = tab.a[s];
-      const Vec<V> xrs = advanced<row>(h, kx, xr), vs = advanced<row, sigma>(h, kv, s0.v);
-      const Vec<V> xs = Central ? advanced<row>(h, kx, s0.x) : xrs;
+      const Vec<V> vs = advanced<row, sigma>(h, kv, s0.v);
+      const Vec<V> ps = stage_linear_part<row>(h, body, kx, p);
+      const Vec<V> xs = Central ? advanced<row>(h, kx, s0.x) : s0.x;
       const Quat4<V> qs = advanced<row>(h, kq, s0.q);
       const Vec<V> ls = advanced<row>(h, kl, s0.l);
       const Rotation<V> r = rotation(qs);
       const Vec<V> omega = angular_velocity(r, inv_inertia, ls);
       kx[s] = vs;
-      kv[s] = accel<Quadratic, Central>(f, body, xrs, xs, vs);
+      kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
       kq[s] = quaternion_rate(omega, qs);
       kl[s] = torque(rf, body, r, omega);
     });
