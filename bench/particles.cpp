@@ -41,40 +41,41 @@ struct CaseStepper {
   }
 };
 
+// Steps the case's bodies `per_iteration` steps per benchmark iteration: 1 through step()
+// (what a frame loop does), more through advance() (the temporally blocked ceiling).
 template <class T>
-void step_by_step(benchmark::State& state, Case c) {
+void run_steps(benchmark::State& state, const Case& c, std::int64_t per_iteration) {
   const auto n = std::size_t(state.range(0));
   const ParticleSet<T>& initial = cached_particles<T>(n);
   ParticleSet<T> bodies = initial;
   CaseStepper<T> run(c, n);
-  Stepper<T>& stepper = run.stepper;
-  stepper.step(bodies, T(kDt));  // warm: first-touch, scratch
+  auto steps = [&] {
+    if (per_iteration == 1) {
+      run.stepper.step(bodies, T(kDt));
+    } else {
+      run.stepper.advance(bodies, T(kDt), std::uint64_t(per_iteration));
+    }
+  };
+  steps();  // warm: first-touch, scratch
   std::int64_t k = 0;
   for (auto _ : state) {
-    if (++k % kRestoreEvery == 0) restore(bodies, initial);
-    stepper.step(bodies, T(kDt));
+    if (++k % (kRestoreEvery / per_iteration) == 0) restore(bodies, initial);
+    steps();
     benchmark::ClobberMemory();
   }
   benchmark::DoNotOptimize(bodies.px());
   require_finite(state, bodies);
-  report_body_steps(state, double(n), particle_step_bytes<T>());
+  report_body_steps(state, double(n) * double(per_iteration), particle_step_bytes<T>());
+}
+
+template <class T>
+void step_by_step(benchmark::State& state, Case c) {
+  run_steps<T>(state, c, 1);
 }
 
 template <class T>
 void temporally_blocked(benchmark::State& state, Case c) {
-  const auto n = std::size_t(state.range(0));
-  const ParticleSet<T>& initial = cached_particles<T>(n);
-  ParticleSet<T> bodies = initial;
-  CaseStepper<T> run(c, n);
-  Stepper<T>& stepper = run.stepper;
-  std::int64_t k = 0;
-  for (auto _ : state) {
-    if (++k % (kRestoreEvery / kCeilingSteps) == 0) restore(bodies, initial);
-    stepper.advance(bodies, T(kDt), kCeilingSteps);
-    benchmark::ClobberMemory();
-  }
-  require_finite(state, bodies);
-  report_body_steps(state, double(n) * kCeilingSteps, particle_step_bytes<T>());
+  run_steps<T>(state, c, kCeilingSteps);
 }
 
 std::string name(const char* kind, const Case& c, const char* precision) {

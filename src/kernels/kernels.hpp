@@ -135,7 +135,8 @@ struct Combination {
   // Appends the term w k (w != 0).
   void add(double w, double first_w, const std::array<const T*, 3>& field) {
     groups.add(terms, w, first_w);
-    for (int g = 0; g < groups.count; ++g) ratio[g] = T(groups.ratio[g]);
+    const int g = groups.group[terms];
+    ratio[g] = T(groups.ratio[g]);
     for (int d = 0; d < 3; ++d) k[terms][d] = field[d];
     ++terms;
   }
