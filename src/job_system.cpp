@@ -1,7 +1,10 @@
 #include "kinema/job_system.hpp"
 
 #include <algorithm>
-#include <thread>
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <limits>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -20,10 +23,89 @@ JobHandle SerialJobSystem::enqueue(RangeTask task, std::size_t item_count, std::
   return nullptr;
 }
 
+namespace {
+
+// The chunks [front, back) of one worker's slice not yet claimed, packed in one word so that
+// a single compare-exchange claims from either end.
+struct alignas(64) Slice {
+  std::atomic<std::uint64_t> chunks{0};
+
+  void reset(std::uint32_t front, std::uint32_t back) {
+    chunks.store(std::uint64_t(back) << 32 | front, std::memory_order_relaxed);
+  }
+
+  // The owner claims from the front, a thief from the back. Relaxed is enough: the chunks
+  // were published by the arena's entry and are joined by its exit.
+  bool claim(bool from_front, std::uint32_t& chunk) {
+    std::uint64_t seen = chunks.load(std::memory_order_relaxed);
+    std::uint64_t next;
+    do {
+      const auto front = std::uint32_t(seen), back = std::uint32_t(seen >> 32);
+      if (front >= back) return false;
+      chunk = from_front ? front : back - 1;
+      next = from_front ? seen + 1 : (seen & 0xffffffffu) | std::uint64_t(back - 1) << 32;
+    } while (!chunks.compare_exchange_weak(seen, next, std::memory_order_relaxed));
+    return true;
+  }
+};
+
+constexpr unsigned kMaxSlices = 64;
+
+// One call's items, cut into one contiguous slice per worker. A worker runs its own slice,
+// so across steps it meets the same bodies, in its own cache; it starts at the end where it
+// stopped last call (the direction alternates), where the freshest of them are. Then it
+// takes chunks from the far ends of the other slices, so a worker that joins late or is
+// slowed down costs only the chunks it did not get to.
+class SliceSchedule {
+ public:
+  SliceSchedule(RangeTask task, std::size_t items, std::size_t min_range, unsigned workers,
+                bool forward, void* context)
+      : task_(task),
+        context_(context),
+        items_(items),
+        forward_(forward),
+        slices_(std::min(workers, kMaxSlices)) {
+    constexpr std::size_t kMaxChunks = std::numeric_limits<std::uint32_t>::max();
+    grain_ = std::max({std::size_t(1), min_range, (items + kMaxChunks - 1) / kMaxChunks});
+    const std::size_t chunks = (items + grain_ - 1) / grain_;
+    for (unsigned s = 0; s < slices_; ++s) {
+      slice_[s].reset(std::uint32_t(chunks * s / slices_), std::uint32_t(chunks * (s + 1) / slices_));
+    }
+  }
+
+  unsigned slices() const { return slices_; }
+
+  void run(unsigned worker) {
+    const unsigned home = worker % slices_;
+    drain(slice_[home], forward_, worker);
+    for (unsigned k = 1; k < slices_; ++k) drain(slice_[(home + k) % slices_], !forward_, worker);
+  }
+
+ private:
+  void drain(Slice& slice, bool from_front, unsigned worker) {
+    std::uint32_t chunk;
+    while (slice.claim(from_front, chunk)) {
+      const std::size_t begin = std::size_t(chunk) * grain_;
+      task_(begin, std::min(items_, begin + grain_), worker, context_);
+    }
+  }
+
+  RangeTask task_;
+  void* context_;
+  std::size_t items_;
+  std::size_t grain_;
+  bool forward_;
+  unsigned slices_;
+  std::array<Slice, kMaxSlices> slice_;
+};
+
+}  // namespace
+
 struct TbbJobSystem::Arena {
   explicit Arena(unsigned threads) : arena(int(threads)), threads(threads) {}
   tbb::task_arena arena;
   unsigned threads;
+  std::atomic<unsigned> calls{0};
 };
 
 TbbJobSystem::TbbJobSystem(unsigned threads)
@@ -35,14 +117,17 @@ unsigned TbbJobSystem::worker_count() const { return arena_->threads; }
 
 JobHandle TbbJobSystem::enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
                                 void* context) {
-  // Runs to completion here: the calling thread joins the arena's workers. Blocks cost the
-  // same, so a static split (about one chunk per thread) has the least overhead.
+  if (item_count == 0) return nullptr;
+  // Runs to completion here: the calling thread joins the arena's workers, each of which
+  // starts on its own slice (one task per slice; a task a busy thread picks up finds its
+  // slice already taken and only helps).
+  const bool forward = arena_->calls.fetch_add(1, std::memory_order_relaxed) % 2 == 0;
+  SliceSchedule schedule(task, item_count, min_range, arena_->threads, forward, context);
   arena_->arena.execute([&] {
     tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, item_count, std::max<std::size_t>(1, min_range)),
-        [&](const tbb::blocked_range<std::size_t>& r) {
-          const int worker = tbb::this_task_arena::current_thread_index();
-          task(r.begin(), r.end(), unsigned(std::max(0, worker)), context);
+        tbb::blocked_range<unsigned>(0, schedule.slices(), 1),
+        [&](const tbb::blocked_range<unsigned>&) {
+          schedule.run(unsigned(std::max(0, tbb::this_task_arena::current_thread_index())));
         },
         tbb::static_partitioner{});
   });

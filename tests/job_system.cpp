@@ -13,23 +13,27 @@ namespace {
 
 struct Tally {
   std::vector<std::atomic<int>> hits;
+  std::size_t min_range;
   std::atomic<unsigned> max_worker{0};
-  explicit Tally(std::size_t n) : hits(n) {}
+  std::atomic<int> short_ranges{0};  // shorter than min_range and not at the end
+  Tally(std::size_t n, std::size_t min) : hits(n), min_range(min) {}
 };
 
 void count_range(std::size_t begin, std::size_t end, unsigned worker, void* context) {
   auto& t = *static_cast<Tally*>(context);
   for (std::size_t i = begin; i < end; ++i) ++t.hits[i];
+  if (end - begin < t.min_range && end != t.hits.size()) ++t.short_ranges;
   unsigned seen = t.max_worker.load();
   while (worker > seen && !t.max_worker.compare_exchange_weak(seen, worker)) {
   }
 }
 
 void check_each_item_once(JobSystem& jobs, std::size_t items, std::size_t min_range) {
-  Tally tally(items);
+  Tally tally(items, min_range);
   jobs.wait(jobs.enqueue(&count_range, items, min_range, &tally));
   for (std::size_t i = 0; i < items; ++i) REQUIRE(tally.hits[i] == 1);
   CHECK(tally.max_worker < jobs.worker_count());
+  CHECK(tally.short_ranges == 0);
 }
 
 }  // namespace
@@ -47,6 +51,22 @@ TEST_CASE("job systems run every item exactly once", "[job_system]") {
   }
   test::ThreadPool pool(2);
   check_each_item_once(pool, 1000, 4);
+}
+
+// TbbJobSystem gives each worker a slice, alternates the direction from call to call and
+// lets idle workers take from the others' slices: every split must still cover each item once.
+TEST_CASE("the TBB job system covers every item for any count, grain and thread count",
+          "[job_system]") {
+  for (unsigned threads : {1u, 2u, 3u, 8u}) {
+    TbbJobSystem tbb(threads);
+    for (std::size_t items : {1u, 2u, 5u, 97u, 98u, 1000u}) {
+      for (std::size_t min_range : {1u, 3u, 64u}) {
+        INFO(threads << " threads, " << items << " items, min_range " << min_range);
+        check_each_item_once(tbb, items, min_range);  // one direction
+        check_each_item_once(tbb, items, min_range);  // and the other
+      }
+    }
+  }
 }
 
 TEST_CASE("the default TBB job system uses every hardware thread", "[job_system]") {
