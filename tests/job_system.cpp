@@ -53,8 +53,9 @@ TEST_CASE("job systems run every item exactly once", "[job_system]") {
   check_each_item_once(pool, 1000, 4);
 }
 
-// TbbJobSystem gives each worker a slice, alternates the direction from call to call and
-// lets idle workers take from the others' slices: every split must still cover each item once.
+// TbbJobSystem gives each worker a slice and lets idle workers take from the backs of the
+// others' slices: every split must still cover each item once (with 8 threads on fewer
+// cores, most slices are taken by thieves).
 TEST_CASE("the TBB job system covers every item for any count, grain and thread count",
           "[job_system]") {
   for (unsigned threads : {1u, 2u, 3u, 8u}) {
@@ -62,8 +63,7 @@ TEST_CASE("the TBB job system covers every item for any count, grain and thread 
     for (std::size_t items : {1u, 2u, 5u, 97u, 98u, 1000u}) {
       for (std::size_t min_range : {1u, 3u, 64u}) {
         INFO(threads << " threads, " << items << " items, min_range " << min_range);
-        check_each_item_once(tbb, items, min_range);  // one direction
-        check_each_item_once(tbb, items, min_range);  // and the other
+        check_each_item_once(tbb, items, min_range);
       }
     }
   }
