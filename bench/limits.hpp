@@ -25,4 +25,7 @@ LimitKernels limits_avx512();
 LimitKernels limits_avx2();
 LimitKernels limits_sse2();
 
+// The versions for the best instruction set this CPU has.
+const LimitKernels& best_limits();
+
 }  // namespace kinema::bench

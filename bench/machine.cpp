@@ -11,7 +11,6 @@
 #include "limits.hpp"
 
 namespace kinema::bench {
-namespace {
 
 const LimitKernels& best_limits() {
   static const LimitKernels k = isa_available(Isa::avx512) ? limits_avx512()
@@ -19,6 +18,8 @@ const LimitKernels& best_limits() {
                                                            : limits_sse2();
   return k;
 }
+
+namespace {
 
 struct StreamArrays {
   AlignedArray<float> x, v;

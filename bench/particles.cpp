@@ -1,12 +1,17 @@
 // kinema's particle paths: fused step by step (what a frame loop does), the same kernel with
 // its memory traffic removed (advance(): each cache-sized block takes every step in turn),
-// and the staged path, per method, precision, size, thread count and instruction set.
+// and the staged path, per method, precision, size, thread count and instruction set; and
+// the 2-thread scaling measured in pairs, each pair checked against pure FMA work.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <chrono>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "bench_scene.hpp"
+#include "limits.hpp"
 
 namespace kinema::bench {
 namespace {
@@ -78,9 +83,99 @@ void temporally_blocked(benchmark::State& state, Case c) {
   run_steps<T>(state, c, kCeilingSteps);
 }
 
+// Two items of pure FMA work through a job system: how much faster two workers run them than
+// one, right now.
+struct FmaProbe {
+  long rounds;
+  float sink[2] = {};
+};
+
+void fma_items(std::size_t begin, std::size_t end, unsigned, void* context) {
+  auto& probe = *static_cast<FmaProbe*>(context);
+  double flops = 0;
+  for (std::size_t i = begin; i < end; ++i) probe.sink[i] = best_limits().peak_float(probe.rounds, &flops);
+}
+
+template <class Run>
+double seconds(Run&& run) {
+  const auto start = std::chrono::steady_clock::now();
+  run();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Items of about 100 us; the 2-thread run follows a shorter one, so that a worker that fell
+// asleep during the 1-thread run is awake (waking one takes tens of microseconds here).
+double fma_scaling(JobSystem& two) {
+  FmaProbe probe{1 << 15};
+  FmaProbe wake{1 << 14};
+  SerialJobSystem one;
+  const double t1 = seconds([&] { one.wait(one.enqueue(&fma_items, 2, 1, &probe)); });
+  two.wait(two.enqueue(&fma_items, 2, 1, &wake));
+  const double t2 = seconds([&] { two.wait(two.enqueue(&fma_items, 2, 1, &probe)); });
+  benchmark::DoNotOptimize(probe.sink);
+  benchmark::DoNotOptimize(wake.sink);
+  return t1 / t2;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+// Each iteration is one round: an FMA probe, a few steps on 1 thread, the same steps on 2,
+// another probe. Separate 1- and 2-thread runs are minutes apart and a shared host drifts
+// in between; a pair is seconds of the same conditions. Pairs count only when both probes
+// scaled 1.8x (two real cores at that moment). Reports the median ratio of those pairs, and
+// of all pairs.
+template <class T>
+void paired_scaling(benchmark::State& state, Case c) {
+  const auto n = std::size_t(state.range(0));
+  const int steps = std::max(1, int(2'000'000 / n));  // 2-4 ms on one thread
+  ParticleSet<T> bodies[2] = {cached_particles<T>(n), cached_particles<T>(n)};
+  c.threads = 1;
+  CaseStepper<T> one(c, n);
+  c.threads = 2;
+  CaseStepper<T> two(c, n);
+  CaseStepper<T>* runs[2] = {&one, &two};
+  std::vector<double> fma, pairs, all_pairs;
+  for (auto _ : state) {
+    double t[2];
+    const double before = fma_scaling(two.jobs);
+    for (int r = 0; r < 2; ++r) {
+      restore(bodies[r], cached_particles<T>(n));
+      runs[r]->stepper.step(bodies[r], T(kDt));  // warm
+      t[r] = seconds([&] {
+        for (int k = 0; k < steps; ++k) runs[r]->stepper.step(bodies[r], T(kDt));
+      });
+    }
+    const double after = fma_scaling(two.jobs);
+    fma.push_back(std::min(before, after));
+    all_pairs.push_back(t[0] / t[1]);
+    if (fma.back() >= 1.8) pairs.push_back(all_pairs.back());
+  }
+  require_finite(state, bodies[1]);
+  if (!pairs.empty()) state.counters["scaling"] = median(pairs);
+  state.counters["scaling_all_pairs"] = median(all_pairs);
+  state.counters["fma_scaling"] = median(fma);
+  state.counters["pairs_kept"] = double(pairs.size());
+  state.counters["pairs"] = double(fma.size());
+}
+
 std::string name(const char* kind, const Case& c, const char* precision) {
   return std::string(kind) + "/" + std::string(c.method->name) + "/" + precision + "/" +
          std::string(isa_name(c.isa)) + "/threads:" + std::to_string(c.threads);
+}
+
+void register_paired_scaling(Isa isa) {
+  const Case paired{&rk4, isa, 2, false};
+  const std::string suffix = std::string("/") + std::string(isa_name(isa));
+  for (auto* b : {benchmark::RegisterBenchmark(("scaling/rk4/float" + suffix).c_str(),
+                                               paired_scaling<float>, paired),
+                  benchmark::RegisterBenchmark(("scaling/rk4/double" + suffix).c_str(),
+                                               paired_scaling<double>, paired)}) {
+    b->Arg(100000)->Unit(benchmark::kMillisecond);
+  }
 }
 
 void register_all() {
@@ -111,6 +206,7 @@ void register_all() {
         st->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
       }
     }
+    if (isa == best_isa()) register_paired_scaling(isa);
     if (isa == Isa::scalar || isa == Isa::sse2) {
       // What exact fused multiply-adds cost where there is no FMA unit.
       const Case r{&rk4, isa, 1, false, true};

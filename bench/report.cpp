@@ -5,8 +5,11 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <optional>
+#include <regex>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -156,6 +159,26 @@ class Report {
     }
   }
 
+  void paired_scaling() {
+    bool header = false;
+    for (const std::string p : {"float", "double"}) {
+      const std::string run = "scaling/rk4/" + p + "/" + isa_ + "/100000";
+      const auto kept = find(runs_, run, "scaling");
+      const auto all = find(runs_, run, "scaling_all_pairs");
+      if (!all) continue;
+      if (!header) {
+        std::printf("\n2 threads against 1, fused RK4, N = 100000, %s, measured in pairs (a few steps on 1 "
+                    "thread, then on 2; pure FMA work probed before and after each pair)\n", isa_.c_str());
+        header = true;
+      }
+      std::printf("%-6s %s in the pairs where FMA work scaled 1.8x or more (%s of %s pairs; FMA %s), "
+                  "%s over all pairs\n",
+                  p.c_str(), cell(median(kept), "%.2fx").c_str(), value(run, "pairs_kept", "%.0f").c_str(),
+                  value(run, "pairs", "%.0f").c_str(), value(run, "fma_scaling", "%.2fx").c_str(),
+                  cell(median(all), "%.2fx").c_str());
+    }
+  }
+
   void limits() {
     std::printf("\nMachine limits in this run: FMA peak float %s / %s GFLOP/s (1 / 2 threads), double %s / %s;"
                 "\n  in-place streaming at 4M bodies' state: %s / %s GB/s\n",
@@ -183,9 +206,9 @@ class Report {
   }
 
  private:
-  std::string value(const std::string& run, const char* counter) const {
+  std::string value(const std::string& run, const char* counter, const char* format = "%.1f") const {
     const auto f = find(runs_, run, counter);
-    return f ? cell(f->median, "%.1f") : "-";
+    return f ? cell(f->median, format) : "-";
   }
 
   void rk4_row(const std::string& p, long n) {
@@ -220,6 +243,16 @@ class Report {
   std::vector<double> cvs_;
 };
 
+// Google Benchmark writes a counter's undefined statistics (the cv of a counter that is 0 in
+// every repetition) as NaN or inf, which JSON has no word for: read those as null.
+json parse_benchmark_json(const char* path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open the file");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  static const std::regex undefined(R"(:\s*-?(NaN|nan|inf|Infinity)\b)");
+  return json::parse(std::regex_replace(text, undefined, ": null"));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -229,8 +262,7 @@ int main(int argc, char** argv) {
   }
   json doc;
   try {
-    std::ifstream in(argv[1]);
-    doc = json::parse(in);
+    doc = parse_benchmark_json(argv[1]);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "kinema_bench_report: %s: %s\n", argv[1], e.what());
     return 1;
@@ -251,6 +283,7 @@ int main(int argc, char** argv) {
   report.methods_table();
   report.isa_table();
   report.rigid_table();
+  report.paired_scaling();
   report.limits();
   report.noise();
   if (csv != nullptr) std::fclose(csv);
