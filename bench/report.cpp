@@ -193,6 +193,15 @@ class Report {
                   s >= 1.8 ? "two real cores, the 2-thread figures are trustworthy"
                            : "below 1.8x, the vCPUs share a core now; discard the 2-thread figures");
     }
+    // The probes of the paired runs sample the whole run, not one moment of it.
+    for (const std::string p : {"float", "double"}) {
+      const std::string run = "scaling/rk4/" + p + "/" + isa_ + "/100000";
+      const auto fma = find(runs_, run, "fma_scaling");
+      if (fma && fma->median < 1.8) {
+        std::printf("but the FMA probes of the %s pairs scaled only %.2fx (median): the vCPUs shared a core "
+                    "for much of the run; trust only the paired figures\n", p.c_str(), fma->median);
+      }
+    }
   }
 
   void noise() const {
