@@ -32,8 +32,8 @@ struct alignas(64) Slice {
     chunks.store(std::uint64_t(back) << 32 | front, std::memory_order_relaxed);
   }
 
-  // The owner claims from the front, a thief from the back. Relaxed is enough: the chunks
-  // were published by the arena's entry and are joined by its exit.
+  // The owner claims from the front, a thief from the back. Relaxed is enough: the slices
+  // are published by spawning the workers' tasks and joined by waiting for them.
   bool claim(bool from_front, std::uint32_t& chunk) {
     std::uint64_t seen = chunks.load(std::memory_order_relaxed);
     std::uint64_t next;
@@ -53,8 +53,8 @@ constexpr unsigned kMaxSlices = 64;
 // front to back, so across steps it meets the same bodies, in its own cache. Then it takes
 // chunks from the backs of the other slices, so a worker that joins late or is slowed down
 // costs only the chunks it did not get to. (Alternating the direction from call to call,
-// to start on the freshest bodies, made steps at 1M bodies slower: prefetchers favour
-// ascending addresses.)
+// to start on the freshest bodies, made steps at 1M bodies slower: the kernels prefetch
+// ahead in address order, so a backward walk starts each block cold.)
 class SliceSchedule {
  public:
   SliceSchedule(RangeTask task, std::size_t items, std::size_t min_range, unsigned workers,
@@ -64,8 +64,8 @@ class SliceSchedule {
         items_(items),
         slices_(std::min(workers, kMaxSlices)) {
     constexpr std::size_t kMaxChunks = std::numeric_limits<std::uint32_t>::max();
-    grain_ = std::max({std::size_t(1), min_range, (items + kMaxChunks - 1) / kMaxChunks});
-    const std::size_t chunks = (items + grain_ - 1) / grain_;
+    grain_ = std::max({min_range, items / kMaxChunks + 1});  // so that chunks fit 32 bits
+    const std::size_t chunks = items / grain_ + (items % grain_ != 0);
     for (unsigned s = 0; s < slices_; ++s) {
       slice_[s].reset(std::uint32_t(chunks * s / slices_), std::uint32_t(chunks * (s + 1) / slices_));
     }
