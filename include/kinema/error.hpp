@@ -3,6 +3,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace kinema {
 
@@ -10,5 +11,10 @@ class Error : public std::runtime_error {
  public:
   explicit Error(const std::string& message) : std::runtime_error(message) {}
 };
+
+// `text` made safe for one line of a terminal or of a script's string literal: control
+// characters (C0, DEL, C1) and bytes that are not valid UTF-8 become \xNN (C1 code points
+// \u00NN); every other character, Unicode included, stays as it is.
+std::string printable(std::string_view text);
 
 }  // namespace kinema

@@ -110,7 +110,7 @@ void write_charts(const fs::path& dir, const Scene& scene, const std::vector<con
   ev += "set title " + gnuplot_quote("Error against step size: " + scene.name) + "\n";
   ev += "set xlabel 'step size h (s)'\nset ylabel 'error at the end'\nplot ";
   for (std::size_t i = 0; i < methods.size(); ++i) {
-    const std::string data = gnuplot_quote((dir / ("points_" + std::string(methods[i]->name) + ".dat")).string());
+    const std::string data = gnuplot_quote("points_" + std::string(methods[i]->name) + ".dat");
     const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
     const std::string lc = " lc " + std::to_string(i + 1);
     wp += data + " using 5:6 with linespoints pt 7" + lc + " title " +

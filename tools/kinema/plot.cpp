@@ -4,7 +4,10 @@
 #include <spawn.h>
 #include <sys/wait.h>
 
+#include <cerrno>
+#include <cstring>
 #include <fstream>
+#include <sstream>
 
 #include "kinema/error.hpp"
 
@@ -12,11 +15,9 @@ extern char** environ;
 
 namespace kinema::cli {
 
-// Single quotes: gnuplot expands neither backquotes nor escapes inside them; a quote
-// inside is written twice.
 std::string gnuplot_quote(const std::string& text) {
   std::string out = "'";
-  for (char c : text) {
+  for (char c : printable(text)) {
     out += c;
     if (c == '\'') out += '\'';
   }
@@ -25,20 +26,35 @@ std::string gnuplot_quote(const std::string& text) {
 
 namespace {
 
-// Runs gnuplot on `script` without a shell, its stderr into `log`. True on success.
-bool run_gnuplot(const std::string& script, const std::string& log) {
+// Runs gnuplot on the script `name` inside `dir`, without a shell, its stderr into `log`
+// (a bare name in `dir` too). Returns the exit status, or -errno when it could not start.
+int run_gnuplot(const std::filesystem::path& dir, const std::string& script,
+                const std::string& log) {
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addchdir_np(&actions, dir.c_str());
   posix_spawn_file_actions_addopen(&actions, 2, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  std::string program = "gnuplot";
-  char* argv[] = {program.data(), const_cast<char*>(script.c_str()), nullptr};
+  std::string program = "gnuplot", argument = "./" + script;
+  char* argv[] = {program.data(), argument.data(), nullptr};
   pid_t pid = 0;
   const int spawned = posix_spawnp(&pid, "gnuplot", &actions, nullptr, argv, environ);
   posix_spawn_file_actions_destroy(&actions);
-  if (spawned != 0) return false;
+  if (spawned != 0) return -spawned;
   int status = 0;
-  if (waitpid(pid, &status, 0) < 0) return false;
-  return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return -errno;
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+// The last line gnuplot wrote that says what went wrong.
+std::string last_complaint(const std::filesystem::path& log) {
+  std::ifstream in(log);
+  std::string line, last;
+  while (std::getline(in, line)) {
+    if (line.find_first_not_of(" \t^") != std::string::npos) last = line;
+  }
+  return printable(last);
 }
 
 }  // namespace
@@ -49,18 +65,24 @@ void render_chart(const std::filesystem::path& dir, const std::string& name,
   {
     std::ofstream out(gp);
     out << "set terminal svg size 900,600 dynamic noenhanced font 'sans,13' background rgb 'white'\n"
-        << "set output " << gnuplot_quote((dir / (name + ".svg")).string()) << "\n"
+        << "set output '" << name << ".svg'\n"
         << script << "\n"
         << "set terminal pngcairo size 900,600 noenhanced font 'sans,11'\n"
-        << "set output " << gnuplot_quote((dir / (name + ".png")).string()) << "\n"
+        << "set output '" << name << ".png'\n"
         << "replot\n";
-    if (!out) throw Error(gp.string() + ": cannot write the chart script");
+    out.close();
+    if (!out) throw Error(printable(gp.string()) + ": cannot write the chart script");
   }
-  if (!run_gnuplot(gp.string(), (dir / (name + ".log")).string())) {
-    throw Error("gnuplot failed on " + gp.string() + " (is gnuplot-nox installed? see " +
-                (dir / (name + ".log")).string() + ")");
+  const std::string log = name + ".log";
+  const int status = run_gnuplot(dir, name + ".gp", log);
+  if (status == -ENOENT) throw Error("gnuplot is not installed (Debian: gnuplot-nox)");
+  if (status < 0) {
+    throw Error("cannot start gnuplot in " + printable(dir.string()) + ": " + std::strerror(-status));
   }
-  std::filesystem::remove(dir / (name + ".log"));
+  if (status != 0) {
+    throw Error("gnuplot failed on " + printable(gp.string()) + ": " + last_complaint(dir / log));
+  }
+  std::filesystem::remove(dir / log);
 }
 
 }  // namespace kinema::cli

@@ -111,9 +111,9 @@ void write_regions(const fs::path& dir, const std::vector<const Method*>& method
     char label[96];
     std::snprintf(label, sizeof label, "%s: measured limit h lambda = %.4g", name.c_str(), limit);
     plot += std::string(first ? "" : ", \\\n  ") +
-            gnuplot_quote((dir / ("region_" + name + ".dat")).string()) + " with points pt 7 ps 0.15" + lc +
+            gnuplot_quote("region_" + name + ".dat") + " with points pt 7 ps 0.15" + lc +
             " title " + gnuplot_quote("|R| = 1, " + name) + ", " +
-            gnuplot_quote((dir / ("threshold_" + name + ".dat")).string()) + " with points pt 2 ps 2 lw 2" + lc +
+            gnuplot_quote("threshold_" + name + ".dat") + " with points pt 2 ps 2 lw 2" + lc +
             " title " + gnuplot_quote(label);
     first = false;
   }
@@ -179,9 +179,9 @@ int stability_scene(const StabilityOptions& o) {
     }
     const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
     const std::string lc = " lc " + std::to_string(i + 1);
-    energy_plot += gnuplot_quote((dir / ("energy_" + name + ".dat")).string()) + " with lines lw 2" +
+    energy_plot += gnuplot_quote("energy_" + name + ".dat") + " with lines lw 2" +
                    lc + " title " + gnuplot_quote(name) + sep;
-    path_plot += gnuplot_quote((dir / ("path_" + name + ".dat")).string()) + " with lines" + lc +
+    path_plot += gnuplot_quote("path_" + name + ".dat") + " with lines" + lc +
                  " title " + gnuplot_quote(name) + sep;
     progress.update(double(i + 1) / double(methods.size() + 1));
   }
