@@ -6,7 +6,7 @@
 #include <initializer_list>
 #include <numbers>
 #include <random>
-#include <sstream>
+#include <set>
 
 #include <nlohmann/json.hpp>
 
@@ -28,7 +28,7 @@ struct Node {
   std::string_view origin;
 
   [[noreturn]] void fail(const std::string& what) const {
-    throw Error(std::string(origin) + ": " + (path.empty() ? "(top level)" : path) + ": " + what);
+    throw Error(printable(std::string(origin) + ": " + (path.empty() ? "(top level)" : path) + ": " + what));
   }
   Node child(const std::string& key) const {
     return {value.at(key), path.empty() ? key : path + "." + key, origin};
@@ -66,7 +66,10 @@ struct Node {
     return x;
   }
   std::uint64_t count(bool allow_zero) const {
-    if (!value.is_number_integer() || value.get<std::int64_t>() < (allow_zero ? 0 : 1)) {
+    // Integers past 2^63 parse as unsigned, negative ones as signed.
+    const bool negative = value.is_number_integer() && !value.is_number_unsigned() &&
+                          value.get<std::int64_t>() < 0;
+    if (!value.is_number_integer() || negative || (!allow_zero && value.get<std::uint64_t>() == 0)) {
       fail(allow_zero ? "expected an integer >= 0" : "expected an integer >= 1");
     }
     return value.get<std::uint64_t>();
@@ -186,9 +189,12 @@ Vec3<double> parse_inertia(const Node& n, Quat<double>& out_turn) {
 Quat<double> parse_orientation(const Node& n) {
   if (!n.value.is_array() || n.value.size() != 4) n.fail("expected [w, x, y, z]");
   Quat<double> q;
+  double largest = 0;
+  for (std::size_t k = 0; k < 4; ++k) q[k] = n.element(k).number(), largest = std::max(largest, std::abs(q[k]));
+  if (!(largest > 0)) n.fail("the quaternion is zero");
+  // Scaled by the largest component first, so neither tiny nor huge ones under- or overflow.
   double norm = 0;
-  for (std::size_t k = 0; k < 4; ++k) q[k] = n.element(k).number(), norm += q[k] * q[k];
-  if (!(norm > 0)) n.fail("the quaternion is zero");
+  for (double& c : q) c /= largest, norm += c * c;
   for (double& c : q) c /= std::sqrt(norm);
   return q;
 }
@@ -268,15 +274,98 @@ double uniform(std::mt19937_64& rng, double lo, double hi) {
   return lo + (hi - lo) * u;
 }
 
+// Follows the parser through the document, so that an error the JSON library finds (a
+// number out of range, a syntax error) can name its path, and refuses duplicate keys (the
+// library would keep the last one silently).
+class PathTracker {
+ public:
+  struct Duplicate {};  // thrown on a repeated key; path() then names it
+
+  bool operator()(int, json::parse_event_t event, const json& parsed) {
+    switch (event) {
+      case json::parse_event_t::object_start:
+      case json::parse_event_t::array_start:
+        begin_element();
+        frames_.push_back({event == json::parse_event_t::object_start, {}, 0, {}});
+        break;
+      case json::parse_event_t::object_end:
+      case json::parse_event_t::array_end:
+        frames_.pop_back();
+        end_value();
+        break;
+      case json::parse_event_t::key:
+        take_key(parsed.get<std::string>());
+        break;
+      case json::parse_event_t::value:
+        begin_element();
+        end_value();
+        break;
+    }
+    return true;
+  }
+
+  // Where the parser is: "forces[2].k", or "" at the top level. In the innermost array the
+  // parser is reading the element after the last one it finished.
+  std::string path() const {
+    std::string out;
+    for (std::size_t i = 0; i < frames_.size(); ++i) {
+      const Frame& f = frames_[i];
+      const bool innermost = i + 1 == frames_.size();
+      if (f.object && f.has_key) out += (out.empty() ? "" : ".") + f.key;
+      if (!f.object) out += "[" + std::to_string(innermost ? f.elements : f.elements - 1) + "]";
+    }
+    return out;
+  }
+
+ private:
+  struct Frame {
+    bool object;
+    std::string key;
+    std::size_t elements;
+    std::set<std::string> keys;
+    bool has_key = false;
+  };
+
+  void begin_element() {
+    if (!frames_.empty() && !frames_.back().object) ++frames_.back().elements;
+  }
+  // A key names the path only until its value is complete.
+  void end_value() {
+    if (!frames_.empty() && frames_.back().object) frames_.back().has_key = false;
+  }
+  void take_key(std::string key) {
+    Frame& f = frames_.back();
+    f.key = key, f.has_key = true;
+    if (!f.keys.insert(std::move(key)).second) throw Duplicate{};
+  }
+
+  std::vector<Frame> frames_;
+};
+
+[[noreturn]] void invalid_json(std::string_view origin, const std::string& path,
+                               const std::string& what) {
+  throw Error(printable(std::string(origin) + ": " + (path.empty() ? "" : path + ": ") +
+                       "invalid JSON: " + what));
+}
+
+json parse_json(std::string_view text, std::string_view origin) {
+  if (const std::size_t nul = text.find('\0'); nul != std::string_view::npos) {
+    invalid_json(origin, "", "a NUL byte at offset " + std::to_string(nul));
+  }
+  PathTracker tracker;
+  try {
+    return json::parse(text.begin(), text.end(), std::ref(tracker));
+  } catch (const PathTracker::Duplicate&) {
+    Node{json(), tracker.path(), origin}.fail("duplicate key (each key may appear once)");
+  } catch (const json::exception& e) {
+    invalid_json(origin, tracker.path(), e.what());
+  }
+}
+
 }  // namespace
 
 Scene parse_scene(std::string_view text, std::string_view origin) {
-  json doc;
-  try {
-    doc = json::parse(text.begin(), text.end());
-  } catch (const json::parse_error& e) {
-    throw Error(std::string(origin) + ": invalid JSON: " + e.what());
-  }
+  const json doc = parse_json(text, origin);
   const Node root{doc, "", origin};
   root.expect_object({"name", "precision", "method", "tolerance", "dt", "steps", "particles",
                       "rigid_bodies", "generate", "forces"});
@@ -334,11 +423,23 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
 }
 
 Scene load_scene(const std::filesystem::path& path) {
+  const std::string name = printable(path.string());
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) throw Error(name + ": is a directory, not a scene file");
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path.string() + ": cannot open the file");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse_scene(text.str(), path.string());
+  if (!in) throw Error(name + ": cannot open the file");
+  // In chunks, up to one byte past the cap: a device or a pipe may never end.
+  std::string text;
+  char chunk[1 << 16];
+  while (text.size() <= kMaxSceneBytes && in.read(chunk, sizeof chunk).gcount() > 0) {
+    text.append(chunk, std::size_t(in.gcount()));
+  }
+  if (in.bad()) throw Error(name + ": cannot read the file");
+  if (text.size() > kMaxSceneBytes) {
+    throw Error(name + ": larger than " + std::to_string(kMaxSceneBytes >> 20) +
+                " MiB, the limit for a scene file (use \"generate\" for large scenes)");
+  }
+  return parse_scene(text, path.string());
 }
 
 namespace {

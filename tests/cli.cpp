@@ -223,7 +223,7 @@ TEST_CASE("every malformed scene or option fails with one clear line", "[cli][er
       {"run " + good + " --precision half", "--precision"},
       {"run " + good + " --method bogus", "unknown method 'bogus'"},
       {"run " + good + " --steps many", "--steps"},
-      {"run " + good + " --steps -1", "--steps: must not be negative"},
+      {"run " + good + " --steps -1", "--steps: expected a decimal integer"},
       {"chart " + good + " --dts 1e-30", "takes more than 2^32 steps"},
       {"fly " + good, "subcommand"},
       {"", "A subcommand is required"},

@@ -64,6 +64,9 @@ struct Scene {
 // Parses a scene; throws kinema::Error naming the JSON path of the first problem,
 // e.g. "scene.json: forces[2].k: expected a number >= 0".
 Scene parse_scene(std::string_view json_text, std::string_view origin = "scene");
+// Files past kMaxSceneBytes are refused: the parsed document takes several times its text,
+// and a device such as /dev/zero never ends.
+inline constexpr std::size_t kMaxSceneBytes = std::size_t(256) << 20;
 Scene load_scene(const std::filesystem::path& path);
 
 // Listed bodies first, then generated ones (of the matching kind).

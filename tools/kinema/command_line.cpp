@@ -1,0 +1,149 @@
+#include "command_line.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include <CLI/CLI.hpp>
+
+#include "kinema/error.hpp"
+
+namespace kinema::cli {
+namespace {
+
+// CLI11 2.1 reads integers in base 0 ("010" is 8, "0x10" is 16) and wraps unsigned ones
+// ("-1" is 2^64 - 1): counts are checked here as decimal text and handed on without
+// leading zeros, so CLI11 reads the number the user wrote.
+CLI::Validator decimal(std::uint64_t least, std::uint64_t most) {
+  const std::string range = std::to_string(least) + " to " + std::to_string(most);
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        std::uint64_t value = 0;
+        const char* end = text.data() + text.size();
+        const auto [stop, error] = std::from_chars(text.data(), end, value, 10);
+        if (text.empty() || stop != end || text.find_first_not_of("0123456789") != std::string::npos) {
+          return "expected a decimal integer from " + range + ", got '" + printable(text) + "'";
+        }
+        if (error != std::errc() || value < least || value > most) {
+          return "expected " + range + ", got " + printable(text);
+        }
+        text = std::to_string(value);
+        return {};
+      },
+      "INT in [" + range + "]");
+}
+
+// A finite number > 0 in decimal notation (CLI11's PositiveNumber lets inf through and
+// prints its range with 309 digits).
+const CLI::Validator positive_finite(
+    [](std::string& text) -> std::string {
+      double value = 0;
+      const char* end = text.data() + text.size();
+      const auto [stop, error] = std::from_chars(text.data(), end, value);
+      if (text.empty() || stop != end || error != std::errc() || !std::isfinite(value) ||
+          !(value > 0)) {
+        return "expected a finite number > 0, got '" + printable(text) + "'";
+      }
+      return {};
+    },
+    "NUMBER > 0");
+
+const CLI::Validator not_empty(
+    [](std::string& text) -> std::string { return text.empty() ? "expected a path, got ''" : ""; },
+    "PATH");
+
+constexpr std::uint64_t kMaxCount = std::numeric_limits<std::uint64_t>::max();
+
+void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string& precision) {
+  CLI::App* run = app.add_subcommand("run", "Step a scene and print a summary of the run");
+  run->add_option("scene", o.scene_path, "Scene file (JSON); see tools/scenes/")
+      ->required()
+      ->check(not_empty);
+  run->add_option("--method", o.method,
+                  "Override the scene's method: euler, midpoint, heun, rk4, symplectic_euler, "
+                  "velocity_verlet, or auto (the cheapest method and step for --tolerance)");
+  run->add_option("--tolerance", o.tolerance,
+                  "With auto: the largest error allowed at the end (length units; radians for "
+                  "rigid orientations)")
+      ->check(positive_finite);
+  run->add_option("--dt", o.dt, "Override the step size (seconds, > 0)")->check(positive_finite);
+  run->add_option("--steps", o.steps, "Override the number of steps")->transform(decimal(0, kMaxCount));
+  run->add_option("--precision", precision, "Override the scene's precision: float or double")
+      ->check(CLI::IsMember({"float", "double"}));
+  run->add_option("--out", o.trajectory_path,
+                  "Write the trajectory as CSV (step,t,body,px,py,pz,vx,vy,vz)")
+      ->check(not_empty);
+  run->add_option("--every", o.every, "With --out: write every K steps (plus step 0 and the last)")
+      ->transform(decimal(1, kMaxCount));
+  run->add_option("--summary", o.summary_path, "Write the run's summary as JSON")->check(not_empty);
+  run->add_option("--isa", isa, "Instruction set: auto, scalar, sse2, avx2, avx512")
+      ->check(CLI::IsMember({"auto", "scalar", "sse2", "avx2", "avx512"}));
+  run->add_option("--threads", o.threads,
+                  "Worker threads (0: all cores; more than the machine has are not started)")
+      ->transform(decimal(0, 1024));
+  run->add_flag("--relaxed-fma", o.relaxed_fma,
+                "Scalar and SSE2 paths: multiply then add instead of an exact fused "
+                "multiply-add (faster without an FMA unit; results then differ in the last "
+                "bits from the AVX2 and AVX-512 paths)");
+  run->add_flag("--quiet,-q", o.quiet, "Print nothing on success");
+}
+
+void add_chart_command(CLI::App& app, ChartOptions& o) {
+  CLI::App* chart = app.add_subcommand(
+      "chart", "Work-precision diagram: error against cost for each method over a range of steps");
+  chart->add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
+  chart->add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  chart->add_option("--dts", o.dts, "Step sizes (default: the scene's dt times 1/8 .. 16)")
+      ->delimiter(',')
+      ->check(positive_finite);
+  chart->add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
+      ->check(positive_finite);
+  chart->add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
+      ->transform(decimal(1, std::uint64_t(1) << 32));
+  chart->add_option("--repeat", o.repeat, "Timed runs per point; the fastest counts (default 3)")
+      ->transform(decimal(1, 100));
+  chart->add_option("--out", o.out, "Output folder (default: charts)")->check(not_empty);
+  chart->add_flag("--quiet,-q", o.quiet, "No progress bar and no summary");
+}
+
+void add_stability_command(CLI::App& app, StabilityOptions& o) {
+  CLI::App* s = app.add_subcommand(
+      "stability", "Energy error against time, trajectories, and the stability regions");
+  s->add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
+  s->add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  s->add_option("--dt", o.dt, "Step size (default: the scene's)")->check(positive_finite);
+  s->add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
+      ->check(positive_finite);
+  s->add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
+      ->transform(decimal(1, std::uint64_t(1) << 32));
+  s->add_option("--out", o.out, "Output folder (default: stability)")->check(not_empty);
+  s->add_flag("--quiet,-q", o.quiet, "No progress bar and no summary");
+}
+
+}  // namespace
+
+std::unique_ptr<CLI::App> make_app(CommandLine& out) {
+  auto app = std::make_unique<CLI::App>(
+      "kinema: a data-oriented time integrator for particles and rigid bodies.\n"
+      "Runs a scene (JSON) with a chosen method and reports speed and energy.");
+  app->require_subcommand(1);
+  add_run_command(*app, out.run, out.isa, out.precision);
+  add_chart_command(*app, out.chart);
+  add_stability_command(*app, out.stability);
+  return app;
+}
+
+void parse_command_line(CLI::App& app, CommandLine& out, int argc, const char* const* argv) {
+  app.parse(argc, argv);
+  for (const char* name : {"run", "chart", "stability"}) {
+    if (app.got_subcommand(name)) out.command = name;
+  }
+  // Both were checked against their lists while parsing.
+  out.run.isa = isa_by_name(out.isa);
+  if (!out.precision.empty()) {
+    out.run.precision = out.precision == "float" ? Precision::single : Precision::dual;
+  }
+}
+
+}  // namespace kinema::cli

@@ -1,0 +1,32 @@
+#pragma once
+// The command line: subcommands, options and their checks, apart from running them (so
+// the parser can be tested and fuzzed alone).
+
+#include <memory>
+#include <string>
+
+#include "chart_command.hpp"
+#include "run_command.hpp"
+
+namespace CLI {
+class App;
+}
+
+namespace kinema::cli {
+
+struct CommandLine {
+  std::string command;  // "run", "chart" or "stability"
+  RunOptions run;
+  ChartOptions chart;
+  StabilityOptions stability;
+  std::string isa = "auto", precision;  // as typed; parse_command_line sets run.isa, run.precision
+};
+
+// An App that fills `out` when it parses (its options point into `out`).
+std::unique_ptr<CLI::App> make_app(CommandLine& out);
+
+// Parses argv into `out`. Throws CLI::ParseError for a usage error or a request for help
+// (get_exit_code() 0); kinema::Error never.
+void parse_command_line(CLI::App& app, CommandLine& out, int argc, const char* const* argv);
+
+}  // namespace kinema::cli
