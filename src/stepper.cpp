@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "kernels/kernels.hpp"
@@ -15,10 +16,23 @@ namespace {
 // can overflow float: refuse them here rather than let inf times a zero inverse mass make
 // NaN out of a kinematic body.
 template <class T>
+std::string type_name() {
+  return sizeof(T) == 4 ? "float" : "double";
+}
+
+// The shortest text that reads back as the same value (no "0.000000" for 1e-50).
+template <class T>
+std::string shortest(T x) {
+  char text[32];
+  std::snprintf(text, sizeof text, sizeof(T) == 4 ? "%.9g" : "%.17g", double(x));
+  return text;
+}
+
+template <class T>
 T narrow(double x) {
   const T out = T(x);
   if (!std::isfinite(out)) {
-    throw Error(std::string("force parameters overflow ") + (sizeof(T) == 4 ? "float" : "double") +
+    throw Error("force parameters overflow " + type_name<T>() +
                 " (their sum, per kind of term, must be finite in the stepper's precision)");
   }
   return out;
@@ -221,13 +235,18 @@ struct Stepper<T>::Impl {
 
   double time() const { return origin + double(steps_since_origin) * double(last_h); }
 
-  void start_steps(ParticleSet<T>& b, T step_size) {
+  void check_step_size(T step_size) const {
     if (!(std::isfinite(step_size) && step_size > 0)) {
-      throw Error("step size h must be positive and finite, got " + std::to_string(step_size));
+      throw Error("step size h must be positive and finite in " + type_name<T>() + ", got " +
+                  shortest(step_size));
     }
+    check_scaled_forces(step_size);
+  }
+
+  void start_steps(ParticleSet<T>& b, T step_size) {
+    check_step_size(step_size);
     if (step_size != last_h) {
       h = step_size;
-      check_scaled_forces();
       origin = time();
       steps_since_origin = 0;
       last_h = step_size;
@@ -238,8 +257,8 @@ struct Stepper<T>::Impl {
 
   // Runge-Kutta kernels multiply the force parameters by sigma h (accel_scale): with a large
   // step, parameters near the type's limit would overflow there.
-  void check_scaled_forces() const {
-    const T scale = accel_scale();
+  void check_scaled_forces(T step_size) const {
+    const T scale = accel_scale(step_size);
     bool finite = std::isfinite(local.spring_k * scale) && std::isfinite(local.linear * scale) &&
                   std::isfinite(local.quadratic * scale);
     for (int d = 0; d < 3; ++d) {
@@ -248,8 +267,8 @@ struct Stepper<T>::Impl {
     }
     for (int c = 0; c < local.central_count; ++c) finite = finite && std::isfinite(local.mu[c] * scale);
     if (!finite) {
-      throw Error("step size h = " + std::to_string(h) +
-                  " times the force parameters overflows; take a smaller step");
+      throw Error("step size h = " + shortest(step_size) +
+                  " times the force parameters overflows " + type_name<T>() + "; take a smaller step");
     }
   }
 
@@ -391,10 +410,11 @@ struct Stepper<T>::Impl {
 
   // What the stage accelerations are multiplied by: sigma h for Runge-Kutta methods (see
   // kernels::acceleration_scale), 1 for kicks, which scale by their own weight.
-  T accel_scale() const {
+  T accel_scale(T step_size) const {
     if (method.kind != MethodKind::runge_kutta) return 1;
-    return T(kernels::acceleration_scale(method.tableau)) * h;
+    return T(kernels::acceleration_scale(method.tableau)) * step_size;
   }
+  T accel_scale() const { return accel_scale(h); }
 
   // The step of a position and a velocity combination whose first weight is w.
   void set_steps(kernels::Combination<T>& x, kernels::Combination<T>& v, double w) const {
@@ -492,6 +512,11 @@ void Stepper<T>::step(RigidBodySet<T>& io_bodies, T h) {
 template <class T>
 void Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps) {
   impl_->advance(io_bodies, h, steps);
+}
+
+template <class T>
+void Stepper<T>::check_step_size(T h) const {
+  impl_->check_step_size(h);
 }
 
 template <class T>

@@ -43,7 +43,10 @@ TEST_CASE("a step that would scale force parameters past the type's range is ref
   b.add({1, 0, 0}, {0, 0, 0}, 1);
   b.add_kinematic({2, 0, 0});
   Stepper<float> s(f, rk4, test::serial_options());
-  CHECK_THROWS_WITH(s.step(b, 4.0f), Catch::Contains("overflows; take a smaller step"));
+  CHECK_THROWS_WITH(s.check_step_size(4.0f), Catch::Contains("overflows float; take a smaller step"));
+  CHECK_THROWS_WITH(s.step(b, 4.0f), Catch::Contains("overflows float; take a smaller step"));
+  CHECK_THROWS_WITH(s.check_step_size(1e-50f), Catch::Contains("got 0"));  // underflowed to 0
+  CHECK_NOTHROW(s.check_step_size(1e-20f));
   CHECK(b.position(0) == Vec3<float>{1, 0, 0});
   s.step(b, 1e-20f);  // a step small enough works, and the kinematic body stays finite
   CHECK(all_finite(b));

@@ -69,7 +69,20 @@ Scene parse_scene(std::string_view json_text, std::string_view origin = "scene")
 inline constexpr std::size_t kMaxSceneBytes = std::size_t(256) << 20;
 Scene load_scene(const std::filesystem::path& path);
 
-// Listed bodies first, then generated ones (of the matching kind).
+// Refuses, before a single body is built, what the scene's text already shows cannot run
+// in precision T: a force term out of range or in excess, force parameters or dt (alone or
+// times the forces) beyond T, and generated bodies whose mass, inertia or boxes T cannot
+// hold or whose state would not fit in this machine's memory. Throws kinema::Error naming
+// the JSON path.
+template <class T>
+void check_scene(const Scene& scene);
+
+// Bytes of body state (every SoA array, padding aside) the scene's bodies take in T.
+template <class T>
+double state_bytes(const Scene& scene);
+
+// Listed bodies first, then generated ones (of the matching kind). Generated bodies are
+// checked as check_scene does before the first is made.
 template <class T>
 ParticleSet<T> make_particles(const Scene& scene);
 template <class T>
