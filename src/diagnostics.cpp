@@ -1,6 +1,7 @@
 #include "kinema/diagnostics.hpp"
 
 #include <cmath>
+#include <utility>
 
 namespace kinema {
 namespace {
@@ -68,14 +69,35 @@ Vec3<double> momentum(const ParticleSet<T>& b) {
   return p;
 }
 
+namespace {
+
+// Narrows `first` to an earlier body when `a` has a non-finite entry before it.
 template <class T>
-bool all_finite(const ParticleSet<T>& b) {
-  for (const T* a : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()}) {
-    for (std::size_t i = 0; i < b.size(); ++i) {
-      if (!std::isfinite(a[i])) return false;
+void find_non_finite(const T* a, std::size_t count, const char* field,
+                     std::optional<NonFinite>& first) {
+  const std::size_t end = first ? first->body : count;
+  for (std::size_t i = 0; i < end; ++i) {
+    if (!std::isfinite(a[i])) {
+      first = NonFinite{i, field};
+      return;
     }
   }
-  return true;
+}
+
+}  // namespace
+
+template <class T>
+std::optional<NonFinite> first_non_finite(const ParticleSet<T>& b) {
+  std::optional<NonFinite> first;
+  const std::pair<const T*, const char*> fields[] = {{b.px(), "px"}, {b.py(), "py"}, {b.pz(), "pz"},
+                                                     {b.vx(), "vx"}, {b.vy(), "vy"}, {b.vz(), "vz"}};
+  for (const auto& [a, name] : fields) find_non_finite(a, b.size(), name, first);
+  return first;
+}
+
+template <class T>
+bool all_finite(const ParticleSet<T>& b) {
+  return !first_non_finite(b);
 }
 
 template <class T>
@@ -119,15 +141,16 @@ Vec3<double> angular_momentum(const RigidBodySet<T>& b) {
 }
 
 template <class T>
+std::optional<NonFinite> first_non_finite(const RigidBodySet<T>& b) {
+  std::optional<NonFinite> first = first_non_finite(b.centers());
+  const char* names[] = {"qw", "qx", "qy", "qz", "lx", "ly", "lz"};
+  for (int k = 0; k < 7; ++k) find_non_finite(k < 4 ? b.q(k) : b.l(k - 4), b.size(), names[k], first);
+  return first;
+}
+
+template <class T>
 bool all_finite(const RigidBodySet<T>& b) {
-  if (!all_finite(b.centers())) return false;
-  for (int k = 0; k < 7; ++k) {
-    const T* a = k < 4 ? b.q(k) : b.l(k - 4);
-    for (std::size_t i = 0; i < b.size(); ++i) {
-      if (!std::isfinite(a[i])) return false;
-    }
-  }
-  return true;
+  return !first_non_finite(b);
 }
 
 #define KINEMA_INSTANTIATE(T)                                                  \
@@ -136,11 +159,13 @@ bool all_finite(const RigidBodySet<T>& b) {
   template EnergyReport energy(const ParticleSet<T>&, const ForceModel<T>&);   \
   template Vec3<double> momentum(const ParticleSet<T>&);                       \
   template bool all_finite(const ParticleSet<T>&);                             \
+  template std::optional<NonFinite> first_non_finite(const ParticleSet<T>&);   \
   template Vec3<double> angular_momentum(const ParticleSet<T>&);               \
   template double rotational_energy(const RigidBodySet<T>&);                   \
   template EnergyReport energy(const RigidBodySet<T>&, const ForceModel<T>&);  \
   template Vec3<double> angular_momentum(const RigidBodySet<T>&);              \
-  template bool all_finite(const RigidBodySet<T>&);
+  template bool all_finite(const RigidBodySet<T>&);                            \
+  template std::optional<NonFinite> first_non_finite(const RigidBodySet<T>&);
 KINEMA_INSTANTIATE(float)
 KINEMA_INSTANTIATE(double)
 #undef KINEMA_INSTANTIATE

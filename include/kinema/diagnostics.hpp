@@ -3,6 +3,8 @@
 // order, so they are reproducible. Bodies with inv_mass 0 have no defined mass and are left
 // out of energies and momentum.
 
+#include <optional>
+
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
 
@@ -29,6 +31,15 @@ Vec3<double> angular_momentum(const ParticleSet<T>& bodies);
 template <class T>
 bool all_finite(const ParticleSet<T>& bodies);
 
+// The lowest-numbered body with a non-finite component, and that component ("px" .. "vz",
+// for rigid bodies also "qw" .. "qz", "lx" .. "lz"); nullopt when all are finite.
+struct NonFinite {
+  std::size_t body;
+  const char* field;
+};
+template <class T>
+std::optional<NonFinite> first_non_finite(const ParticleSet<T>& bodies);
+
 // Rigid bodies: kinetic energy includes the rotational part 1/2 L . omega; the potential
 // is that of the centres of mass; angular momentum adds each body's spin L to m x cross v.
 template <class T>
@@ -40,5 +51,7 @@ Vec3<double> angular_momentum(const RigidBodySet<T>& bodies);
 // True when every position, velocity, orientation and angular momentum is finite.
 template <class T>
 bool all_finite(const RigidBodySet<T>& bodies);
+template <class T>
+std::optional<NonFinite> first_non_finite(const RigidBodySet<T>& bodies);
 
 }  // namespace kinema
