@@ -1,12 +1,37 @@
-// The kinema command-line program.
+// The kinema command-line program. Exit codes: 0 success, 1 an error (bad scene, failed
+// write), 2 a usage error, 3 the state stopped being finite, 128 + N stopped by signal N
+// (SIGINT 130, SIGTERM 143) at a safe point with every output complete to there.
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
 #include "command_line.hpp"
+#include "interrupt.hpp"
 #include "kinema/error.hpp"
+
+namespace {
+
+int run(const kinema::cli::CommandLine& line) {
+  using namespace kinema::cli;
+  try {
+    if (line.command == "chart") return chart_scene(line.chart);
+    if (line.command == "stability") return stability_scene(line.stability);
+    return run_scene(line.run);
+  } catch (const Interrupted& e) {
+    std::fprintf(stderr, "kinema: stopped by %s; the outputs written so far are incomplete\n",
+                 signal_name(e.signal).c_str());
+    return 128 + e.signal;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "kinema: error: %s\n", kinema::printable(e.what()).c_str());
+  }
+  return 1;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   kinema::cli::CommandLine line;
@@ -18,12 +43,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "kinema: error: %s (see kinema --help)\n", kinema::printable(e.what()).c_str());
     return 2;
   }
-  try {
-    if (line.command == "chart") return kinema::cli::chart_scene(line.chart);
-    if (line.command == "stability") return kinema::cli::stability_scene(line.stability);
-    return kinema::cli::run_scene(line.run);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "kinema: error: %s\n", kinema::printable(e.what()).c_str());
+  kinema::cli::catch_interrupts();
+  const int code = run(line);
+  // What stdout holds is part of the result: a full disk there is an error, not a success.
+  if (std::fflush(stdout) != 0 || std::ferror(stdout) != 0) {
+    std::fprintf(stderr, "kinema: error: standard output: cannot write: %s\n", std::strerror(errno));
+    return code == 0 ? 1 : code;
   }
-  return 1;
+  return code;
 }

@@ -1,15 +1,16 @@
 #include "run_command.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
-#include <iostream>
+#include <cstring>
 #include <optional>
 
 #include <nlohmann/json.hpp>
 
+#include "interrupt.hpp"
 #include "kinema/kinema.hpp"
 #include "progress.hpp"
 #include "trajectory.hpp"
@@ -18,6 +19,11 @@ namespace kinema::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Body-steps per advance call when nothing else bounds it: long enough that the
+// finiteness check after each call costs little, short enough (tens of milliseconds) that
+// a signal is answered at once.
+constexpr double kBodyStepsPerChunk = double(1 << 26);
 
 }  // namespace
 
@@ -28,10 +34,18 @@ Scene scene_with_overrides(const RunOptions& o) {
   if (o.dt) scene.dt = *o.dt;
   if (o.steps) scene.steps = *o.steps;
   if (o.precision) scene.precision = *o.precision;
-  if (!(std::isfinite(scene.dt) && scene.dt > 0)) throw Error("dt must be positive and finite");
   if (scene.method != "auto") method_by_name(scene.method);
   if (scene.method == "auto" && !scene.tolerance) {
     throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
+  }
+  try {
+    if (scene.precision == Precision::single) {
+      check_scene<float>(scene);
+    } else {
+      check_scene<double>(scene);
+    }
+  } catch (const Error& e) {
+    throw Error(o.scene_path + ": " + e.what());
   }
   return scene;
 }
@@ -39,11 +53,72 @@ Scene scene_with_overrides(const RunOptions& o) {
 namespace {
 
 void print_summary(const nlohmann::ordered_json& summary) {
-  std::printf("kinema run: %s\n", summary["scene"].get<std::string>().c_str());
+  std::printf("kinema run: %s\n", printable(summary["scene"].get<std::string>()).c_str());
   for (const auto& [key, value] : summary.items()) {
     if (key == "scene") continue;
     std::printf("  %-22s %s\n", key.c_str(),
-                value.is_string() ? value.get<std::string>().c_str() : value.dump().c_str());
+                printable(value.is_string() ? value.get<std::string>() : value.dump()).c_str());
+  }
+}
+
+// The summary file, opened before the run so that a path that cannot be written is
+// refused before any work, and checked when it is closed (a full disk shows only there).
+class SummaryFile {
+ public:
+  explicit SummaryFile(const std::string& path) : path_(path) {
+    if (path.empty()) return;
+    file_ = std::fopen(path.c_str(), "w");
+    if (file_ == nullptr) fail();
+  }
+  ~SummaryFile() {
+    if (file_ != nullptr) std::fclose(file_);
+  }
+  void write(const nlohmann::ordered_json& summary) {
+    if (file_ == nullptr) return;
+    const std::string text = summary.dump(2) + "\n";
+    const bool written = std::fwrite(text.data(), 1, text.size(), file_) == text.size() &&
+                         std::fflush(file_) == 0;
+    const int error = errno;
+    const bool closed = std::fclose(file_) == 0;
+    file_ = nullptr;
+    if (!written || !closed) fail(written ? errno : error);
+  }
+
+ private:
+  [[noreturn]] void fail(int error = errno) const {
+    throw Error(printable(path_) + ": cannot write the summary: " + std::strerror(error));
+  }
+  std::string path_;
+  std::FILE* file_ = nullptr;
+};
+
+// Where the state first stopped being finite.
+struct BlowUp {
+  std::uint64_t step;
+  double t;
+  std::size_t body;  // particles first, then rigid bodies
+  std::string field;
+};
+
+template <class T>
+std::optional<NonFinite> first_non_finite(const World<T>& world) {
+  if (auto p = kinema::first_non_finite(world.particles)) return p;
+  if (auto r = kinema::first_non_finite(world.rigid)) {
+    return NonFinite{world.particles.size() + r->body, r->field};
+  }
+  return std::nullopt;
+}
+
+// Steps a fresh world to `from` (the last step known finite), then one step at a time:
+// results do not depend on how steps are grouped, so this finds the very step.
+template <class T>
+BlowUp find_blow_up(const Scene& scene, const StepperOptions& options, std::uint64_t from) {
+  World<T> world(scene, method_by_name(scene.method), options);
+  const T h = T(scene.dt);
+  if (from > 0) world.advance(h, from);
+  for (std::uint64_t step = from + 1;; ++step) {
+    world.advance(h, 1);
+    if (auto bad = first_non_finite(world)) return {step, world.time(), bad->body, bad->field};
   }
 }
 
@@ -56,8 +131,10 @@ template <class T>
 int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
   StepperOptions options;
   options.isa = o.isa;
-  options.threads = o.threads;
+  // More threads than the machine has would only wait on each other (and make oneTBB warn).
+  options.threads = std::min(o.threads == 0 ? hardware_threads() : o.threads, hardware_threads());
   options.relaxed_fma = o.relaxed_fma;
+  SummaryFile summary_file(o.summary_path);
   World<T> world = [&] {
     try {
       return World<T>(scene, method_by_name(scene.method), options);
@@ -65,48 +142,46 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
       throw Error(o.scene_path + ": " + e.what());
     }
   }();
+  std::optional<TrajectoryWriter> trajectory;
+  if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
   const T h = T(scene.dt);
   const double initial_energy = world.total_energy();
+  const std::size_t bodies = world.particles.size() + world.rigid.size();
 
-  double wall_seconds = 0;  // stepping only: loading and writing are not timed
+  // In chunks, for the progress bar, the trajectory and signals: the same bits as one call.
+  const std::uint64_t chunk = std::min<std::uint64_t>(
+      std::max<std::uint64_t>(1, scene.steps / 100),
+      std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1)))));
+  double wall_seconds = 0;  // stepping only: loading, checking and writing are not timed
   Progress progress("kinema run", o.quiet);
   std::uint64_t done = 0;
-  auto timed_advance = [&](std::uint64_t n) {
+  if (trajectory) trajectory->write(0, world.time(), world.particles, world.rigid);
+  std::optional<BlowUp> blow_up;
+  while (done < scene.steps && interrupting_signal() == 0) {
+    std::uint64_t n = std::min(chunk, scene.steps - done);
+    if (trajectory) n = std::min(n, o.every - done % o.every);  // stop at each K-th step
     const auto start = Clock::now();
     world.advance(h, n);
     wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
+    const bool finite = world.finite();
+    if (!finite) blow_up = find_blow_up<T>(scene, options, done);
     done += n;
-    progress.update(double(done) / double(std::max<std::uint64_t>(1, scene.steps)));
-  };
-  if (o.trajectory_path.empty()) {
-    // In chunks, for the progress bar: the same bits as one call.
-    const std::uint64_t chunk = std::max<std::uint64_t>(1, scene.steps / 100);
-    for (std::uint64_t step = 0; step < scene.steps; step += chunk) {
-      timed_advance(std::min(chunk, scene.steps - step));
+    progress.update(double(done) / double(scene.steps));
+    if (trajectory && (done % o.every == 0 || done == scene.steps || !finite)) {
+      trajectory->write(done, world.time(), world.particles, world.rigid);
     }
-  } else {
-    TrajectoryWriter trajectory(o.trajectory_path, world.rigid.size() > 0);
-    trajectory.write(0, world.time(), world.particles, world.rigid);
-    for (std::uint64_t step = 0; step < scene.steps;) {
-      const std::uint64_t n = std::min(o.every, scene.steps - step);
-      timed_advance(n);
-      step += n;
-      trajectory.write(step, world.time(), world.particles, world.rigid);
-    }
-    trajectory.close();
+    if (!finite) break;
   }
-
+  if (trajectory) trajectory->close();
   progress.finish();
-  const bool finite = world.finite();
-  const std::size_t bodies = world.particles.size() + world.rigid.size();
-  const double body_steps = double(bodies) * double(scene.steps);
+
   const Stepper<T>& stepper = world.stepper();
   nlohmann::ordered_json summary;
   summary["scene"] = scene.name;
   summary["bodies"] = bodies;
   summary["particles"] = world.particles.size();
   summary["rigid_bodies"] = world.rigid.size();
-  summary["steps"] = scene.steps;
+  summary["steps"] = done;
   summary["method"] = std::string(stepper.method().name);
   summary["path"] = stepper.fused() ? "fused" : "staged";
   summary["dt"] = scene.dt;
@@ -116,23 +191,36 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
   summary["wall_seconds"] = wall_seconds;
-  summary["body_steps_per_second"] = wall_seconds > 0 ? body_steps / wall_seconds : 0.0;
+  summary["body_steps_per_second"] = wall_seconds > 0 ? double(bodies) * double(done) / wall_seconds : 0.0;
   summary["energy_initial"] = initial_energy;
   summary["energy_final"] = world.total_energy();
-  summary["finite"] = finite;
+  summary["finite"] = !blow_up;
+  if (blow_up) {
+    summary["first_non_finite"] = {{"step", blow_up->step}, {"t", blow_up->t},
+                                   {"body", blow_up->body}, {"field", blow_up->field}};
+  }
+  const int signal = interrupting_signal();
+  if (signal != 0 && done < scene.steps) {
+    summary["interrupted"] = signal_name(signal);
+    summary["steps_requested"] = scene.steps;
+  }
   if (context.auto_choice) summary["auto"] = *context.auto_choice;
 
-  if (!o.summary_path.empty()) {
-    std::ofstream out(o.summary_path);
-    out << summary.dump(2) << '\n';
-    if (!out) throw Error(o.summary_path + ": cannot write the summary");
-  }
+  summary_file.write(summary);
   if (!o.quiet) print_summary(summary);
-  if (!finite) {
-    std::fprintf(stderr, "kinema: error: the state is no longer finite after %llu steps "
-                         "(try a smaller dt or a more stable method)\n",
-                 static_cast<unsigned long long>(scene.steps));
+  if (blow_up) {
+    std::fprintf(stderr,
+                 "kinema: error: the state is no longer finite after step %llu (t = %g): "
+                 "body %zu, %s (try a smaller dt or a more stable method)\n",
+                 static_cast<unsigned long long>(blow_up->step), blow_up->t, blow_up->body,
+                 blow_up->field.c_str());
     return 3;
+  }
+  if (summary.contains("interrupted")) {
+    std::fprintf(stderr, "kinema: stopped by %s after step %llu of %llu; outputs are complete to there\n",
+                 signal_name(signal).c_str(), static_cast<unsigned long long>(done),
+                 static_cast<unsigned long long>(scene.steps));
+    return 128 + signal;
   }
   return 0;
 }

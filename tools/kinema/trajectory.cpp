@@ -11,11 +11,20 @@ TrajectoryWriter::TrajectoryWriter(const std::string& path, bool rigid_columns)
     : rigid_columns_(rigid_columns), path_(path) {
   file_ = std::fopen(path.c_str(), "w");
   if (file_ == nullptr) {
-    throw Error(path + ": cannot write the trajectory: " + std::strerror(errno));
+    throw Error(printable(path) + ": cannot write the trajectory: " + std::strerror(errno));
   }
   std::fputs(rigid_columns ? "step,t,body,px,py,pz,vx,vy,vz,qw,qx,qy,qz,lx,ly,lz\n"
                            : "step,t,body,px,py,pz,vx,vy,vz\n",
              file_);
+  // The header reaches the file before the run: a full device is found here, not at the end.
+  if (std::fflush(file_) != 0) fail();
+}
+
+void TrajectoryWriter::fail() {
+  const int error = errno;
+  std::fclose(file_);
+  file_ = nullptr;
+  throw Error(printable(path_) + ": cannot write the trajectory: " + std::strerror(error));
 }
 
 TrajectoryWriter::~TrajectoryWriter() {
@@ -52,13 +61,14 @@ void TrajectoryWriter::write(std::uint64_t step, double t, const ParticleSet<T>&
     for (int d = 0; d < 3; ++d) std::fprintf(file_, kValue<T>, double(rigid.l(d)[i]));
     std::fputc('\n', file_);
   }
+  if (std::ferror(file_) != 0) fail();  // stop at the first failed write, not at the end
 }
 
 void TrajectoryWriter::close() {
-  const bool failed = std::ferror(file_) != 0;
-  const bool close_failed = std::fclose(file_) != 0;
+  if (std::fflush(file_) != 0 || std::ferror(file_) != 0) fail();
+  const bool closed = std::fclose(file_) == 0;
   file_ = nullptr;
-  if (failed || close_failed) throw Error(path_ + ": writing the trajectory failed");
+  if (!closed) throw Error(printable(path_) + ": cannot write the trajectory: " + std::strerror(errno));
 }
 
 template void TrajectoryWriter::write(std::uint64_t, double, const ParticleSet<float>&,

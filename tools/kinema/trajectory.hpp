@@ -13,7 +13,8 @@ namespace kinema::cli {
 
 class TrajectoryWriter {
  public:
-  // Throws kinema::Error when the file cannot be written.
+  // Throws kinema::Error when the file cannot be written (the header is flushed at once).
+  // write() and close() throw at the first write that fails.
   TrajectoryWriter(const std::string& path, bool rigid_columns);
   ~TrajectoryWriter();
   TrajectoryWriter(const TrajectoryWriter&) = delete;
@@ -25,6 +26,8 @@ class TrajectoryWriter {
   void close();  // throws kinema::Error when the data did not reach the file
 
  private:
+  [[noreturn]] void fail();  // closes the file and throws with errno's reason
+
   std::FILE* file_ = nullptr;
   bool rigid_columns_ = false;
   std::string path_;
