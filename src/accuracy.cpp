@@ -226,11 +226,24 @@ Reference reference_states(const Scene& scene, double duration, std::uint64_t st
 
 namespace {
 
-// Pilot runs of one method on a sample of bodies, memoized by step count.
+// The whole search may run this many body-steps of pilots (a few seconds on one core):
+// a tolerance no method reaches, or a scene that blows up at every step size, ends there.
+// A sample smaller than kChargedBodies is charged as that many: a step of a handful of
+// bodies costs about as much (padding, per-step overhead).
+constexpr double kSearchBodySteps = double(1 << 28);
+constexpr double kChargedBodies = 64;
+// A method's pilots stop at 4 x 2^22 steps.
+constexpr std::uint64_t kMostPilotSteps = std::uint64_t(1) << 22;
+
+struct SearchSpent {};  // thrown when the next pilot would pass kSearchBodySteps
+
+// Pilot runs of one method on a sample of bodies, memoized by step count; every run is
+// charged to `spent` (body-steps).
 class Pilot {
  public:
-  Pilot(const Scene& scene, const Method& method, double duration)
-      : scene_(scene), method_(method), duration_(duration) {}
+  Pilot(const Scene& scene, const Method& method, double duration, double& spent)
+      : scene_(scene), method_(method), duration_(duration), spent_(spent),
+        bodies_(std::max(kChargedBodies, double(scene.particles.size() + scene.rigid_bodies.size()))) {}
 
   // Error estimate of the n-step run, from runs at n, 2n and 4n: the difference d of the
   // first two times 2^p / (2^p - 1), p the observed order (capped by the nominal one).
@@ -245,13 +258,19 @@ class Pilot {
  private:
   const BodyStates& at(std::uint64_t n) {
     auto it = runs_.find(n);
-    if (it == runs_.end()) it = runs_.emplace(n, simulate(scene_, method_, n, duration_)).first;
+    if (it == runs_.end()) {
+      if (spent_ + double(n) * bodies_ > kSearchBodySteps) throw SearchSpent{};
+      spent_ += double(n) * bodies_;
+      it = runs_.emplace(n, simulate(scene_, method_, n, duration_)).first;
+    }
     return it->second;
   }
 
   const Scene& scene_;
   const Method& method_;
   double duration_;
+  double& spent_;
+  double bodies_;
   std::map<std::uint64_t, BodyStates> runs_;
 };
 
@@ -267,14 +286,32 @@ std::optional<std::uint64_t> steps_needed(Pilot& pilot, const Method& m, std::ui
   } else {
     do {
       n *= 2;
-      // Pilots run 4n steps: stop at 2^24 (a pilot of 2^26 steps).
-      if (!affordable(n) || n > (std::uint64_t(1) << 24)) return std::nullopt;
+      if (!affordable(n) || n > kMostPilotSteps) return std::nullopt;
     } while (!fits(n));
   }
   const std::uint64_t three_quarters = std::max<std::uint64_t>(1, 3 * n / 4);
   if (three_quarters < n && fits(three_quarters)) n = three_quarters;
   if (!affordable(n)) return std::nullopt;
   return n;
+}
+
+// Refuses at once a tolerance below the round-off of a single step: a few units in the
+// last place of the largest |x| + |v| among the bodies.
+void check_reachable(const Scene& sample, double tolerance) {
+  double scale = 0;
+  auto size = [](const Vec3<double>& v) { return std::hypot(v[0], v[1], v[2]); };
+  for (const BodySpec& b : sample.particles) scale = std::max(scale, size(b.position) + size(b.velocity));
+  for (const RigidSpec& b : sample.rigid_bodies) scale = std::max(scale, size(b.position) + size(b.velocity));
+  const double epsilon = sample.precision == Precision::single ? 0x1p-23 : 0x1p-52;
+  const double floor = 4 * epsilon * scale;
+  if (tolerance < floor) {
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "auto: tolerance %g is below the round-off of one step in %s on this scene "
+                  "(about %.2g: 4 ulp of its largest |x| + |v|); no method can reach it",
+                  tolerance, std::string(precision_name(sample.precision)).c_str(), floor);
+    throw Error(text);
+  }
 }
 
 }  // namespace
@@ -286,16 +323,23 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
   if (scene.steps == 0) throw Error("auto: the scene has no steps to choose a step size for");
   const double duration = scene.dt * double(scene.steps);
   const Scene pilot_scene = sample_bodies(scene, 64);
-  const std::uint64_t start = std::max<std::uint64_t>(8, scene.steps / 16);
+  check_reachable(pilot_scene, tolerance);
+  const std::uint64_t start = std::clamp<std::uint64_t>(scene.steps / 16, 8, kMostPilotSteps);
   MethodChoice choice;
-  double best_cost = std::numeric_limits<double>::infinity();
+  double best_cost = std::numeric_limits<double>::infinity(), spent = 0;
   std::string reason;
   // Highest order first: it usually sets the budget the others must beat.
   std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
   std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
   for (const Method* m : order) {
-    Pilot pilot(pilot_scene, *m, duration);
-    const auto steps = steps_needed(pilot, *m, start, tolerance, best_cost);
+    Pilot pilot(pilot_scene, *m, duration, spent);
+    std::optional<std::uint64_t> steps;
+    try {
+      steps = steps_needed(pilot, *m, start, tolerance, best_cost);
+    } catch (const SearchSpent&) {
+      reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " not tried (search budget spent)";
+      break;  // the best so far meets the tolerance; it may not be the cheapest
+    }
     reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " ";
     if (!steps) {
       reason += std::isfinite(best_cost) ? "costlier" : "cannot";
@@ -312,10 +356,11 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
     }
   }
   if (choice.method == nullptr) {
-    char text[160];
+    char text[256];
     std::snprintf(text, sizeof text,
-                  "auto: no method reaches tolerance %g within 2^24 steps (in float, round-off "
-                  "may stand in the way: try double)", tolerance);
+                  "auto: no method reaches tolerance %g within 2^22 steps or 2^28 body-steps of "
+                  "pilot runs (give --method and --dt, or a larger tolerance%s)", tolerance,
+                  scene.precision == Precision::single ? "; in float, try double" : "");
     throw Error(text);
   }
   choice.dt = duration / double(choice.steps);
