@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "kinema/bodies.hpp"
@@ -64,6 +65,17 @@ PrincipalFrame principal_frame(const Matrix& inertia) {
       }
     }
   }
+  // Scaled by a power of two (exact) so that the largest entry is about 1: the sums below
+  // cannot overflow near 1e308 nor underflow near 1e-308.
+  double largest = 0;
+  for (const auto& row : a) {
+    for (double x : row) largest = std::max(largest, std::abs(x));
+  }
+  if (largest == 0) throw Error("inertia: the tensor is zero");
+  const int exponent = std::ilogb(largest);
+  for (auto& row : a) {
+    for (double& x : row) x = std::ldexp(x, -exponent);
+  }
   // Cyclic Jacobi: each rotation zeroes one off-diagonal entry; a few sweeps converge.
   for (int sweep = 0; sweep < 50; ++sweep) {
     const double off = std::abs(a[0][1]) + std::abs(a[0][2]) + std::abs(a[1][2]);
@@ -95,9 +107,16 @@ PrincipalFrame principal_frame(const Matrix& inertia) {
   if (det < 0) {
     for (int k = 0; k < 3; ++k) v[k][2] = -v[k][2];  // a rotation, not a reflection
   }
-  const Vec3<double> moments{a[0][0], a[1][1], a[2][2]};
-  for (double m : moments) {
-    if (!(m > 0)) throw Error("inertia: the tensor is not positive definite");
+  // A moment within round-off of zero (relative to the largest) makes the tensor singular.
+  const double top = std::max({a[0][0], a[1][1], a[2][2]});
+  Vec3<double> moments;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(a[k][k]) < 64 * std::numeric_limits<double>::epsilon() * top) {
+      throw Error("inertia: the tensor is singular (a principal moment is zero to within round-off)");
+    }
+    if (!(a[k][k] > 0)) throw Error("inertia: the tensor is not positive definite");
+    moments[k] = std::ldexp(a[k][k], exponent);
+    if (!std::isfinite(moments[k])) throw Error("inertia: a principal moment overflows double");
   }
   return {moments, to_quaternion(v)};
 }

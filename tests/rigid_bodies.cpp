@@ -209,40 +209,54 @@ TEST_CASE("the quaternion stays unit; without renormalization Euler's grows", "[
   CHECK(norm2(orientation(raw)) > 1.001);
 }
 
-TEST_CASE("a full inertia tensor is diagonalized with the orientation adjusted", "[rigid]") {
-  // A box with moments (1, 2, 3) turned by a known rotation: I = R diag(1, 2, 3) R^T.
-  const Quat<double> turn{0.8, 0.2, -0.4, 0.4};  // unit: 0.64 + 0.04 + 0.16 + 0.16
-  std::array<std::array<double, 3>, 3> tensor{};
+namespace {
+
+using Tensor = std::array<std::array<double, 3>, 3>;
+
+// I = R diag(m) R^T.
+Tensor turned(const Quat<double>& turn, const Vec3<double>& m) {
+  Tensor tensor{};
   for (int a = 0; a < 3; ++a) {
     Vec3<double> axis{};
     axis[a] = 1;
     const Vec3<double> col = rotate(turn, axis);
     for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) tensor[i][j] += (a + 1.0) * col[i] * col[j];
+      for (int j = 0; j < 3; ++j) tensor[i][j] += m[a] * col[i] * col[j];
     }
   }
-  const PrincipalFrame p = principal_frame(tensor);
-  // The frame reproduces the tensor: R diag(m) R^T = I.
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      double sum = 0;
-      for (int a = 0; a < 3; ++a) {
-        Vec3<double> axis{};
-        axis[a] = 1;
-        const Vec3<double> col = rotate(p.rotation, axis);
-        sum += p.moments[a] * col[i] * col[j];
-      }
-      CHECK(sum == Approx(tensor[i][j]).margin(1e-12));
+  return tensor;
+}
+
+}  // namespace
+
+TEST_CASE("a full inertia tensor is diagonalized with the orientation adjusted", "[rigid]") {
+  // A box with moments (1, 2, 3) x scale turned by a known rotation, at scales where the
+  // Jacobi sums would overflow or underflow unless the tensor is scaled first.
+  const Quat<double> turn{0.8, 0.2, -0.4, 0.4};  // unit: 0.64 + 0.04 + 0.16 + 0.16
+  for (const double scale : {1.0, 2e307, 1e-300}) {
+    INFO("scale " << scale);
+    const Tensor tensor = turned(turn, {scale, 2 * scale, 3 * scale});
+    const PrincipalFrame p = principal_frame(tensor);
+    // The frame reproduces the tensor: R diag(m) R^T = I.
+    const Tensor back = turned(p.rotation, p.moments);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) CHECK(back[i][j] / scale == Approx(tensor[i][j] / scale).margin(1e-12));
     }
+    std::vector<double> moments(p.moments.begin(), p.moments.end());
+    std::sort(moments.begin(), moments.end());
+    CHECK(moments[0] / scale == Approx(1));
+    CHECK(moments[2] / scale == Approx(3));
   }
-  std::vector<double> moments(p.moments.begin(), p.moments.end());
-  std::sort(moments.begin(), moments.end());
-  CHECK(moments[0] == Approx(1));
-  CHECK(moments[2] == Approx(3));
   CHECK_THROWS_WITH(principal_frame({{{1, 0, 0}, {0, -1, 0}, {0, 0, 1}}}),
                     "inertia: the tensor is not positive definite");
   CHECK_THROWS_WITH(principal_frame({{{1, 0.5, 0}, {0, 1, 0}, {0, 0, 1}}}),
                     "inertia: the tensor is not symmetric");
+  // Moments (1e308, 0, 1e308): singular, however large its entries.
+  CHECK_THROWS_WITH(principal_frame({{{5e307, 5e307, 0}, {5e307, 5e307, 0}, {0, 0, 1e308}}}),
+                    Catch::Contains("singular"));
+  CHECK_THROWS_WITH(principal_frame({{{1, 1, 0}, {1, 1, 0}, {0, 0, 1}}}), Catch::Contains("singular"));
+  CHECK_THROWS_WITH(principal_frame({{{1.5e308, 0, 0}, {0, 1.5e308, 1e308}, {0, 1e308, 1.5e308}}}),
+                    Catch::Contains("overflows"));
 }
 
 TEST_CASE("bad rigid bodies are refused by name", "[rigid][errors]") {
