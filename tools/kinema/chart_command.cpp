@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "kinema/kinema.hpp"
+#include "interrupt.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
 
@@ -22,16 +23,31 @@ std::vector<const Method*> pick_methods(const std::vector<std::string>& names) {
   return out;
 }
 
-// Steps of size about dt over `duration`; kinema::Error past 2^32 steps.
 std::uint64_t step_count(double duration, double dt) {
   const double steps = std::round(duration / dt);
-  if (!(steps <= 4294967296.0)) {
-    char text[128];
-    std::snprintf(text, sizeof text, "a step of %g s over %g s takes more than 2^32 steps", dt,
-                  duration);
+  const char* problem = steps > 4294967296.0 ? "takes more than 2^32 steps"
+                        : steps < 1          ? "is longer than the duration"
+                                             : nullptr;
+  if (problem != nullptr) {
+    char text[160];
+    std::snprintf(text, sizeof text, "a step of %g s over %g s %s", dt, duration, problem);
     throw Error(text);
   }
-  return std::max<std::uint64_t>(1, std::uint64_t(steps));
+  return std::uint64_t(steps);
+}
+
+Scene load_checked(const std::string& path) {
+  Scene scene = load_scene(path);
+  try {
+    if (scene.precision == Precision::single) {
+      check_scene<float>(scene);
+    } else {
+      check_scene<double>(scene);
+    }
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
+  }
+  return scene;
 }
 
 double least_squares_slope(const std::vector<double>& x, const std::vector<double>& y) {
@@ -129,7 +145,7 @@ void write_charts(const fs::path& dir, const Scene& scene, const std::vector<con
 }  // namespace
 
 int chart_scene(const ChartOptions& o) {
-  const Scene full = load_scene(o.scene_path);
+  const Scene full = load_checked(o.scene_path);
   const Scene scene = sample_bodies(full, o.max_bodies);
   const double duration = o.duration.value_or(full.dt * double(full.steps));
   if (!(duration > 0)) throw Error("the duration must be positive (--duration or the scene's dt x steps)");
@@ -148,21 +164,22 @@ int chart_scene(const ChartOptions& o) {
   const Reference ref = reference_states(scene, duration, 64 * most_steps);
 
   fs::create_directories(o.out);
-  std::ofstream csv(fs::path(o.out) / "work_precision.csv");
+  OutputFile csv(fs::path(o.out) / "work_precision.csv");
   csv << "method,order,dt,steps,error,seconds_per_simulated_second,force_evaluations,"
          "reference_error,analytic_reference\n";
   const double eps = scene.precision == Precision::single ? 1.2e-7 : 2.2e-16;
   const double scale = motion_scale(ref.states);
   Progress progress("kinema chart", o.quiet);
   std::vector<std::string> legends;
-  std::ofstream orders(fs::path(o.out) / "orders.csv");
+  OutputFile orders(fs::path(o.out) / "orders.csv");
   orders << "method,nominal_order,fitted_order\n";
-  std::size_t done = 0;
+  std::size_t done = 0, plotted = 0;
   for (const Method* m : methods) {
     std::vector<Point> points;
-    std::ofstream dat(fs::path(o.out) / ("points_" + std::string(m->name) + ".dat"));
+    OutputFile dat(fs::path(o.out) / ("points_" + std::string(m->name) + ".dat"));
     dat << "# steps dt seconds evaluations error seconds_per_simulated_second\n";
     for (double dt : dts) {
+      stop_if_interrupted();
       const std::uint64_t steps = step_count(duration, dt);
       const double h = duration / double(steps);
       const double error = state_error(simulate(scene, *m, steps, duration), ref.states);
@@ -177,7 +194,8 @@ int chart_scene(const ChartOptions& o) {
                     std::string(m->name).c_str(), m->order, h, static_cast<unsigned long long>(steps),
                     error, seconds / duration, evaluations, ref.error, ref.analytic ? "true" : "false");
       csv << line;
-      if (std::isfinite(error)) {
+      if (std::isfinite(error) && error > 0) {  // what log axes can show
+        ++plotted;
         dat << steps << ' ' << h << ' ' << seconds << ' ' << evaluations << ' ' << error << ' '
             << seconds / duration << '\n';
       }
@@ -189,18 +207,24 @@ int chart_scene(const ChartOptions& o) {
                   std::string(m->name).c_str(), order.value_or(0));
     legends.push_back(legend);
     orders << m->name << ',' << m->order << ',' << (order ? std::to_string(*order) : "") << '\n';
+    dat.close();
   }
   progress.finish();
   csv.close();
   orders.close();
+  if (plotted == 0) {
+    throw Error("no chart: every error is zero or not finite (the methods are exact on this "
+                "scene, or every run blew up); the values are in " +
+                (fs::path(o.out) / "work_precision.csv").string());
+  }
   write_charts(o.out, scene, methods, legends, ref, duration);
   if (!o.quiet) {
-    std::printf("kinema chart: %s, %zu methods x %zu step sizes, reference %s\n", scene.name.c_str(),
+    std::printf("kinema chart: %s, %zu methods x %zu step sizes, reference %s\n", printable(scene.name).c_str(),
                 methods.size(), dts.size(),
                 ref.analytic ? "analytic" : ("rk4 double, " + std::to_string(ref.steps) + " steps").c_str());
     for (const std::string& l : legends) std::printf("  %s\n", l.c_str());
     std::printf("wrote %s/{work_precision,orders}.csv and {work_precision,error_vs_step}.{svg,png}\n",
-                o.out.c_str());
+                printable(o.out).c_str());
   }
   return 0;
 }

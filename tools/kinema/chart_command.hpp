@@ -1,9 +1,13 @@
 #pragma once
 // `kinema chart` (work-precision diagrams) and `kinema stability` (where methods fail).
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "kinema/methods.hpp"
+#include "kinema/scene.hpp"
 
 namespace kinema::cli {
 
@@ -31,5 +35,13 @@ struct StabilityOptions {
 };
 
 int stability_scene(const StabilityOptions& options);
+
+// Shared by both commands.
+// The scene file, with check_scene run in its precision (before any body is built).
+Scene load_checked(const std::string& path);
+// The built-in methods named (all of them when none is).
+std::vector<const Method*> pick_methods(const std::vector<std::string>& names);
+// Steps of about dt over `duration`; kinema::Error past 2^32 steps or below one.
+std::uint64_t step_count(double duration, double dt);
 
 }  // namespace kinema::cli

@@ -15,6 +15,16 @@ extern char** environ;
 
 namespace kinema::cli {
 
+OutputFile::OutputFile(const std::filesystem::path& path) : std::ofstream(path), path_(path) {
+  precision(17);
+  if (!*this) throw Error(printable(path.string()) + ": cannot write: " + std::strerror(errno));
+}
+
+void OutputFile::close() {
+  std::ofstream::close();
+  if (!*this) throw Error(printable(path_.string()) + ": cannot write (disk full?)");
+}
+
 std::string gnuplot_quote(const std::string& text) {
   std::string out = "'";
   for (char c : printable(text)) {

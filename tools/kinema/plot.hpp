@@ -7,6 +7,7 @@
 // The only user text in a script is a title, quoted by gnuplot_quote.
 
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 namespace kinema::cli {
@@ -21,5 +22,16 @@ void render_chart(const std::filesystem::path& dir, const std::string& name,
 // backquote or macro expansion inside), a quote doubled, and every control character or
 // invalid byte escaped as visible text (see printable), so the literal cannot end the line.
 std::string gnuplot_quote(const std::string& text);
+
+// An output file of the chart commands: an unwritable path fails when it is opened, and a
+// failed write (a full disk) when it is closed; both throw kinema::Error naming the file.
+class OutputFile : public std::ofstream {
+ public:
+  explicit OutputFile(const std::filesystem::path& path);
+  void close();
+
+ private:
+  std::filesystem::path path_;
+};
 
 }  // namespace kinema::cli

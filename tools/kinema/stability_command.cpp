@@ -9,14 +9,12 @@
 
 #include "chart_command.hpp"
 #include "kinema/kinema.hpp"
+#include "interrupt.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
 
 namespace kinema::cli {
 namespace fs = std::filesystem;
-
-std::vector<const Method*> pick_methods(const std::vector<std::string>& names);
-std::uint64_t step_count(double duration, double dt);
 
 namespace {
 
@@ -80,9 +78,7 @@ double measured_threshold(const Method& m) {
 }
 
 void write_regions(const fs::path& dir, const std::vector<const Method*>& methods) {
-  std::ofstream csv(dir / "stability_region.csv"), limits(dir / "thresholds.csv");
-  csv.precision(17);
-  limits.precision(17);
+  OutputFile csv(dir / "stability_region.csv"), limits(dir / "thresholds.csv");
   csv << "method,re,im\n";
   limits << "method,measured_threshold\n";
   std::string plot = "set grid\nset size ratio -1\nset key outside right\n"
@@ -94,7 +90,8 @@ void write_regions(const fs::path& dir, const std::vector<const Method*>& method
     if (m->kind != MethodKind::runge_kutta) continue;
     ++color;
     const std::vector<double> c = stability_polynomial(m->tableau);
-    std::ofstream dat(dir / ("region_" + std::string(m->name) + ".dat"));
+    stop_if_interrupted();
+    OutputFile dat(dir / ("region_" + std::string(m->name) + ".dat"));
     for (int k = 0; k < 240; ++k) {
       std::vector<Complex> p(c.begin(), c.end());
       p[0] -= std::polar(1.0, 2 * M_PI * k / 240);
@@ -103,10 +100,12 @@ void write_regions(const fs::path& dir, const std::vector<const Method*>& method
         csv << m->name << ',' << z.real() << ',' << z.imag() << '\n';
       }
     }
+    dat.close();
     const double limit = measured_threshold(*m);
     limits << m->name << ',' << limit << '\n';
-    std::ofstream mark(dir / ("threshold_" + std::string(m->name) + ".dat"));
+    OutputFile mark(dir / ("threshold_" + std::string(m->name) + ".dat"));
     mark << -limit << " 0\n";
+    mark.close();
     const std::string name(m->name), lc = " lc " + std::to_string(color);
     char label[96];
     std::snprintf(label, sizeof label, "%s: measured limit h lambda = %.4g", name.c_str(), limit);
@@ -117,13 +116,16 @@ void write_regions(const fs::path& dir, const std::vector<const Method*>& method
             " title " + gnuplot_quote(label);
     first = false;
   }
+  csv.close();
+  limits.close();
   if (!first) render_chart(dir, "stability_region", plot);
 }
 
+// Returns how many points of the energy error it wrote for the chart.
 template <class T>
-void record(const Scene& scene, const Method& m, double dt, std::uint64_t steps,
-            std::ofstream& energy_csv, std::ofstream& path_csv, std::ofstream& energy_dat,
-            std::ofstream& path_dat, double& max_z) {
+std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t steps,
+                   std::ofstream& energy_csv, std::ofstream& path_csv, std::ofstream& energy_dat,
+                   std::ofstream& path_dat, double& max_z) {
   SerialJobSystem serial;
   StepperOptions o;
   o.jobs = &serial;
@@ -131,24 +133,26 @@ void record(const Scene& scene, const Method& m, double dt, std::uint64_t steps,
   const double e0 = world.total_energy();
   const std::uint64_t every = std::max<std::uint64_t>(1, steps / 2000);
   const ParticleSet<T>& centres = world.particles.size() ? world.particles : world.rigid.centers();
+  std::size_t plotted = 0;
   for (std::uint64_t k = 0; k <= steps; k += every) {
     const double t = double(k) * dt, e = world.total_energy(), rel = (e - e0) / std::abs(e0);
     const auto x = centres.position(0);
     energy_csv << m.name << ',' << t << ',' << e << ',' << rel << '\n';
     path_csv << m.name << ',' << t << ',' << x[0] << ',' << x[1] << ',' << x[2] << '\n';
-    if (std::isfinite(rel)) energy_dat << t << ' ' << std::max(std::abs(rel), 1e-17) << '\n';
+    if (std::isfinite(rel)) energy_dat << t << ' ' << std::max(std::abs(rel), 1e-17) << '\n', ++plotted;
     path_dat << x[0] << ' ' << x[1] << '\n';
     max_z = std::max(max_z, double(std::abs(x[2])));
     const std::uint64_t n = std::min(every, steps - std::min(steps, k));
     if (n == 0) break;
     world.advance(T(dt), n);
   }
+  return plotted;
 }
 
 }  // namespace
 
 int stability_scene(const StabilityOptions& o) {
-  const Scene full = load_scene(o.scene_path);
+  const Scene full = load_checked(o.scene_path);
   const Scene scene = sample_bodies(full, o.max_bodies);
   const double dt = o.dt.value_or(full.dt);
   const double duration = o.duration.value_or(full.dt * double(full.steps));
@@ -156,9 +160,7 @@ int stability_scene(const StabilityOptions& o) {
   const std::vector<const Method*> methods = pick_methods(o.methods);
   const fs::path dir = o.out;
   fs::create_directories(dir);
-  std::ofstream energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
-  energy_csv.precision(17);
-  path_csv.precision(17);
+  OutputFile energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
   energy_csv << "method,t,energy,relative_error\n";
   path_csv << "method,t,x,y,z\n";
   std::string energy_plot = "set logscale y\nset grid\nset key outside right\nset format y '%.0e'\n"
@@ -168,15 +170,17 @@ int stability_scene(const StabilityOptions& o) {
                           "set title " + gnuplot_quote("Trajectory of body 0: " + scene.name) +
                           "\nset xlabel 'x'\nset ylabel 'y'\nplot ";
   double max_z = 0;
+  std::size_t plotted = 0;
   Progress progress("kinema stability", o.quiet);
   for (std::size_t i = 0; i < methods.size(); ++i) {
+    stop_if_interrupted();
     const std::string name(methods[i]->name);
-    std::ofstream energy_dat(dir / ("energy_" + name + ".dat")), path_dat(dir / ("path_" + name + ".dat"));
-    if (scene.precision == Precision::single) {
-      record<float>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z);
-    } else {
-      record<double>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z);
-    }
+    OutputFile energy_dat(dir / ("energy_" + name + ".dat")), path_dat(dir / ("path_" + name + ".dat"));
+    plotted += scene.precision == Precision::single
+        ? record<float>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z)
+        : record<double>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z);
+    energy_dat.close();
+    path_dat.close();
     const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
     const std::string lc = " lc " + std::to_string(i + 1);
     energy_plot += gnuplot_quote("energy_" + name + ".dat") + " with lines lw 2" +
@@ -187,6 +191,11 @@ int stability_scene(const StabilityOptions& o) {
   }
   energy_csv.close();
   path_csv.close();
+  if (plotted == 0) {
+    throw Error("no energy chart: the relative energy error is not finite at any time (the "
+                "initial energy is 0, or every method blew up at once); the values are in " +
+                (dir / "energy.csv").string());
+  }
   render_chart(dir, "energy", energy_plot);
   const bool planar = max_z == 0;
   if (planar) render_chart(dir, "trajectory", path_plot);
@@ -195,7 +204,8 @@ int stability_scene(const StabilityOptions& o) {
   if (!o.quiet) {
     std::printf("kinema stability: %s, h = %g, %llu steps; wrote %s/{energy,trajectory,"
                 "stability_region,thresholds}.csv and charts%s\n",
-                scene.name.c_str(), dt, static_cast<unsigned long long>(steps), o.out.c_str(),
+                printable(scene.name).c_str(), dt, static_cast<unsigned long long>(steps),
+                printable(o.out).c_str(),
                 planar ? "" : " (no trajectory chart: the motion is not planar)");
   }
   return 0;
