@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <new>
@@ -81,6 +82,13 @@ void AlignedArray<T>::resize(std::size_t count) {
 namespace {
 
 template <class T>
+std::string number_text(T x) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", double(x));
+  return text;
+}
+
+template <class T>
 void check_finite(const Vec3<T>& v, std::size_t body, const char* field) {
   for (T c : v) {
     if (!std::isfinite(c)) {
@@ -114,11 +122,11 @@ std::size_t ParticleSet<T>::add(const Vec3<T>& position, const Vec3<T>& velocity
   check_finite(velocity, i, "velocity");
   if (!(std::isfinite(mass) && mass > 0)) {
     throw Error("body " + std::to_string(i) + ": mass must be positive and finite, got " +
-                std::to_string(mass));
+                number_text(mass));
   }
   const T inv_mass = T(1) / mass;
   if (!std::isfinite(inv_mass) || inv_mass == 0) {
-    throw Error("body " + std::to_string(i) + ": mass " + std::to_string(mass) +
+    throw Error("body " + std::to_string(i) + ": mass " + number_text(mass) +
                 " has no finite nonzero inverse in this precision");
   }
   grow_to(i + 1);

@@ -551,8 +551,27 @@ double state_bytes(const Scene& scene) {
   return (particles * kParticleArrays + rigid_bodies * kRigidArrays) * double(sizeof(T));
 }
 
+// Listed masses that T cannot invert (1e-50 is 0 in float), named by their JSON path.
+template <class T>
+void check_listed_masses(const Scene& scene) {
+  auto check = [](const char* list, std::size_t i, double mass) {
+    const T inverse = T(1) / T(mass);
+    if (!(std::isfinite(inverse) && inverse > 0)) {
+      char text[160];
+      std::snprintf(text, sizeof text, "%s[%zu].mass: %g has no finite nonzero inverse in %s", list,
+                    i, mass, sizeof(T) == 4 ? "float" : "double");
+      throw Error(text);
+    }
+  };
+  for (std::size_t i = 0; i < scene.particles.size(); ++i) {
+    if (!scene.particles[i].kinematic) check("particles", i, scene.particles[i].mass);
+  }
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) check("rigid_bodies", i, scene.rigid_bodies[i].mass);
+}
+
 template <class T>
 void check_scene(const Scene& scene) {
+  check_listed_masses<T>(scene);
   check_generated<T>(scene);
   const ForceModel<T> forces = make_forces<T>(scene);
   SerialJobSystem serial;

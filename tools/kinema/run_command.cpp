@@ -35,10 +35,10 @@ Scene scene_with_overrides(const RunOptions& o) {
   if (o.steps) scene.steps = *o.steps;
   if (o.precision) scene.precision = *o.precision;
   if (scene.method != "auto") method_by_name(scene.method);
-  if (scene.method == "auto" && !scene.tolerance) {
-    throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
-  }
   try {
+    if (scene.method == "auto" && !scene.tolerance) {
+      throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
+    }
     if (scene.precision == Precision::single) {
       check_scene<float>(scene);
     } else {
@@ -232,7 +232,13 @@ int run_scene(const RunOptions& o) {
   std::optional<nlohmann::ordered_json> choice;
   if (scene.method == "auto") {
     const auto start = Clock::now();
-    const MethodChoice c = choose_method(scene, *scene.tolerance);
+    const MethodChoice c = [&] {
+      try {
+        return choose_method(scene, *scene.tolerance);
+      } catch (const Error& e) {
+        throw Error(o.scene_path + ": " + e.what());
+      }
+    }();
     choice = nlohmann::ordered_json{
         {"method", std::string(c.method->name)}, {"dt", c.dt}, {"steps", c.steps},
         {"tolerance", *scene.tolerance}, {"estimated_error", c.estimated_error},
