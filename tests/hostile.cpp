@@ -1,0 +1,400 @@
+// Hostile and careless input to the kinema program: every case ends with the exit code it
+// should, one line on stderr that names the problem (control characters escaped), and
+// nothing run that the input did not ask for. Table first, then the cases that need more
+// than an exit code and a message: signals, write errors, chart injection, blow-ups.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cstdlib>
+#include <map>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "cli_support.hpp"
+
+using namespace kinema::test;
+
+namespace {
+
+const std::string kScenes = KINEMA_SCENES;
+const std::string kSpring = kScenes + "/damped_spring.json";
+
+// A scene body that is valid on its own, to splice the hostile part into.
+const std::string P = R"("particles": [{"position": [1,0,0]}])";
+std::string with_body(const std::string& rest) { return "{" + P + ", " + rest + "}"; }
+std::string force(const std::string& term) { return with_body(R"("forces": [)" + term + "]"); }
+std::string generated(const std::string& rest) {
+  return R"({"generate": {"count": 8388608, "position_min": [0,0,0], "position_max": [1,1,1]}, )" +
+         rest + "}";
+}
+
+struct Case {
+  std::string scene;              // written to a file that "{}" in args stands for; "" for none
+  std::vector<std::string> args;  // after "kinema"
+  int code;                       // the exit code wanted
+  std::string message;            // a piece of the one stderr line ("" when it must be silent)
+  long peak_mib = 0;              // when set: peak memory must stay below (nothing was built)
+};
+
+// Control characters other than the final newline.
+bool has_raw_control(const std::string& s) {
+  for (std::size_t i = 0; i + 1 < s.size(); ++i) {
+    const auto c = static_cast<unsigned char>(s[i]);
+    if (c < 0x20 || c == 0x7F) return true;
+  }
+  return false;
+}
+
+std::vector<std::string> run_args(std::vector<std::string> extra = {}) {
+  std::vector<std::string> a{"run", "{}", "-q"};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return a;
+}
+
+std::vector<Case> scene_cases() {
+  const std::string nul_then_garbage = std::string("{") + P + "}" + std::string(1, '\0') + "garbage";
+  std::string deep = R"({"name": )";
+  for (int i = 0; i < 20000; ++i) deep += "[";
+  for (int i = 0; i < 20000; ++i) deep += "]";
+  deep += ", " + P + "}";
+  return {
+      // JSON as text: syntax, numbers out of range, duplicate keys, bytes that end parsing.
+      {"{\"particles\": [", run_args(), 1, "invalid JSON"},
+      {"", {"run", (work_dir() / "empty.json").string()}, 1, "cannot open the file"},
+      {" ", run_args(), 1, "invalid JSON"},
+      {"[1, 2, 3]", run_args(), 1, "(top level): expected an object"},
+      {"{" + P + "} trailing", run_args(), 1, "invalid JSON"},
+      {nul_then_garbage, run_args(), 1, "a NUL byte at offset"},
+      {with_body("\"dt\": 1e400"), run_args(), 1, "dt: invalid JSON"},
+      {with_body("\"dt\": -1e400"), run_args(), 1, "dt: invalid JSON"},
+      {R"({"particles": [{"position": [1,0,0]}, {"position": [1,0,1e999]}]})", run_args(), 1,
+       "particles[1].position[2]: invalid JSON"},
+      {with_body("\"dt\": 0.1, \"dt\": 0.2"), run_args(), 1, "dt: duplicate key"},
+      {R"({"particles": [{"position": [1,0,0], "position": [2,0,0]}]})", run_args(), 1,
+       "particles[0].position: duplicate key"},
+      {R"({"generate": {"count": 1, "count": 2, "position_min": [0,0,0], "position_max": [1,1,1]}})",
+       run_args(), 1, "generate.count: duplicate key"},
+      {deep, run_args(), 1, "name: expected a string"},
+      {with_body("\"name\": \"\xff\xfe\""), run_args(), 1, "invalid JSON"},
+      {"{" + P + " // a comment\n}", run_args(), 1, "invalid JSON"},
+      {with_body("\"bad\\nkey\": 1"), run_args(), 1, "bad\\x0Akey: unknown key"},
+      {with_body("\"\\u001b[31mred\": 1"), run_args(), 1, "\\x1B[31mred: unknown key"},
+      {force("{\"type\": \"gr\navity\"}"), run_args(), 1, "invalid JSON"},  // a raw newline
+      {force(R"({"type": "gr\navity"})"), run_args(), 1, "unknown force 'gr\\x0Aavity'"},
+      {with_body(R"("method": "rk4\u0007")"), run_args(), 1, "unknown method 'rk4\\x07'"},
+      {with_body(R"("name": 7)"), run_args(), 1, "name: expected a string"},
+      {with_body(R"("dt": "0.1")"), run_args(), 1, "dt: expected a number"},
+      {"", {"run", kScenes}, 1, "is a directory"},
+      {"", {"run", "/dev/zero"}, 1, "larger than 256 MiB"},
+      // Values: step, counts, masses, vectors.
+      {with_body(R"("dt": 0)"), run_args(), 1, "dt: expected a number > 0"},
+      {with_body(R"("dt": -1)"), run_args(), 1, "dt: expected a number > 0"},
+      {with_body(R"("dt": 1e-50)"), run_args(), 1, "dt: step size h must be positive and finite in float, got 0"},
+      {force(R"({"type": "spring", "k": 10})").insert(1, R"("dt": 1e38, )"), run_args(), 1,
+       "overflows float; take a smaller step"},
+      {with_body(R"("steps": -5)"), run_args(), 1, "steps: expected an integer >= 0"},
+      {with_body(R"("steps": 1.5)"), run_args(), 1, "steps: expected an integer >= 0"},
+      {with_body(R"("steps": 1e30)"), run_args(), 1, "steps: expected an integer >= 0"},
+      {with_body(R"("steps": 18446744073709551616)"), run_args(), 1, "steps: expected an integer >= 0"},
+      {R"({"particles": [{"position": [1,0,0], "mass": 0}]})", run_args(), 1, "particles[0].mass: expected a number > 0"},
+      {R"({"particles": [{"position": [1,0,0], "mass": -1}]})", run_args(), 1, "particles[0].mass: expected a number > 0"},
+      {R"({"particles": [{"position": [1,0,0], "mass": 1e-50}]})", run_args(), 1, "particles[0].mass: 1e-50 has no finite nonzero inverse in float"},
+      {R"({"particles": [{"position": [1,0,0], "mass": "heavy"}]})", run_args(), 1, "particles[0].mass: expected a number"},
+      {R"({"particles": [{"position": [1,0]}]})", run_args(), 1, "particles[0].position: expected an array of 3"},
+      {R"({"particles": [{"position": [[1],0,0]}]})", run_args(), 1, "particles[0].position[0]: expected a number"},
+      {R"({"particles": [{"position": [1,0,0], "velocity": [0,"up",0]}]})", run_args(), 1, "particles[0].velocity[1]: expected a number"},
+      {R"({"particles": [{"position": [1e39,0,0]}]})", run_args(), 1, "position is not finite"},
+      {R"({"particles": [{"position": [1,0,0], "kinematic": "yes"}]})", run_args(), 1, "kinematic: expected true or false"},
+      {R"({"particles": [{"velocity": [1,0,0]}]})", run_args(), 1, "particles[0]: missing key 'position'"},
+      {R"({"particles": {"position": [1,0,0]}})", run_args(), 1, "particles: expected an array"},
+      {R"({"particles": []})", run_args(), 1, "the scene has no bodies"},
+      {"{\"partciles\": [{\"position\": [1,0,0]}]}", run_args(), 1, "partciles: unknown key"},
+      {with_body(R"("precision": "half")"), run_args(), 1, "precision: expected \"float\" or \"double\""},
+      {with_body(R"("method": "rk5")"), run_args(), 1, "unknown method 'rk5'"},
+      {with_body(R"("method": "auto")"), run_args(), 1, "needs a tolerance"},
+      {with_body(R"("method": "auto", "tolerance": 0)"), run_args(), 1, "tolerance: expected a number > 0"},
+      // Generation: refused from the text, before a single body is built.
+      {R"({"generate": {"count": -3, "position_min": [0,0,0], "position_max": [1,1,1]}})", run_args(), 1, "generate.count: expected an integer >= 0"},
+      {R"({"generate": {"count": 4294967297, "position_min": [0,0,0], "position_max": [1,1,1]}})", run_args(), 1, "expected at most 2^32 bodies"},
+      {R"({"precision": "double", "generate": {"count": 4294967296, "kind": "rigid", "position_min": [0,0,0], "position_max": [1,1,1]}})",
+       run_args(), 1, "generate.count: 4294967296 rigid bodies in double need 544.0 GiB of state", 64},
+      {R"({"generate": {"count": 3, "position_min": [0,0,0], "position_max": [1,-1,1]}})", run_args(), 1, "generate.position_max: must not be below"},
+      {R"({"generate": {"count": 3, "position_min": [0,0,0], "position_max": [1,1,1], "kind": "fluid"}})", run_args(), 1, "generate.kind: expected \"particle\" or \"rigid\""},
+      {R"({"generate": {"count": 3, "position_min": [0,0,0], "position_max": [1,1,1], "inertia": [1,1,1]}})", run_args(), 1, "generate.inertia: only for"},
+      {R"({"generate": {"count": 3, "kind": "rigid", "position_min": [0,0,0], "position_max": [1,1,1], "inertia": [0,1,1]}})", run_args(), 1, "generate.inertia[0]: expected a number > 0"},
+      {R"({"generate": {"count": 3, "seed": -1, "position_min": [0,0,0], "position_max": [1,1,1]}})", run_args(), 1, "generate.seed: expected an integer >= 0"},
+      {R"({"generate": {"count": 3, "seed": 18446744073709551615, "position_min": [0,0,0], "position_max": [1,1,1]}, "steps": 2})", run_args(), 0, ""},
+      {generated(R"("forces": [{"type":"central","mu":1},{"type":"central","mu":1},{"type":"central","mu":1},{"type":"central","mu":1},{"type":"central","mu":1}])"),
+       run_args(), 1, "forces[4]: central: at most 4 central terms", 64},
+      {generated(R"("forces": [{"type":"spring","k":1e39}])"), run_args(), 1, "forces: force parameters overflow float", 64},
+      {generated(R"("forces": [{"type":"spring","k":2e38}, {"type":"spring","k":2e38}])"), run_args(), 1, "force parameters overflow float", 64},
+      {generated(R"("dt": 1e-50)"), run_args(), 1, "dt: step size h must be positive and finite in float", 64},
+      {R"({"generate": {"count": 8388608, "mass": 1e-50, "position_min": [0,0,0], "position_max": [1,1,1]}})", run_args(), 1, "generate.mass: has no finite nonzero inverse in float", 64},
+      {R"({"generate": {"count": 8388608, "position_min": [0,0,0], "position_max": [1e39,1,1]}})", run_args(), 1, "generate.position_max: overflows float", 64},
+      {R"({"generate": {"count": 8388608, "kind": "rigid", "position_min": [0,0,0], "position_max": [1,1,1], "angular_velocity_max": [3e38,0,0]}})",
+       run_args(), 1, "angular momentum it gives overflows float", 64},
+      {R"({"generate": {"count": 8388608, "kind": "rigid", "position_min": [0,0,0], "position_max": [1,1,1], "inertia": [1e-39,1,1]}})",
+       run_args(), 1, "generate.inertia: a moment has no finite inverse in float", 64},
+      // Force terms.
+      {force(R"({"type": "magnet"})"), run_args(), 1, "forces[0].type: unknown force 'magnet'"},
+      {force(R"({"k": 1})"), run_args(), 1, "forces[0]: missing key 'type'"},
+      {force(R"({"type": "gravity", "g": 9.81})"), run_args(), 1, "forces[0].g: expected an array of 3"},
+      {force(R"({"type": "gravity", "g": [0,0,0]}, {"type": "spring", "k": -4})"), run_args(), 1, "forces[1].k: expected a number >= 0"},
+      {force(R"({"type": "spring", "k": 1, "anchor": [0,0]})"), run_args(), 1, "forces[0].anchor: expected an array of 3"},
+      {force(R"({"type": "spring", "k": 1, "stiffness": 2})"), run_args(), 1, "forces[0].stiffness: unknown key"},
+      {force(R"({"type": "central", "mu": -1})"), run_args(), 1, "forces[0].mu: expected a number >= 0"},
+      {force(R"({"type": "linear_drag", "k": 1e39})"), run_args(), 1, "force parameters overflow float"},
+      {force(R"({"type": "torque", "torque": 1})"), run_args(), 1, "forces[0].torque: expected an array of 3"},
+      {force(R"({"type": "angular_drag", "c": -1})"), run_args(), 1, "forces[0].c: expected a number >= 0"},
+      {force(R"({"type": "point_force", "point": [0,0,0]})"), run_args(), 1, "forces[0]: missing key 'force'"},
+      {force(R"({"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]})"),
+       run_args(), 1, "forces[4]: point_force: at most 4"},
+      {with_body(R"("forces": {"type": "gravity"})"), run_args(), 1, "forces: expected an array"},
+      // Rigid bodies.
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[5e307,5e307,0],[5e307,5e307,0],[0,0,1e308]]}]})", run_args(), 1, "rigid_bodies[0].inertia: the tensor is singular"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[1,1,0],[1,1,0],[0,0,1]]}]})", run_args(), 1, "the tensor is singular"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[1,0.5,0],[0,1,0],[0,0,1]]}]})", run_args(), 1, "the tensor is not symmetric"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[2,0,0],[0,-1,0],[0,0,2]]}]})", run_args(), 1, "not positive definite"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[7e307,3e307,0],[3e307,7e307,0],[0,0,7e307]]}], "precision": "double", "steps": 2})", run_args(), 0, ""},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [1,1]}]})", run_args(), 1, "rigid_bodies[0].inertia: expected [Ixx, Iyy, Izz] or a 3x3 matrix"},
+      {R"({"precision": "float", "rigid_bodies": [{"position": [0,0,0], "inertia": [1e-39, 1, 1]}]})", run_args(), 1, "an inertia moment has no finite inverse"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "orientation": [0,0,0,0]}]})", run_args(), 1, "rigid_bodies[0].orientation: the quaternion is zero"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "orientation": [1e-200,0,0,0]}], "steps": 2})", run_args(), 0, ""},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "orientation": [1e300,1e300,0,0]}], "steps": 2})", run_args(), 0, ""},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "angular_velocity": [1,0,0], "angular_momentum": [1,0,0]}]})", run_args(), 1, "angular_velocity or angular_momentum, not both"},
+      // Runaway searches: refused at once, or bounded.
+      {"", {"run", kSpring, "-q", "--method", "auto", "--tolerance", "1e-300"}, 1, "is below the round-off of one step in double"},
+      {R"({"precision": "float", "rigid_bodies": [{"position": [0,0,0], "angular_velocity": [3e37, 1e37, 0], "inertia": [1,2,3]}], "method": "auto", "tolerance": 1e-3})",
+       run_args(), 1, "auto: no method reaches tolerance 0.001"},
+      {"", {"run", kSpring, "-q", "--method", "auto", "--tolerance", "1e-6", "--steps", "1099511627776", "--dt", "1e-9"}, 1,
+       "auto: no method reaches tolerance 1e-06 within 2^22 steps or 2^28 body-steps"},
+  };
+}
+
+std::vector<Case> option_cases() {
+  const std::string scene = kSpring;
+  auto run = [&](std::vector<std::string> extra) {
+    std::vector<std::string> a{"run", scene, "-q"};
+    a.insert(a.end(), extra.begin(), extra.end());
+    return a;
+  };
+  return {
+      {"", run({"--steps", "0x10"}), 2, "--steps: expected a decimal integer"},
+      {"", run({"--steps", "18446744073709551616"}), 2, "--steps: expected 0 to 18446744073709551615"},
+      {"", run({"--steps", "-1"}), 2, "--steps: expected a decimal integer"},
+      {"", run({"--steps", "1e3"}), 2, "--steps: expected a decimal integer"},
+      {"", run({"--steps", "+5"}), 2, "--steps: expected a decimal integer"},
+      {"", run({"--steps", ""}), 2, "--steps"},
+      {"", run({"--steps", "many"}), 2, "--steps"},
+      {"", run({"--steps"}), 2, "--steps"},
+      {"", run({"--every", "0"}), 2, "--every: expected 1 to"},
+      {"", run({"--every", "0x1"}), 2, "--every: expected a decimal integer"},
+      {"", run({"--threads", "2000"}), 2, "--threads: expected 0 to 1024"},
+      {"", run({"--threads", "-2"}), 2, "--threads"},
+      {"", run({"--dt", "0"}), 2, "--dt: expected a finite number > 0, got '0'"},
+      {"", run({"--dt", "-1"}), 2, "--dt: expected a finite number > 0"},
+      {"", run({"--dt", "nan"}), 2, "--dt: expected a finite number > 0"},
+      {"", run({"--dt", "inf"}), 2, "--dt: expected a finite number > 0"},
+      {"", run({"--dt", "1e400"}), 2, "--dt: expected a finite number > 0"},
+      {"", run({"--dt", "0x1p-3"}), 2, "--dt: expected a finite number > 0"},
+      {"", run({"--dt", "1e-400"}), 2, "--dt: expected a finite number > 0"},
+      {"", run({"--tolerance", "0"}), 2, "--tolerance: expected a finite number > 0"},
+      {"", run({"--out", ""}), 2, "--out: expected a path"},
+      {"", run({"--summary", ""}), 2, "--summary: expected a path"},
+      {"", run({"--isa", "neon"}), 2, "--isa"},
+      {"", run({"--precision", "half"}), 2, "--precision"},
+      {"", run({"--frobnicate"}), 2, "--frobnicate"},
+      {"", run({"--method", "bogus"}), 1, "unknown method 'bogus'"},
+      {"", run({"--method", "rk4\n--evil"}), 1, "unknown method 'rk4\\x0A--evil'"},
+      {"", run({"--method", "\x1b]0;title\x07"}), 1, "unknown method '\\x1B]0;title\\x07'"},
+      {"", run({"--steps", "010", "--threads", "0002"}), 0, ""},
+      {"", run({"--threads", "64", "--steps", "3"}), 0, ""},
+      {"", {"run", ""}, 2, "expected a path"},
+      {"", {"run"}, 2, "scene is required"},
+      {"", {}, 2, "A subcommand is required"},
+      {"", {"fly", scene}, 2, "subcommand"},
+      {"", {"chart", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
+      {"", {"chart", scene, "--repeat", "101"}, 2, "--repeat: expected 1 to 100"},
+      {"", {"chart", scene, "--dts", "0.1,inf"}, 2, "--dts: expected a finite number > 0"},
+      {"", {"chart", scene, "--duration", "-1"}, 2, "--duration: expected a finite number > 0"},
+      {"", {"chart", scene, "--out", ""}, 2, "--out: expected a path"},
+      {"", {"chart", scene, "-q", "--dts", "1e300"}, 1, "a step of 1e+300 s over 20 s is longer than the duration"},
+      {"", {"chart", scene, "-q", "--dts", "1e-30"}, 1, "takes more than 2^32 steps"},
+      {"", {"chart", scene, "-q", "--methods", "rk9"}, 1, "unknown method 'rk9'"},
+      {"", {"stability", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
+      {"", {"stability", scene, "--dt", "nan"}, 2, "--dt: expected a finite number > 0"},
+      {"", {"stability", scene, "-q", "--dt", "100"}, 1, "is longer than the duration"},
+      // Outputs that cannot be written: refused before the run, naming the file.
+      {"", run({"--summary", "/dev/full"}), 1, "/dev/full: cannot write the summary: No space left on device"},
+      {"", run({"--out", "/dev/full"}), 1, "/dev/full: cannot write the trajectory: No space left on device"},
+      {"", run({"--out", "/nonexistent/dir/t.csv"}), 1, "/nonexistent/dir/t.csv: cannot write the trajectory"},
+      {"", run({"--summary", "/"}), 1, "/: cannot write the summary"},
+      {"", {"chart", scene, "-q", "--out", "/dev/null/charts"}, 1, "/dev/null/charts"},
+      {"", {"stability", scene, "-q", "--out", "/dev/null/charts"}, 1, "/dev/null/charts"},
+      // Charts of scenes with nothing to draw on log axes.
+      {R"({"particles": [{"position": [0,0,0]}], "steps": 10})", {"chart", "{}", "-q", "--repeat", "1", "--out", (work_dir() / "still_chart").string()}, 1,
+       "no chart: every error is zero or not finite"},
+      {R"({"particles": [{"position": [1,0,0]}], "forces": [{"type": "linear_drag", "k": 1}], "steps": 10})",
+       {"stability", "{}", "-q", "--out", (work_dir() / "still_stability").string()}, 1, "no energy chart"},
+  };
+}
+
+}  // namespace
+
+TEST_CASE("hostile scenes and options: the exit code and one clear line each", "[cli][hostile]") {
+  std::vector<Case> cases = scene_cases();
+  const std::vector<Case> options = option_cases();
+  cases.insert(cases.end(), options.begin(), options.end());
+  CHECK(cases.size() > 100);
+  int index = 0;
+  for (Case c : cases) {
+    const std::string file = "hostile" + std::to_string(index++) + ".json";
+    if (!c.scene.empty()) {
+      const std::string path = write(file, c.scene).string();
+      std::replace(c.args.begin(), c.args.end(), std::string("{}"), path);
+    }
+    const Result r = run_kinema(c.args);
+    CHECK_FALSE(r.killed);
+    std::string shown;
+    for (const auto& a : c.args) shown += " [" + a.substr(0, 80) + "]";
+    INFO("case " << index - 1 << ":" << shown << "\nscene: " << c.scene.substr(0, 200)
+                 << "\nstderr: " << r.err);
+    CHECK(r.code == c.code);
+    CHECK_FALSE(has_raw_control(r.err));
+    if (c.message.empty()) {
+      CHECK(r.err.empty());
+    } else {
+      CHECK(lines(r.err) == 1);
+      CHECK(r.err.rfind("kinema: error: ", 0) == 0);
+      CHECK(r.err.find(c.message) != std::string::npos);
+      CHECK(r.err.size() < 400);  // no 309-digit ranges
+      if (!c.scene.empty() && c.code == 1 && c.args[0] == "run") {
+        CHECK(r.err.find(file) != std::string::npos);  // names the file
+      }
+    }
+    if (c.peak_mib > 0) CHECK(r.peak_kib < c.peak_mib * 1024);
+  }
+}
+
+namespace {
+
+std::vector<std::string> split(const std::string& line, char by) {
+  std::vector<std::string> cells;
+  std::istringstream in(line);
+  for (std::string cell; std::getline(in, cell, by);) cells.push_back(cell);
+  return cells;
+}
+
+// Every cell after the header reads as a whole number, with nothing left over.
+bool whole_numbers(const std::vector<std::string>& cells) {
+  for (const std::string& cell : cells) {
+    char* end = nullptr;
+    std::strtod(cell.c_str(), &end);
+    if (cell.empty() || *end != '\0') return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+TEST_CASE("a signal stops a run at a step boundary: whole lines, a complete last step, the summary", "[cli][hostile][signals]") {
+  // 1000 bodies for up to 10^7 steps, every step written: far longer than the test waits.
+  const fs::path scene = write("long.json", R"({"dt": 0.001, "steps": 10000000,
+      "generate": {"count": 1000, "position_min": [0,0,0], "position_max": [1,1,1]},
+      "forces": [{"type": "gravity", "g": [0,-9.81,0]}]})");
+  for (const int signal : {SIGINT, SIGTERM}) {
+    INFO("signal " << signal);
+    const fs::path csv = work_dir() / "interrupted.csv", summary = work_dir() / "interrupted.json";
+    fs::remove(csv);
+    const Result r = run_kinema(
+        {"run", scene.string(), "-q", "--every", "1", "--out", csv.string(), "--summary", summary.string()}, {},
+        [&](pid_t pid) {
+          // Past the first 4 KiB buffers, where a killed run used to cut a number in half.
+          while (!fs::exists(csv) || fs::file_size(csv) < 200000) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+          }
+          ::kill(pid, signal);
+        });
+    CHECK_FALSE(r.killed);  // it exited by itself, at a step boundary
+    CHECK(r.code == 128 + signal);
+    CHECK(r.err.find(signal == SIGINT ? "stopped by SIGINT after step" : "stopped by SIGTERM after step") !=
+          std::string::npos);
+    std::istringstream in(read(csv));
+    std::string line;
+    std::getline(in, line);
+    REQUIRE(line == "step,t,body,px,py,pz,vx,vy,vz");
+    std::map<long, int> rows_per_step;
+    bool whole = true;
+    while (std::getline(in, line)) {
+      const auto cells = split(line, ',');
+      whole = whole && cells.size() == 9 && whole_numbers(cells);
+      ++rows_per_step[std::stol(cells.at(0))];
+    }
+    CHECK(whole);
+    REQUIRE_FALSE(rows_per_step.empty());
+    for (const auto& [step, rows] : rows_per_step) REQUIRE(rows == 1000);  // no step cut short
+    const auto j = nlohmann::json::parse(read(summary));
+    CHECK(j["interrupted"] == (signal == SIGINT ? "SIGINT" : "SIGTERM"));
+    CHECK(j["steps"] == rows_per_step.rbegin()->first);  // the summary's last step is the file's
+    CHECK(j["steps_requested"] == 10000000);
+    CHECK(j["finite"] == true);
+  }
+}
+
+TEST_CASE("a full standard output is an error, not a silent success", "[cli][hostile]") {
+  const Result r = run_kinema({"run", kSpring}, "/dev/full");
+  CHECK(r.code == 1);
+  CHECK(r.err == "kinema: error: standard output: cannot write: No space left on device\n");
+}
+
+TEST_CASE("a blow-up names the very step, body and component", "[cli][hostile]") {
+  // Explicit Euler on v' = -30 v with h = 0.1: v is multiplied by -2 each step, so in float
+  // |v| = 2^n first overflows at step 128 (FLT_MAX < 2^128); x stays finite one step longer.
+  const fs::path scene = write("spiral.json", R"({"precision": "float", "method": "euler", "dt": 0.1,
+      "steps": 1000, "particles": [{"position": [0,0,0]}, {"position": [1,0,0], "velocity": [1,0,0]}],
+      "forces": [{"type": "linear_drag", "k": 30}]})");
+  const fs::path summary = work_dir() / "spiral_summary.json";
+  const Result r = run_kinema({"run", scene.string(), "-q", "--summary", summary.string()});
+  CHECK(r.code == 3);
+  CHECK(r.err.find("no longer finite after step 128 (t = 12.8): body 1, vx") != std::string::npos);
+  const auto j = nlohmann::json::parse(read(summary));
+  CHECK(j["finite"] == false);
+  CHECK(j["first_non_finite"]["step"] == 128);
+  CHECK(j["first_non_finite"]["body"] == 1);
+  CHECK(j["first_non_finite"]["field"] == "vx");
+  CHECK(j["steps"].get<int>() >= 128);  // the run stops soon after, not at step 1000
+  CHECK(j["steps"].get<int>() < 1000);
+}
+
+TEST_CASE("chart and stability: no name or path can become a gnuplot command", "[cli][hostile][chart]") {
+  const fs::path marker = work_dir() / "pwned";
+  const std::string payload = "system \"touch " + marker.string() + "\"";
+  // A name that closes its string and starts a new line, quotes, macros, backquotes,
+  // escapes, a C1 control and invalid UTF-8.
+  const std::string name = "x'\n" + payload + "\n'@GPVAL_TERM `touch " + marker.string() +
+                           "` \\ \x1b[31m \xc2\x85 \xff end";
+  nlohmann::json scene = {{"name", name}, {"steps", 40},
+                          {"particles", {{{"position", {1, 0, 0}}, {"velocity", {0, 1, 0}}}}},
+                          {"forces", {{{"type", "central"}, {"mu", 1}}}}};
+  const fs::path file = write("inject.json", scene.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  const std::vector<std::string> outs = {(work_dir() / ("o\n" + payload + "\n'")).string(), "-x-charts",
+                                         (work_dir() / "o'; `touch pwned`").string()};
+  for (const std::string& out : outs) {
+    for (const char* command : {"chart", "stability"}) {
+      INFO(command << " --out " << out);
+      fs::remove_all(out);
+      std::vector<std::string> args{command, file.string(), "-q", "--methods", "euler,rk4", "--out=" + out};
+      if (std::string(command) == "chart") args.insert(args.end(), {"--repeat", "1"});
+      const Result r = run_kinema(args);
+      CHECK(r.code == 0);
+      CHECK(r.err.empty());
+      CHECK_FALSE(fs::exists(marker));
+      const std::string chart = std::string(command) == "chart" ? "work_precision.svg" : "energy.svg";
+      REQUIRE(fs::exists(fs::path(out) / chart));
+      // The title is the name, escaped, as text of the chart.
+      CHECK(read(fs::path(out) / chart).find("x'\\x0Asystem") != std::string::npos);
+    }
+  }
+  fs::remove_all("-x-charts");
+}
