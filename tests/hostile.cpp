@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_support.hpp"
+#include "kinema/job_system.hpp"
 
 using namespace kinema::test;
 
@@ -340,6 +341,18 @@ TEST_CASE("a signal stops a run at a step boundary: whole lines, a complete last
     CHECK(j["steps_requested"] == 10000000);
     CHECK(j["finite"] == true);
   }
+}
+
+TEST_CASE("more threads than cores: silent with -q, and the summary says what ran", "[cli][hostile]") {
+  // Past inline_below, so the job system runs; oneTBB used to warn on stderr.
+  const fs::path scene = write("threads.json", R"({"steps": 3,
+      "generate": {"count": 20000, "position_min": [0,0,0], "position_max": [1,1,1]}})");
+  const fs::path summary = work_dir() / "threads_summary.json";
+  const Result r = run_kinema({"run", scene.string(), "-q", "--threads", "64", "--summary", summary.string()});
+  CHECK(r.code == 0);
+  CHECK(r.err.empty());
+  CHECK(r.out.empty());
+  CHECK(nlohmann::json::parse(read(summary))["threads"] == kinema::hardware_threads());
 }
 
 TEST_CASE("a full standard output is an error, not a silent success", "[cli][hostile]") {
