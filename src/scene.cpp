@@ -489,6 +489,11 @@ std::string gib(double bytes) {
 }
 
 template <class T>
+std::string type_name() {
+  return std::string(precision_name(sizeof(T) == 4 ? Precision::single : Precision::dual));
+}
+
+template <class T>
 bool holds(double x) {
   return std::isfinite(T(x));
 }
@@ -506,7 +511,7 @@ template <class T>
 void check_generated(const Scene& scene) {
   if (!scene.generate) return;
   const GenerateSpec& g = *scene.generate;
-  const std::string type(precision_name(sizeof(T) == 4 ? Precision::single : Precision::dual));
+  const std::string type = type_name<T>();
   auto fail = [&](const std::string& key, const std::string& what) {
     throw Error(printable("generate." + key + ": " + what));
   };
@@ -540,6 +545,24 @@ void check_generated(const Scene& scene) {
   }
 }
 
+// Listed masses that T cannot invert (1e-50 is 0 in float), named by their JSON path.
+template <class T>
+void check_listed_masses(const Scene& scene) {
+  auto check = [](const char* list, std::size_t i, double mass) {
+    const T inverse = T(1) / T(mass);
+    if (!(std::isfinite(inverse) && inverse > 0)) {
+      char text[160];
+      std::snprintf(text, sizeof text, "%s[%zu].mass: %g has no finite nonzero inverse in %s", list,
+                    i, mass, type_name<T>().c_str());
+      throw Error(text);
+    }
+  };
+  for (std::size_t i = 0; i < scene.particles.size(); ++i) {
+    if (!scene.particles[i].kinematic) check("particles", i, scene.particles[i].mass);
+  }
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) check("rigid_bodies", i, scene.rigid_bodies[i].mass);
+}
+
 }  // namespace
 
 template <class T>
@@ -549,24 +572,6 @@ double state_bytes(const Scene& scene) {
   const double particles = double(scene.particles.size()) + (rigid ? 0 : generated);
   const double rigid_bodies = double(scene.rigid_bodies.size()) + (rigid ? generated : 0);
   return (particles * kParticleArrays + rigid_bodies * kRigidArrays) * double(sizeof(T));
-}
-
-// Listed masses that T cannot invert (1e-50 is 0 in float), named by their JSON path.
-template <class T>
-void check_listed_masses(const Scene& scene) {
-  auto check = [](const char* list, std::size_t i, double mass) {
-    const T inverse = T(1) / T(mass);
-    if (!(std::isfinite(inverse) && inverse > 0)) {
-      char text[160];
-      std::snprintf(text, sizeof text, "%s[%zu].mass: %g has no finite nonzero inverse in %s", list,
-                    i, mass, sizeof(T) == 4 ? "float" : "double");
-      throw Error(text);
-    }
-  };
-  for (std::size_t i = 0; i < scene.particles.size(); ++i) {
-    if (!scene.particles[i].kinematic) check("particles", i, scene.particles[i].mass);
-  }
-  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) check("rigid_bodies", i, scene.rigid_bodies[i].mass);
 }
 
 template <class T>
