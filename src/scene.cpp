@@ -37,7 +37,8 @@ struct Node {
     throw Error(printable(std::string(origin) + ": " + (path.empty() ? "(top level)" : path) + ": " + what));
   }
   Node child(const std::string& key) const {
-    return {value.at(key), path.empty() ? key : path + "." + key, origin};
+    if (!has(key)) fail("missing key '" + key + "'");
+    return {value[key], path.empty() ? key : path + "." + key, origin};
   }
   Node element(std::size_t i) const {
     return {value.at(i), path + "[" + std::to_string(i) + "]", origin};
@@ -92,10 +93,7 @@ struct Node {
     if (!value.is_array() || value.size() != 3) fail("expected an array of 3 numbers");
     return {element(0).number(), element(1).number(), element(2).number()};
   }
-  Node required(const std::string& key) const {
-    if (!has(key)) fail("missing key '" + key + "'");
-    return child(key);
-  }
+  Node required(const std::string& key) const { return child(key); }
 };
 
 LocalTerm parse_force(const Node& n) {
@@ -155,12 +153,13 @@ BodySpec parse_body(const Node& n) {
   return b;
 }
 
+// Either bound may be left out (it is then 0): the error names one the scene gave.
 void check_box(const Node& n, const char* lo_key, const char* hi_key, const Vec3<double>& lo,
                const Vec3<double>& hi) {
   for (int d = 0; d < 3; ++d) {
-    if (lo[d] > hi[d]) {
-      n.child(hi_key).fail(std::string("must not be below ") + lo_key + " in any component");
-    }
+    if (lo[d] <= hi[d]) continue;
+    if (n.has(hi_key)) n.child(hi_key).fail(std::string("must not be below ") + lo_key + " in any component");
+    n.child(lo_key).fail(std::string("must not be above ") + hi_key + " (0 when left out) in any component");
   }
 }
 
