@@ -1,0 +1,48 @@
+// Fuzz target: any bytes as a scene file. kinema::Error is the expected refusal; anything
+// else escaping (or a sanitizer report) is a finding.
+#include <cstddef>
+#include <cstdint>
+#include <string_view>
+
+#include "kinema/error.hpp"
+#include "kinema/scene.hpp"
+
+namespace {
+
+template <class T>
+void build(const kinema::Scene& scene) {
+  try {
+    kinema::check_scene<T>(scene);
+  } catch (const kinema::Error&) {
+  }
+  try {
+    (void)kinema::make_forces<T>(scene);
+  } catch (const kinema::Error&) {
+  }
+  // Building bodies costs memory in proportion to their number: only small scenes.
+  const std::uint64_t listed = scene.particles.size() + scene.rigid_bodies.size();
+  if (listed + (scene.generate ? scene.generate->count : 0) > 4096) return;
+  try {
+    (void)kinema::make_particles<T>(scene);
+  } catch (const kinema::Error&) {
+  }
+  try {
+    (void)kinema::make_rigid_bodies<T>(scene);
+  } catch (const kinema::Error&) {
+  }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string_view text(reinterpret_cast<const char*>(data), size);
+  kinema::Scene scene;
+  try {
+    scene = kinema::parse_scene(text, "fuzz");
+  } catch (const kinema::Error&) {
+    return 0;
+  }
+  build<float>(scene);
+  build<double>(scene);
+  return 0;
+}
