@@ -1,0 +1,239 @@
+#include "staged_path.hpp"
+
+#include <algorithm>
+
+namespace kinema {
+namespace {
+
+template <class T>
+kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
+  return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass()};
+}
+
+}  // namespace
+
+template <class T>
+StagedPath<T>::StagedPath(const ForceModel<T>& forces, const Method& method,
+                          const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local)
+    : forces_(forces), method_(method), table_(table), local_(local),
+      stage_fn_(table.stage[local.has_quadratic()][local.has_central()]) {
+  plan();
+}
+
+template <class T>
+void StagedPath<T>::plan() {
+  auto push = [&](PhaseKind k, int i) { phases_[phase_count_++] = {k, i}; };
+  if (method_.kind == MethodKind::runge_kutta) {
+    for (int s = 0; s < method_.tableau.stages; ++s) {
+      push(PhaseKind::stage, s);
+      if (coupled()) push(PhaseKind::coupled, s);
+    }
+    push(PhaseKind::finish, 0);
+    return;
+  }
+  for (int k = 0; k < method_.scheme.count; ++k) {
+    if (method_.scheme.ops[k].kind == OpKind::drift) {
+      push(PhaseKind::drift, k);
+      continue;
+    }
+    push(PhaseKind::stage, k);
+    if (coupled()) push(PhaseKind::coupled, k);
+    push(PhaseKind::kick, k);
+  }
+}
+
+template <class T>
+void StagedPath<T>::reserve(std::size_t padded) {
+  if (padded <= capacity_) return;
+  const int stages = method_.kind == MethodKind::runge_kutta ? method_.tableau.stages : 1;
+  for (int s = 0; s < stages; ++s) {
+    for (int d = 0; d < 3; ++d) {
+      if (s > 0) stage_x_[s][d].resize(padded), stage_v_[s][d].resize(padded);
+      stage_a_[s][d].resize(padded);
+    }
+  }
+  if (needs_force_scratch()) {
+    for (auto& f : force_) f.resize(padded);
+  }
+  capacity_ = padded;
+}
+
+template <class T>
+void StagedPath<T>::step(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
+  const std::size_t n = c.bodies.padded_size();
+  if (coupled()) {
+    for (int p = 0; p < phase_count_; ++p) {
+      for_each_block(jobs, inline_below, n, [&](Block b) { run(c, phases_[p], b); });
+    }
+    return;
+  }
+  for_each_block(jobs, inline_below, n, [&](Block b) {
+    for (int p = 0; p < phase_count_; ++p) run(c, phases_[p], b);
+  });
+}
+
+// Stage s's state is the bodies' own for stage 0, for a stage whose tableau row is all
+// zero (nothing to add), and for every kick-drift stage; else its stage buffers.
+template <class T>
+bool StagedPath<T>::own_state(int s) const {
+  if (s == 0 || method_.kind == MethodKind::kick_drift) return true;
+  for (int j = 0; j < s; ++j) {
+    if (method_.tableau.a[s][j] != 0) return false;
+  }
+  return true;
+}
+
+template <class T>
+const T* StagedPath<T>::state_x(const StepContext<T>& c, int s, int d) const {
+  return own_state(s) ? arrays(c.bodies).x[d] : stage_x_[s][d].data();
+}
+
+template <class T>
+const T* StagedPath<T>::state_v(const StepContext<T>& c, int s, int d) const {
+  return own_state(s) ? arrays(c.bodies).v[d] : stage_v_[s][d].data();
+}
+
+// Stage s's velocities (the x derivative) and accelerations, as three component arrays.
+template <class T>
+std::array<const T*, 3> StagedPath<T>::velocities(const StepContext<T>& c, int s) const {
+  return {state_v(c, s, 0), state_v(c, s, 1), state_v(c, s, 2)};
+}
+
+template <class T>
+std::array<const T*, 3> StagedPath<T>::accelerations(int s) const {
+  return {stage_a_[s][0].data(), stage_a_[s][1].data(), stage_a_[s][2].data()};
+}
+
+template <class T>
+int StagedPath<T>::accel_slot(const Phase& p) const {
+  return method_.kind == MethodKind::runge_kutta ? p.index : 0;
+}
+
+template <class T>
+double StagedPath<T>::phase_time(const StepContext<T>& c, const Phase& p) const {
+  const double at = method_.kind == MethodKind::runge_kutta ? method_.tableau.c[p.index]
+                                                             : method_.scheme.ops[p.index].time;
+  return c.t0 + at * double(c.h);
+}
+
+template <class T>
+void StagedPath<T>::run(const StepContext<T>& c, const Phase& p, Block b) {
+  switch (p.kind) {
+    case PhaseKind::stage: return run_stage(c, p, b);
+    case PhaseKind::coupled: return run_coupled(c, p, b);
+    case PhaseKind::finish: return run_finish(c, b);
+    case PhaseKind::kick:
+    case PhaseKind::drift: return run_kick_drift(c, p, b);
+  }
+}
+
+template <class T>
+void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) {
+  const int s = accel_slot(p);
+  kernels::StageJob<T> job{};
+  job.accel_scale = c.accel_scale;
+  job.inv_mass = c.bodies.inv_mass();
+  job.forces = local_;
+  auto body = arrays(c.bodies);
+  for (int d = 0; d < 3; ++d) {
+    job.x.in[d] = body.x[d];
+    job.v.in[d] = body.v[d];
+    job.x.out[d] = s > 0 ? stage_x_[s][d].data() : nullptr;
+    job.v.out[d] = s > 0 ? stage_v_[s][d].data() : nullptr;
+    job.acc[d] = stage_a_[s][d].data();
+  }
+  double first = 0;
+  for (int j = 0; j < s; ++j) {
+    const double a = method_.tableau.a[s][j];
+    if (a == 0) continue;
+    if (first == 0) first = a;
+    job.x.add(a, first, velocities(c, j));
+    job.v.add(a, first, accelerations(j));
+  }
+  set_steps(c, job.x, job.v, first);
+  stage_fn_(job, b.begin, b.end);
+  if (!needs_force_scratch()) return;
+  for (auto& f : force_) std::fill(f.data() + b.begin, f.data() + b.end, T(0));
+  const ParticleBlock<T> view = block_view(c, s, b, phase_time(c, p));
+  for (const auto& callback : forces_.callbacks()) callback(view);
+  if (!coupled()) add_forces(c, s, b);
+}
+
+// The step of a position and a velocity combination whose first weight is w.
+template <class T>
+void StagedPath<T>::set_steps(const StepContext<T>& c, kernels::Combination<T>& x,
+                              kernels::Combination<T>& v, double w) const {
+  x.step = T(w) * c.h;
+  v.step = T(w / kernels::acceleration_scale(method_.tableau));
+}
+
+template <class T>
+ParticleBlock<T> StagedPath<T>::block_view(const StepContext<T>& c, int s, Block b, double t) {
+  ParticleBlock<T> v;
+  v.begin = b.begin;
+  v.count = b.end - b.begin;
+  v.t = t;
+  v.px = state_x(c, s, 0) + b.begin, v.py = state_x(c, s, 1) + b.begin, v.pz = state_x(c, s, 2) + b.begin;
+  v.vx = state_v(c, s, 0) + b.begin, v.vy = state_v(c, s, 1) + b.begin, v.vz = state_v(c, s, 2) + b.begin;
+  v.inv_mass = c.bodies.inv_mass() + b.begin;
+  v.fx = force_[0].data() + b.begin, v.fy = force_[1].data() + b.begin, v.fz = force_[2].data() + b.begin;
+  return v;
+}
+
+template <class T>
+void StagedPath<T>::add_forces(const StepContext<T>& c, int s, Block b) {
+  kernels::ForceJob<T> job{};
+  for (int d = 0; d < 3; ++d) job.acc[d] = stage_a_[s][d].data(), job.force[d] = force_[d].data();
+  job.inv_mass = c.bodies.inv_mass();
+  job.scale = c.accel_scale;
+  table_.add_forces(job, b.begin, b.end);
+}
+
+template <class T>
+void StagedPath<T>::run_coupled(const StepContext<T>& c, const Phase& p, Block b) {
+  const int s = accel_slot(p);
+  const ParticleState<T> all{c.bodies.padded_size(), state_x(c, s, 0), state_x(c, s, 1),
+                             state_x(c, s, 2),        state_v(c, s, 0), state_v(c, s, 1),
+                             state_v(c, s, 2),        c.bodies.inv_mass()};
+  const ParticleBlock<T> view = block_view(c, s, b, phase_time(c, p));
+  for (const auto& term : forces_.coupled_terms()) term->accumulate(all, view);
+  add_forces(c, s, b);
+}
+
+template <class T>
+void StagedPath<T>::run_finish(const StepContext<T>& c, Block b) {
+  auto body = arrays(c.bodies);
+  kernels::CombineJob<T> x{}, v{};
+  for (int d = 0; d < 3; ++d) {
+    x.c.in[d] = x.c.out[d] = body.x[d];
+    v.c.in[d] = v.c.out[d] = body.v[d];
+  }
+  double first = 0;
+  for (int s = 0; s < method_.tableau.stages; ++s) {
+    const double w = method_.tableau.b[s];
+    if (w == 0) continue;
+    if (first == 0) first = w;
+    x.c.add(w, first, velocities(c, s));
+    v.c.add(w, first, accelerations(s));
+  }
+  set_steps(c, x.c, v.c, first);
+  // Positions first: they read the stage-0 velocities, which are the bodies' own.
+  table_.combine(x, b.begin, b.end);
+  table_.combine(v, b.begin, b.end);
+}
+
+template <class T>
+void StagedPath<T>::run_kick_drift(const StepContext<T>& c, const Phase& p, Block b) {
+  auto body = arrays(c.bodies);
+  const bool kick = p.kind == PhaseKind::kick;
+  kernels::CombineJob<T> job{};
+  for (int d = 0; d < 3; ++d) job.c.in[d] = job.c.out[d] = kick ? body.v[d] : body.x[d];
+  job.c.add(1, 1, kick ? accelerations(0) : velocities(c, 0));
+  job.c.step = T(method_.scheme.ops[p.index].weight) * c.h;
+  table_.combine(job, b.begin, b.end);
+}
+
+template class StagedPath<float>;
+template class StagedPath<double>;
+
+}  // namespace kinema

@@ -1,0 +1,78 @@
+#pragma once
+// The staged path: one pass per stage (or kick, drift) over every block, the stage state
+// in memory. It takes what the fused kernels cannot: callbacks, coupled terms, user
+// tableaus. Without coupled terms a block runs all phases of a step while in cache; a
+// coupled term reads every body's stage state, so each phase is then a job of its own.
+
+#include <array>
+#include <cstddef>
+
+#include "blocks.hpp"
+#include "kernels/kernels.hpp"
+#include "kinema/bodies.hpp"
+#include "kinema/forces.hpp"
+#include "kinema/job_system.hpp"
+#include "kinema/methods.hpp"
+#include "step_context.hpp"
+
+namespace kinema {
+
+template <class T>
+class StagedPath {
+ public:
+  // Keeps references: `forces`, `method`, `table` and `local` must outlive the path.
+  StagedPath(const ForceModel<T>& forces, const Method& method,
+             const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local);
+
+  // Scratch for `padded` bodies (a padded count); allocates only when it grows.
+  void reserve(std::size_t padded);
+  void step(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
+
+ private:
+  enum class PhaseKind { stage, coupled, finish, kick, drift };
+  struct Phase {
+    PhaseKind kind;
+    int index;  // stage or operation
+  };
+  static constexpr int kMaxPhases = 3 * kMaxStages + 1;
+
+  void plan();
+  bool coupled() const { return !forces_.coupled_terms().empty(); }
+  bool needs_force_scratch() const { return coupled() || !forces_.callbacks().empty(); }
+
+  bool own_state(int s) const;
+  const T* state_x(const StepContext<T>& c, int s, int d) const;
+  const T* state_v(const StepContext<T>& c, int s, int d) const;
+  std::array<const T*, 3> velocities(const StepContext<T>& c, int s) const;
+  std::array<const T*, 3> accelerations(int s) const;
+  int accel_slot(const Phase& p) const;
+  double phase_time(const StepContext<T>& c, const Phase& p) const;
+  ParticleBlock<T> block_view(const StepContext<T>& c, int s, Block b, double t);
+
+  void run(const StepContext<T>& c, const Phase& p, Block b);
+  void run_stage(const StepContext<T>& c, const Phase& p, Block b);
+  void run_coupled(const StepContext<T>& c, const Phase& p, Block b);
+  void run_finish(const StepContext<T>& c, Block b);
+  void run_kick_drift(const StepContext<T>& c, const Phase& p, Block b);
+  void add_forces(const StepContext<T>& c, int s, Block b);
+  void set_steps(const StepContext<T>& c, kernels::Combination<T>& x, kernels::Combination<T>& v,
+                 double w) const;
+
+  const ForceModel<T>& forces_;
+  const Method& method_;
+  const kernels::KernelTable<T>& table_;
+  const kernels::LocalForces<T>& local_;
+  kernels::StageFn<T> stage_fn_;
+  std::array<Phase, kMaxPhases> phases_{};
+  int phase_count_ = 0;
+  std::size_t capacity_ = 0;
+  // Stage positions and velocities (stage 0 is the bodies themselves), stage accelerations,
+  // and the force accumulator of callback and coupled terms. Blocks write disjoint ranges.
+  std::array<std::array<AlignedArray<T>, 3>, kMaxStages> stage_x_, stage_v_, stage_a_;
+  std::array<AlignedArray<T>, 3> force_;
+};
+
+extern template class StagedPath<float>;
+extern template class StagedPath<double>;
+
+}  // namespace kinema

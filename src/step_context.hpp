@@ -1,0 +1,19 @@
+#pragma once
+// What one step or advance call works on, built on the caller's stack and handed to every
+// phase and block task; the Stepper keeps only what lives across calls.
+
+#include <cstddef>
+
+#include "kinema/bodies.hpp"
+
+namespace kinema {
+
+template <class T>
+struct StepContext {
+  ParticleSet<T>& bodies;  // particles, or the centres of rigid bodies
+  T h;                     // step size
+  T accel_scale;           // what stage accelerations are multiplied by (sigma h, or 1)
+  double t0 = 0;           // time at the start of the step (staged path: callbacks see it)
+};
+
+}  // namespace kinema
