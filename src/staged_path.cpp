@@ -142,15 +142,12 @@ void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) 
     job.v.out[d] = s > 0 ? stage_v_[s][d].data() : nullptr;
     job.acc[d] = stage_a_[s][d].data();
   }
-  double first = 0;
-  for (int j = 0; j < s; ++j) {
-    const double a = method_.tableau.a[s][j];
-    if (a == 0) continue;
-    if (first == 0) first = a;
-    job.x.add(a, first, velocities(c, j));
-    job.v.add(a, first, accelerations(j));
+  if (method_.kind == MethodKind::runge_kutta) {
+    const kernels::RowSum row = kernels::row_sum(method_.tableau.a[s]);
+    job.x.set(row, s, [&](int j) { return velocities(c, j); });
+    job.v.set(row, s, [&](int j) { return accelerations(j); });
+    set_steps(c, row, job.x, job.v);
   }
-  set_steps(c, job.x, job.v, first);
   stage_fn_(job, b.begin, b.end);
   if (!needs_force_scratch()) return;
   for (auto& f : force_) std::fill(f.data() + b.begin, f.data() + b.end, T(0));
@@ -159,12 +156,11 @@ void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) 
   if (!coupled()) add_forces(c, s, b);
 }
 
-// The step of a position and a velocity combination whose first weight is w.
 template <class T>
-void StagedPath<T>::set_steps(const StepContext<T>& c, kernels::Combination<T>& x,
-                              kernels::Combination<T>& v, double w) const {
-  x.step = T(w) * c.h;
-  v.step = T(w / kernels::acceleration_scale(method_.tableau));
+void StagedPath<T>::set_steps(const StepContext<T>& c, const kernels::RowSum& row,
+                              kernels::Combination<T>& x, kernels::Combination<T>& v) const {
+  x.step = row.position_step(c.h);
+  v.step = row.velocity_step<T>(kernels::acceleration_scale(method_.tableau));
 }
 
 template <class T>
@@ -208,15 +204,11 @@ void StagedPath<T>::run_finish(const StepContext<T>& c, Block b) {
     x.c.in[d] = x.c.out[d] = body.x[d];
     v.c.in[d] = v.c.out[d] = body.v[d];
   }
-  double first = 0;
-  for (int s = 0; s < method_.tableau.stages; ++s) {
-    const double w = method_.tableau.b[s];
-    if (w == 0) continue;
-    if (first == 0) first = w;
-    x.c.add(w, first, velocities(c, s));
-    v.c.add(w, first, accelerations(s));
-  }
-  set_steps(c, x.c, v.c, first);
+  const kernels::RowSum row = kernels::row_sum(method_.tableau.b);
+  const int stages = method_.tableau.stages;
+  x.c.set(row, stages, [&](int s) { return velocities(c, s); });
+  v.c.set(row, stages, [&](int s) { return accelerations(s); });
+  set_steps(c, row, x.c, v.c);
   // Positions first: they read the stage-0 velocities, which are the bodies' own.
   table_.combine(x, b.begin, b.end);
   table_.combine(v, b.begin, b.end);
@@ -228,7 +220,8 @@ void StagedPath<T>::run_kick_drift(const StepContext<T>& c, const Phase& p, Bloc
   const bool kick = p.kind == PhaseKind::kick;
   kernels::CombineJob<T> job{};
   for (int d = 0; d < 3; ++d) job.c.in[d] = job.c.out[d] = kick ? body.v[d] : body.x[d];
-  job.c.add(1, 1, kick ? accelerations(0) : velocities(c, 0));
+  // One term of weight 1, the step the operation's weight times h.
+  job.c.set(kernels::row_sum({1}), 1, [&](int) { return kick ? accelerations(0) : velocities(c, 0); });
   job.c.step = T(method_.scheme.ops[p.index].weight) * c.h;
   table_.combine(job, b.begin, b.end);
 }

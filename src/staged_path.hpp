@@ -55,8 +55,8 @@ class StagedPath {
   void run_finish(const StepContext<T>& c, Block b);
   void run_kick_drift(const StepContext<T>& c, const Phase& p, Block b);
   void add_forces(const StepContext<T>& c, int s, Block b);
-  void set_steps(const StepContext<T>& c, kernels::Combination<T>& x, kernels::Combination<T>& v,
-                 double w) const;
+  void set_steps(const StepContext<T>& c, const kernels::RowSum& row, kernels::Combination<T>& x,
+                 kernels::Combination<T>& v) const;
 
   const ForceModel<T>& forces_;
   const Method& method_;

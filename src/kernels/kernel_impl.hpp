@@ -180,10 +180,10 @@ KINEMA_INLINE Vec<V, N> stepped(value_t<V> coef, const Vec<V, N>& dir, const Vec
 
 using Weights = std::array<double, kMaxStages>;
 
-// G_0 + r_1 G_1 + ... for the nonzero weights of W (see TermGroups in kernels.hpp).
+// G_0 + r_1 G_1 + ... for the nonzero weights of W (see RowSum in kernels.hpp).
 template <Weights W, class V, int S, int N>
 KINEMA_INLINE Vec<V, N> grouped_sum(const Vec<V, N> (&k)[S]) {
-  constexpr TermGroups G = group_terms(W);
+  constexpr TermGroups G = row_sum(W).groups;
   Vec<V, N> sum = k[G.lead[0]];
   static_for<G.count>([&](auto g) {
     constexpr int lead = G.lead[g];
@@ -209,16 +209,14 @@ KINEMA_INLINE Vec<V, N> grouped_sum(const Vec<V, N> (&k)[S]) {
 template <Weights W, double Divisor = 0.0, class V, int S, int N>
 KINEMA_INLINE Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Vec<V, N>& base) {
   using T = value_t<V>;
-  constexpr TermGroups G = group_terms(W);
-  if constexpr (G.count == 0) {
+  constexpr RowSum R = row_sum(W);
+  if constexpr (R.empty()) {
     return base;
+  } else if constexpr (Divisor != 0.0) {
+    constexpr T step = R.velocity_step<T>(Divisor);  // a constant: no run-time test
+    return stepped(step, grouped_sum<W>(k), base);
   } else {
-    constexpr double first = W[G.lead[0]];
-    if constexpr (Divisor != 0.0) {
-      return stepped(T(first / Divisor), grouped_sum<W>(k), base);  // constant: no run-time test
-    } else {
-      return step_by(V(T(first) * h), grouped_sum<W>(k), base);
-    }
+    return step_by(V(R.position_step(h)), grouped_sum<W>(k), base);
   }
 }
 
@@ -226,11 +224,11 @@ KINEMA_INLINE Vec<V, N> advanced(value_t<V> h, const Vec<V, N> (&k)[S], const Ve
 template <Weights W, class V, class B, int S>
 KINEMA_INLINE Vec<V> stage_linear_part(value_t<V> h, const B& body, const Vec<V> (&kx)[S],
                                        const Vec<V>& p) {
-  constexpr TermGroups G = group_terms(W);
-  if constexpr (G.count == 0) {
+  constexpr RowSum R = row_sum(W);
+  if constexpr (R.empty()) {
     return p;
   } else {
-    return linear_part_at(body, value_t<V>(W[G.lead[0]]) * h, grouped_sum<W>(kx), p);
+    return linear_part_at(body, R.position_step(h), grouped_sum<W>(kx), p);
   }
 }
 
@@ -337,7 +335,7 @@ KINEMA_INLINE Vec<V> summed(const Combination<value_t<V>>& c, std::size_t i) {
 template <class V>
 KINEMA_INLINE Vec<V> combined(const Combination<value_t<V>>& c, std::size_t i) {
   const Vec<V> base = load3<V>(c.in, i);
-  if (c.terms == 0) return base;
+  if (c.empty()) return base;
   return stepped(c.step, summed<V>(c, i), base);
 }
 
@@ -349,7 +347,7 @@ void stage(const StageJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
     const auto body = body_terms(f, load<V>(job.inv_mass + i));
     Vec<V> xs = x, p = linear_part(body, anchored(f, x));
     const Vec<V> vs = combined<V>(job.v, i);
-    if (job.x.terms > 0) {
+    if (!job.x.empty()) {
       const Vec<V> sum = summed<V>(job.x, i);
       xs = stepped(job.x.step, sum, x);
       p = linear_part_at(body, job.x.step, sum, p);

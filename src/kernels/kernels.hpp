@@ -107,38 +107,62 @@ struct TermGroups {
   }
 };
 
-constexpr TermGroups group_terms(const std::array<double, kMaxStages>& w) {
-  TermGroups t;
-  double first = 0;
-  for (int j = 0; j < kMaxStages; ++j) {
-    t.group[j] = -1;
-    if (w[j] == 0) continue;
-    if (first == 0) first = w[j];
-    t.add(j, w[j], first);
+// One tableau row (a row of A, or b) as both paths evaluate it: the fused kernels at
+// compile time, the staged path at run time. Their bits agree because both take the
+// grouping and the steps from here.
+struct RowSum {
+  TermGroups groups;
+  double first = 0;  // w_f; 0 for a row of zeros
+
+  constexpr bool empty() const { return groups.count == 0; }
+  // The factor of the grouped sum for positions: x + (w_f h) (G_0 + ...).
+  template <class T>
+  constexpr T position_step(T h) const {
+    return T(first) * h;
   }
-  return t;
+  // For velocities, whose k are accelerations already scaled by sigma h (see
+  // acceleration_scale): v + (w_f / sigma) (G_0 + ...).
+  template <class T>
+  constexpr T velocity_step(double sigma) const {
+    return T(first / sigma);
+  }
+};
+
+constexpr RowSum row_sum(const std::array<double, kMaxStages>& w) {
+  RowSum row;
+  for (int j = 0; j < kMaxStages; ++j) {
+    row.groups.group[j] = -1;
+    if (w[j] == 0) continue;
+    if (row.first == 0) row.first = w[j];
+    row.groups.add(j, w[j], row.first);
+  }
+  return row;
 }
 
-// out = in + step * (G_0 + r_1 G_1 + ...) for the three components of a vector field (see
-// TermGroups): step = w_f h for positions or w_f / sigma for velocities (see `advanced` in
-// kernel_impl.hpp).
+// out = in + step * (G_0 + r_1 G_1 + ...) for the three components of a vector field, the
+// terms k[j] those of a RowSum (step: see RowSum).
 template <class T>
 struct Combination {
   const T* in[3];
   T* out[3];
-  int terms = 0;
+  int terms = 0;  // k[0 .. terms) are set where the row's weight is nonzero
   T step = 0;
   TermGroups groups;
   std::array<T, kMaxStages> ratio{};  // groups.ratio in T
   const T* k[kMaxStages][3];
 
-  // Appends the term w k (w != 0).
-  void add(double w, double first_w, const std::array<const T*, 3>& field) {
-    groups.add(terms, w, first_w);
-    const int g = groups.group[terms];
-    ratio[g] = T(groups.ratio[g]);
-    for (int d = 0; d < 3; ++d) k[terms][d] = field[d];
-    ++terms;
+  bool empty() const { return groups.count == 0; }
+  // Takes the first `count` terms of `row`; field(j) gives term j's three arrays.
+  template <class Field>
+  void set(const RowSum& row, int count, Field&& field) {
+    groups = row.groups;
+    terms = count;
+    for (int g = 0; g < groups.count; ++g) ratio[g] = T(groups.ratio[g]);
+    for (int j = 0; j < count; ++j) {
+      if (groups.group[j] < 0) continue;
+      const std::array<const T*, 3> arrays = field(j);
+      for (int d = 0; d < 3; ++d) k[j][d] = arrays[d];
+    }
   }
 };
 
