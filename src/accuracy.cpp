@@ -17,10 +17,7 @@ namespace {
 
 template <class T>
 BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
-  SerialJobSystem serial;
-  StepperOptions options;
-  options.jobs = &serial;
-  World<T> world(scene, method, options);
+  World<T> world(scene, method, on_calling_thread());
   world.advance(T(duration / double(steps)), steps);
   const ParticleSet<T>& particles = world.particles;
   const RigidBodySet<T>& rigid = world.rigid;
@@ -134,8 +131,8 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
 BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t steps,
                     double duration) {
   if (steps == 0) throw Error("simulate: steps must be at least 1");
-  return scene.precision == Precision::single ? run<float>(scene, method, steps, duration)
-                                              : run<double>(scene, method, steps, duration);
+  return with_precision(scene.precision,
+                        [&]<class T>() { return run<T>(scene, method, steps, duration); });
 }
 
 double state_error(const BodyStates& a, const BodyStates& b) {

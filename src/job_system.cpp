@@ -5,6 +5,9 @@
 #include <atomic>
 #include <cstdint>
 #include <limits>
+#include <map>
+#include <memory>
+#include <mutex>
 
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
@@ -39,6 +42,23 @@ void tsan_release(const void*) {}
 
 unsigned hardware_threads() {
   return std::max(1, tbb::this_task_arena::max_concurrency());
+}
+
+JobSystem& default_job_system(unsigned threads) {
+  static std::mutex guard;
+  // Never destroyed: arenas torn down during static destruction can outlive oneTBB's own
+  // globals. Reachable to the end, so leak checkers do not count them.
+  static auto* systems = new std::map<unsigned, std::unique_ptr<TbbJobSystem>>;
+  const unsigned n = threads == 0 ? hardware_threads() : threads;
+  const std::lock_guard lock(guard);
+  auto& system = (*systems)[n];
+  if (!system) system = std::make_unique<TbbJobSystem>(n);
+  return *system;
+}
+
+SerialJobSystem& calling_thread_jobs() {
+  static SerialJobSystem serial;  // stateless: shared freely
+  return serial;
 }
 
 JobHandle SerialJobSystem::enqueue(RangeTask task, std::size_t item_count, std::size_t,

@@ -578,14 +578,11 @@ void check_scene(const Scene& scene) {
   check_listed_masses<T>(scene);
   check_generated<T>(scene);
   const ForceModel<T> forces = make_forces<T>(scene);
-  SerialJobSystem serial;
-  StepperOptions options;
-  options.jobs = &serial;
   // Lowering the forces to T checks their sums; auto picks its own dt later.
   const Method& method = scene.method == "auto" ? rk4 : method_by_name(scene.method);
   std::optional<Stepper<T>> stepper;
   try {
-    stepper.emplace(forces, method, options);
+    stepper.emplace(forces, method, on_calling_thread());
   } catch (const Error& e) {
     throw Error(std::string("forces: ") + e.what());
   }

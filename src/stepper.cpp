@@ -43,10 +43,9 @@ struct Clock {
 
 template <class T>
 struct Stepper<T>::Impl {
-  ForceModel<T> forces;
+  std::shared_ptr<const ForceModel<T>> forces;
   Method method;
   StepperOptions options;
-  std::unique_ptr<TbbJobSystem> owned_jobs;
   JobSystem* jobs = nullptr;
   const kernels::KernelTable<T>* table = nullptr;
   LoweredForces<T> lowered;
@@ -55,28 +54,24 @@ struct Stepper<T>::Impl {
   std::unique_ptr<StagedPath<T>> staged;  // when the fused path does not apply
   Clock<T> clock;
 
-  Impl(ForceModel<T> f, const Method& m, StepperOptions o)
+  Impl(std::shared_ptr<const ForceModel<T>> f, const Method& m, StepperOptions o)
       : forces(std::move(f)), method(m), options(o) {
+    if (!forces) throw Error("stepper: null force model");
     validate(method);
     table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
-    if (options.jobs == nullptr) {
-      owned_jobs = std::make_unique<TbbJobSystem>(options.threads);
-      jobs = owned_jobs.get();
-    } else {
-      jobs = options.jobs;
-    }
-    lowered = lower_forces<T>(forces.local_terms());
+    jobs = options.jobs != nullptr ? options.jobs : &default_job_system(options.threads);
+    lowered = lower_forces<T>(forces->local_terms());
     pick_kernels();
   }
 
   void pick_kernels() {
     const int quad = lowered.particle.has_quadratic(), central = lowered.particle.has_central();
     const int builtin = builtin_index(method);
-    if (builtin >= 0 && forces.fusable()) rigid_fn = table->rigid[builtin][quad][central];
-    if (builtin >= 0 && forces.fusable() && !options.force_staged) {
+    if (builtin >= 0 && forces->fusable()) rigid_fn = table->rigid[builtin][quad][central];
+    if (builtin >= 0 && forces->fusable() && !options.force_staged) {
       fused_fn = table->fused[builtin][quad][central];
     } else {
-      staged = std::make_unique<StagedPath<T>>(forces, method, *table, lowered.particle);
+      staged = std::make_unique<StagedPath<T>>(*forces, method, *table, lowered.particle);
     }
   }
 
@@ -147,6 +142,11 @@ struct Stepper<T>::Impl {
 
 template <class T>
 Stepper<T>::Stepper(ForceModel<T> forces, const Method& method, StepperOptions options)
+    : Stepper(std::make_shared<const ForceModel<T>>(std::move(forces)), method, options) {}
+
+template <class T>
+Stepper<T>::Stepper(std::shared_ptr<const ForceModel<T>> forces, const Method& method,
+                    StepperOptions options)
     : impl_(std::make_unique<Impl>(std::move(forces), method, options)) {}
 
 template <class T>
@@ -203,7 +203,7 @@ const Method& Stepper<T>::method() const {
 }
 template <class T>
 const ForceModel<T>& Stepper<T>::forces() const {
-  return impl_->forces;
+  return *impl_->forces;
 }
 template <class T>
 Isa Stepper<T>::isa() const {

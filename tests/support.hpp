@@ -29,11 +29,9 @@ inline Isa test_isa() {
 }
 
 inline StepperOptions serial_options(Isa isa = test_isa()) {
-  static SerialJobSystem serial;
   StepperOptions o;
   o.isa = isa;
-  o.jobs = &serial;
-  return o;
+  return on_calling_thread(o);
 }
 
 template <class T>

@@ -60,4 +60,13 @@ class TbbJobSystem final : public JobSystem {
 // Number of hardware threads this process may use.
 unsigned hardware_threads();
 
+// The process-wide oneTBB job system of `threads` threads (0: all hardware threads), made at
+// first use and kept for the life of the process: every stepper given no job system of its
+// own shares it, so steppers never multiply arenas. Safe to call from any thread; the
+// system it returns may be used from several host threads at once.
+JobSystem& default_job_system(unsigned threads = 0);
+
+// A job system that runs everything on the calling thread, for any number of users.
+SerialJobSystem& calling_thread_jobs();
+
 }  // namespace kinema

@@ -17,6 +17,14 @@ enum class Precision { single, dual };  // float, double
 
 std::string_view precision_name(Precision p);  // "float" or "double"
 
+// fn.template operator()<float>() or <double>(), as `p` says: the one place a scene's
+// precision becomes a type.
+template <class Fn>
+decltype(auto) with_precision(Precision p, Fn&& fn) {
+  if (p == Precision::single) return fn.template operator()<float>();
+  return fn.template operator()<double>();
+}
+
 // Bodies drawn uniformly from boxes, reproducibly from `seed` on every platform. Rigid
 // ones also get a uniformly random orientation and an angular velocity from a box.
 struct GenerateSpec {

@@ -21,8 +21,8 @@ namespace kinema {
 
 struct StepperOptions {
   Isa isa = Isa::automatic;
-  // The host's job system; nullptr makes the stepper own a TbbJobSystem of `threads`
-  // threads (0: all hardware threads).
+  // The host's job system; nullptr uses the process-wide default_job_system(threads)
+  // (0: all hardware threads), shared with every other stepper that is given none.
   JobSystem* jobs = nullptr;
   unsigned threads = 0;
   // Scenes with fewer bodies than this run on the calling thread: below it, task
@@ -39,6 +39,12 @@ struct StepperOptions {
   bool renormalize_quaternions = true;
 };
 
+// `options` with every step run on the calling thread: no worker thread is involved.
+inline StepperOptions on_calling_thread(StepperOptions options = {}) {
+  options.jobs = &calling_thread_jobs();
+  return options;
+}
+
 // Bodies per block: the unit of work handed to the job system. Fixed, so the partition
 // (and every result) is the same for any number of threads. 1024 bodies is 4 KiB per
 // float array, 8 KiB per double array: a block's stage state stays in L1/L2.
@@ -49,6 +55,9 @@ class Stepper {
  public:
   // Throws kinema::Error for an invalid method or an unavailable ISA.
   Stepper(ForceModel<T> forces, const Method& method, StepperOptions options = {});
+  // Shares `forces` (with another stepper, as a World's two do) instead of keeping a copy.
+  Stepper(std::shared_ptr<const ForceModel<T>> forces, const Method& method,
+          StepperOptions options = {});
   ~Stepper();
   Stepper(Stepper&&) noexcept;
   Stepper& operator=(Stepper&&) noexcept;

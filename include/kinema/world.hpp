@@ -16,8 +16,10 @@ namespace kinema {
 template <class T>
 class World {
  public:
-  // With options.jobs null, the world owns a TbbJobSystem of options.threads threads that
-  // both steppers share. Throws kinema::Error as the scene builders and Stepper do.
+  // Builds the forces, then the bodies, then one stepper per kind of body (particles,
+  // rigid bodies), sharing the one force model; each kind has its own clock. With
+  // options.jobs null they use the process-wide default_job_system(options.threads).
+  // Throws kinema::Error as the scene builders and Stepper do.
   World(const Scene& scene, const Method& method, StepperOptions options = {});
   World(World&&) noexcept = default;
 
@@ -26,16 +28,23 @@ class World {
   double total_energy() const;  // kinetic (with rotation) + potential, both sets
   bool finite() const;
 
-  ParticleSet<T> particles;
-  RigidBodySet<T> rigid;
-  const ForceModel<T>& forces() const { return forces_; }
-  const Stepper<T>& stepper() const { return particle_stepper_; }
+  const ForceModel<T>& forces() const { return *forces_; }
+  const Stepper<T>& particle_stepper() const { return particle_stepper_; }
+  const Stepper<T>& rigid_stepper() const { return rigid_stepper_; }
+  // The stepper that moves the world's bodies: the particles', or the rigid bodies' when
+  // the world has no particles.
+  const Stepper<T>& main_stepper() const {
+    return particles.size() > 0 || rigid.size() == 0 ? particle_stepper_ : rigid_stepper_;
+  }
 
  private:
-  StepperOptions with_jobs(StepperOptions options);
+  std::shared_ptr<const ForceModel<T>> forces_;  // declared first: built before the bodies
 
-  ForceModel<T> forces_;
-  std::unique_ptr<JobSystem> owned_jobs_;
+ public:
+  ParticleSet<T> particles;
+  RigidBodySet<T> rigid;
+
+ private:
   Stepper<T> particle_stepper_, rigid_stepper_;
 };
 

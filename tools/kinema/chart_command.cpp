@@ -39,11 +39,7 @@ std::uint64_t step_count(double duration, double dt) {
 Scene load_checked(const std::string& path) {
   Scene scene = load_scene(path);
   try {
-    if (scene.precision == Precision::single) {
-      check_scene<float>(scene);
-    } else {
-      check_scene<double>(scene);
-    }
+    with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }
@@ -74,12 +70,9 @@ struct Point {
 template <class T>
 double timed(const Scene& scene, const Method& method, std::uint64_t steps, double duration,
              int repeat) {
-  SerialJobSystem serial;
-  StepperOptions o;
-  o.jobs = &serial;
   double best = std::numeric_limits<double>::infinity();
   for (int r = 0; r < repeat; ++r) {
-    World<T> world(scene, method, o);
+    World<T> world(scene, method, on_calling_thread());
     const auto start = std::chrono::steady_clock::now();
     world.advance(T(duration / double(steps)), steps);
     best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
@@ -183,9 +176,8 @@ int chart_scene(const ChartOptions& o) {
       const std::uint64_t steps = step_count(duration, dt);
       const double h = duration / double(steps);
       const double error = state_error(simulate(scene, *m, steps, duration), ref.states);
-      const double seconds = scene.precision == Precision::single
-                                 ? timed<float>(scene, *m, steps, duration, o.repeat)
-                                 : timed<double>(scene, *m, steps, duration, o.repeat);
+      const double seconds = with_precision(
+          scene.precision, [&]<class T>() { return timed<T>(scene, *m, steps, duration, o.repeat); });
       const std::size_t bodies = scene.particles.size() + scene.rigid_bodies.size();
       const double evaluations = double(steps) * m->evaluations() * double(bodies);
       points.push_back({m, h, steps, error, seconds / duration, evaluations});

@@ -39,11 +39,7 @@ Scene scene_with_overrides(const RunOptions& o) {
     if (scene.method == "auto" && !scene.tolerance) {
       throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
     }
-    if (scene.precision == Precision::single) {
-      check_scene<float>(scene);
-    } else {
-      check_scene<double>(scene);
-    }
+    with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {
     throw Error(o.scene_path + ": " + e.what());
   }
@@ -175,7 +171,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   if (trajectory) trajectory->close();
   progress.finish();
 
-  const Stepper<T>& stepper = world.stepper();
+  const Stepper<T>& stepper = world.main_stepper();
   nlohmann::ordered_json summary;
   summary["scene"] = scene.name;
   summary["bodies"] = bodies;
@@ -249,8 +245,7 @@ int run_scene(const RunOptions& o) {
     scene.steps = c.steps;
   }
   const RunContext context{choice};
-  return scene.precision == Precision::single ? run_typed<float>(scene, o, context)
-                                              : run_typed<double>(scene, o, context);
+  return with_precision(scene.precision, [&]<class T>() { return run_typed<T>(scene, o, context); });
 }
 
 }  // namespace kinema::cli

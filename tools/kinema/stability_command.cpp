@@ -66,10 +66,7 @@ double measured_threshold(const Method& m) {
     b.add({0, 0, 0}, {1, 0, 0}, 1);
     ForceModel<double> f;
     f.add(LinearDrag{1});
-    SerialJobSystem serial;
-    StepperOptions o;
-    o.jobs = &serial;
-    Stepper<double>(f, m, o).advance(b, z, 4000);
+    Stepper<double>(f, m, on_calling_thread()).advance(b, z, 4000);
     return std::isfinite(b.vx()[0]) && std::abs(b.vx()[0]) <= 1;
   };
   double lo = 0.5, hi = 4;
@@ -126,10 +123,7 @@ template <class T>
 std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t steps,
                    std::ofstream& energy_csv, std::ofstream& path_csv, std::ofstream& energy_dat,
                    std::ofstream& path_dat, double& max_z) {
-  SerialJobSystem serial;
-  StepperOptions o;
-  o.jobs = &serial;
-  World<T> world(scene, m, o);
+  World<T> world(scene, m, on_calling_thread());
   const double e0 = world.total_energy();
   const std::uint64_t every = std::max<std::uint64_t>(1, steps / 2000);
   const ParticleSet<T>& centres = world.particles.size() ? world.particles : world.rigid.centers();
@@ -176,9 +170,9 @@ int stability_scene(const StabilityOptions& o) {
     stop_if_interrupted();
     const std::string name(methods[i]->name);
     OutputFile energy_dat(dir / ("energy_" + name + ".dat")), path_dat(dir / ("path_" + name + ".dat"));
-    plotted += scene.precision == Precision::single
-        ? record<float>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z)
-        : record<double>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z);
+    plotted += with_precision(scene.precision, [&]<class T>() {
+      return record<T>(scene, *methods[i], dt, steps, energy_csv, path_csv, energy_dat, path_dat, max_z);
+    });
     energy_dat.close();
     path_dat.close();
     const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
