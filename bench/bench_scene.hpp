@@ -9,7 +9,7 @@
 #include <map>
 #include <mutex>
 
-#include "kinema/kinema.hpp"
+#include "kinema/scenes.hpp"
 
 namespace kinema::bench {
 

@@ -6,7 +6,7 @@
 #include <fstream>
 #include <string>
 
-#include "kinema/kinema.hpp"
+#include "kinema/scenes.hpp"
 
 namespace {
 

@@ -16,7 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_support.hpp"
-#include "kinema/kinema.hpp"
+#include "kinema/scenes.hpp"
 
 namespace fs = std::filesystem;
 using namespace kinema;

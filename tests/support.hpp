@@ -8,7 +8,7 @@
 #include <cstring>
 #include <vector>
 
-#include "kinema/kinema.hpp"
+#include "kinema/scenes.hpp"
 
 namespace kinema::test {
 

@@ -1,7 +1,8 @@
 #pragma once
-// kinema: a data-oriented time integrator for particles in games and simulations.
+// kinema, the runtime an engine embeds (library kinema::kinema): bodies, forces, methods,
+// the stepper, job systems and diagnostics. Scenes, worlds and the accuracy tools are the
+// separate library kinema::scene (kinema/scenes.hpp).
 
-#include "kinema/accuracy.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
@@ -9,6 +10,4 @@
 #include "kinema/isa.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
-#include "kinema/scene.hpp"
 #include "kinema/stepper.hpp"
-#include "kinema/world.hpp"

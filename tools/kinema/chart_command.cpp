@@ -8,7 +8,7 @@
 #include <fstream>
 #include <limits>
 
-#include "kinema/kinema.hpp"
+#include "kinema/scenes.hpp"
 #include "interrupt.hpp"
 #include "plot.hpp"
 #include "progress.hpp"

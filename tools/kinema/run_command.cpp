@@ -11,7 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "interrupt.hpp"
-#include "kinema/kinema.hpp"
+#include "kinema/scenes.hpp"
 #include "progress.hpp"
 #include "trajectory.hpp"
 

@@ -8,7 +8,7 @@
 #include <fstream>
 
 #include "chart_command.hpp"
-#include "kinema/kinema.hpp"
+#include "kinema/scenes.hpp"
 #include "interrupt.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
