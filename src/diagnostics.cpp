@@ -3,24 +3,18 @@
 #include <cmath>
 #include <utility>
 
+#include "force_terms.hpp"
+
 namespace kinema {
 namespace {
 
-// Potential per unit mass of the local conservative terms at x.
+// Potential energy of a body of mass m at x under the local terms that have one.
 double local_potential(std::span<const LocalTerm> terms, const Vec3<double>& x, double mass) {
   double u = 0;
   for (const LocalTerm& term : terms) {
-    if (auto* g = std::get_if<Gravity>(&term)) {
-      u -= mass * (g->g[0] * x[0] + g->g[1] * x[1] + g->g[2] * x[2]);
-    } else if (auto* s = std::get_if<Spring>(&term)) {
-      double r2 = 0;
-      for (int d = 0; d < 3; ++d) r2 += (x[d] - s->anchor[d]) * (x[d] - s->anchor[d]);
-      u += 0.5 * s->k * r2;
-    } else if (auto* c = std::get_if<Central>(&term)) {
-      double r2 = 0;
-      for (int d = 0; d < 3; ++d) r2 += (x[d] - c->center[d]) * (x[d] - c->center[d]);
-      u -= c->mu * mass / std::sqrt(r2);
-    }
+    visit_term(term, [&](const auto& t, auto info) {
+      if constexpr (decltype(info)::has_potential) u += info.potential(t, x, mass);
+    });
   }
   return u;
 }

@@ -1,8 +1,10 @@
 #include "force_lowering.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
+#include "force_terms.hpp"
 #include "kinema/error.hpp"
 
 namespace kinema {
@@ -22,61 +24,39 @@ T in_precision(double x) {
 }
 
 template <class T>
-kernels::LocalForces<T> lower_local(std::span<const LocalTerm> terms) {
-  Vec3<double> g{}, weighted_anchor{}, point_force_sum{};
-  double spring_k = 0, linear = 0, quadratic = 0;
+std::array<T, 3> in_precision(const Vec3<double>& v) {
+  return {in_precision<T>(v[0]), in_precision<T>(v[1]), in_precision<T>(v[2])};
+}
+
+template <class T>
+kernels::LocalForces<T> lower_local(const LocalSums& s) {
   kernels::LocalForces<T> out;
-  for (const LocalTerm& term : terms) {
-    if (auto* t = std::get_if<Gravity>(&term)) {
-      for (int d = 0; d < 3; ++d) g[d] += t->g[d];
-    } else if (auto* t = std::get_if<LinearDrag>(&term)) {
-      linear += t->k;
-    } else if (auto* t = std::get_if<QuadraticDrag>(&term)) {
-      quadratic += t->k;
-    } else if (auto* t = std::get_if<Spring>(&term)) {
-      // Springs sum to one: -sum k_i (x - a_i) = -K (x - sum k_i a_i / K).
-      spring_k += t->k;
-      linear += t->damping;
-      for (int d = 0; d < 3; ++d) weighted_anchor[d] += t->k * t->anchor[d];
-    } else if (auto* t = std::get_if<Central>(&term)) {
-      const int c = out.central_count++;
-      for (int d = 0; d < 3; ++d) out.center[c][d] = in_precision<T>(t->center[d]);
-      out.mu[c] = in_precision<T>(t->mu);
-    } else if (auto* t = std::get_if<PointForce>(&term)) {
-      for (int d = 0; d < 3; ++d) point_force_sum[d] += t->force[d];
-    }
+  out.central_count = std::min(s.central_count, kMaxCentralTerms);  // a ForceModel holds no more
+  for (int c = 0; c < out.central_count; ++c) {
+    out.center[c] = in_precision<T>(s.center[c]);
+    out.mu[c] = in_precision<T>(s.mu[c]);
   }
+  out.gravity = in_precision<T>(s.gravity);
+  out.constant_force = in_precision<T>(s.push);
   for (int d = 0; d < 3; ++d) {
-    out.gravity[d] = in_precision<T>(g[d]);
-    out.constant_force[d] = in_precision<T>(point_force_sum[d]);
-    out.anchor[d] = spring_k > 0 ? in_precision<T>(weighted_anchor[d] / spring_k) : T(0);
+    out.anchor[d] = s.spring_k > 0 ? in_precision<T>(s.weighted_anchor[d] / s.spring_k) : T(0);
   }
-  out.spring_k = in_precision<T>(spring_k);
-  out.linear = in_precision<T>(linear);
-  out.quadratic = in_precision<T>(quadratic);
+  out.spring_k = in_precision<T>(s.spring_k);
+  out.linear = in_precision<T>(s.linear);
+  out.quadratic = in_precision<T>(s.quadratic);
   return out;
 }
 
 template <class T>
-kernels::RotationalForces<T> lower_rotational(std::span<const LocalTerm> terms) {
-  Vec3<double> torque{};
-  double drag = 0;
+kernels::RotationalForces<T> lower_rotational(const LocalSums& s) {
   kernels::RotationalForces<T> out;
-  for (const LocalTerm& term : terms) {
-    if (auto* t = std::get_if<Torque>(&term)) {
-      for (int d = 0; d < 3; ++d) torque[d] += t->torque[d];
-    } else if (auto* t = std::get_if<AngularDrag>(&term)) {
-      drag += t->c;
-    } else if (auto* t = std::get_if<PointForce>(&term)) {
-      const int p = out.point_count++;
-      for (int d = 0; d < 3; ++d) {
-        out.point[p][d] = in_precision<T>(t->point[d]);
-        out.force[p][d] = in_precision<T>(t->force[d]);
-      }
-    }
+  out.point_count = std::min(s.point_count, kMaxPointForces);
+  for (int p = 0; p < out.point_count; ++p) {
+    out.point[p] = in_precision<T>(s.point[p]);
+    out.force[p] = in_precision<T>(s.point_force[p]);
   }
-  for (int d = 0; d < 3; ++d) out.torque[d] = in_precision<T>(torque[d]);
-  out.angular_drag = in_precision<T>(drag);
+  out.torque = in_precision<T>(s.torque);
+  out.angular_drag = in_precision<T>(s.angular_drag);
   return out;
 }
 
@@ -90,11 +70,12 @@ std::string shortest_text(double x, int digits) {
 
 template <class T>
 LoweredForces<T> lower_forces(std::span<const LocalTerm> terms) {
+  const LocalSums sums = sum_terms(terms);
   LoweredForces<T> out;
-  out.rigid = lower_local<T>(terms);
+  out.rigid = lower_local<T>(sums);
   out.particle = out.rigid;
   out.particle.constant_force = {};
-  out.rotation = lower_rotational<T>(terms);
+  out.rotation = lower_rotational<T>(sums);
   return out;
 }
 

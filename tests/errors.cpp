@@ -30,7 +30,7 @@ TEST_CASE("bad force parameters name the term and field", "[errors]") {
   CHECK_THROWS_WITH(f.add(Gravity{{0, nan, 0}}), "gravity.g: must be finite");
   CHECK_THROWS_WITH(f.add(Central{{0, 0, 0}, -1}), "central.mu: must be finite and >= 0");
   for (int i = 0; i < kMaxCentralTerms; ++i) f.add(Central{{double(i), 0, 0}, 1});
-  CHECK_THROWS_WITH(f.add(Central{{0, 0, 0}, 1}), "central: at most 4 central terms per model");
+  CHECK_THROWS_WITH(f.add(Central{{0, 0, 0}, 1}), "central: at most 4 per model");
   CHECK_THROWS_WITH(f.add(ForceCallback<float>{}), "callback force: empty function");
   CHECK_THROWS_WITH(f.add(std::shared_ptr<const CoupledTerm<float>>{}),
                     "coupled force: null term");

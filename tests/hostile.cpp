@@ -131,7 +131,7 @@ std::vector<Case> scene_cases() {
       {R"({"generate": {"count": 3, "seed": -1, "position_min": [0,0,0], "position_max": [1,1,1]}})", run_args(), 1, "generate.seed: expected an integer >= 0"},
       {R"({"generate": {"count": 3, "seed": 18446744073709551615, "position_min": [0,0,0], "position_max": [1,1,1]}, "steps": 2})", run_args(), 0, ""},
       {generated(R"("forces": [{"type":"central","mu":1},{"type":"central","mu":1},{"type":"central","mu":1},{"type":"central","mu":1},{"type":"central","mu":1}])"),
-       run_args(), 1, "forces[4]: central: at most 4 central terms", 64},
+       run_args(), 1, "forces[4]: central: at most 4 per model", 64},
       {generated(R"("forces": [{"type":"spring","k":1e39}])"), run_args(), 1, "forces: force parameters overflow float", 64},
       {generated(R"("forces": [{"type":"spring","k":2e38}, {"type":"spring","k":2e38}])"), run_args(), 1, "force parameters overflow float", 64},
       {generated(R"("dt": 1e-50)"), run_args(), 1, "dt: step size h must be positive and finite in float", 64},

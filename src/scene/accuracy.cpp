@@ -6,6 +6,7 @@
 #include <limits>
 #include <map>
 
+#include "force_terms.hpp"
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
@@ -161,28 +162,18 @@ double state_error(const BodyStates& a, const BodyStates& b) {
 
 std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
   if (!scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid)) return std::nullopt;
-  const Central* central = nullptr;
-  int centrals = 0, others = 0;
-  Vec3<double> g{}, weighted_anchor{};
-  double drag = 0, spring_k = 0;
+  // Gravity, linear drag and springs make one linear model; a lone central term an orbit.
+  const LocalSums sums = sum_terms(scene.forces);
+  int without_reference = 0;
   for (const LocalTerm& term : scene.forces) {
-    if (auto* c = std::get_if<Central>(&term)) {
-      central = c, ++centrals;
-    } else if (auto* gr = std::get_if<Gravity>(&term)) {
-      for (int d = 0; d < 3; ++d) g[d] += gr->g[d];
-    } else if (auto* l = std::get_if<LinearDrag>(&term)) {
-      drag += l->k;
-    } else if (auto* s = std::get_if<Spring>(&term)) {
-      spring_k += s->k, drag += s->damping;
-      for (int d = 0; d < 3; ++d) weighted_anchor[d] += s->k * s->anchor[d];
-    } else if (!std::holds_alternative<Torque>(term) && !std::holds_alternative<AngularDrag>(term) &&
-               !std::holds_alternative<PointForce>(term)) {
-      ++others;  // quadratic drag: no closed form here
-    }
+    visit_term(term, [&](const auto&, auto info) { without_reference += info.reference == ReferenceRule::none; });
   }
-  const bool linear = centrals == 0 && others == 0;
-  const bool kepler_only = centrals == 1 && others == 0 && drag == 0 && spring_k == 0 &&
-                           g == Vec3<double>{};
+  const double drag = sums.linear, spring_k = sums.spring_k;
+  const Vec3<double>&g = sums.gravity, &weighted_anchor = sums.weighted_anchor;
+  const bool linear = sums.central_count == 0 && without_reference == 0;
+  const bool kepler_only = sums.central_count == 1 && without_reference == 0 && drag == 0 &&
+                           spring_k == 0 && g == Vec3<double>{};
+  const Central central{sums.center[0], sums.mu[0]};  // the lone one, when kepler_only
   if (!linear && !kepler_only) return std::nullopt;
   const Scene explicit_scene = sample_bodies(scene, std::numeric_limits<std::size_t>::max());
   BodyStates out;
@@ -191,7 +182,7 @@ std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
     if (b.kinematic) {
       for (int d = 0; d < 3; ++d) m.x[d] = b.position[d] + b.velocity[d] * t, m.v[d] = b.velocity[d];
     } else if (kepler_only) {
-      const auto k = kepler(*central, b, t);
+      const auto k = kepler(central, b, t);
       if (!k) return std::nullopt;
       m = *k;
     } else {

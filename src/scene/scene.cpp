@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "force_terms.hpp"
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
@@ -46,6 +47,9 @@ struct Node {
   bool has(const std::string& key) const { return value.contains(key); }
 
   void expect_object(std::initializer_list<std::string_view> known) const {
+    expect_object(std::vector<std::string_view>(known));
+  }
+  void expect_object(const std::vector<std::string_view>& known) const {
     if (!value.is_object()) fail("expected an object");
     for (const auto& [key, _] : value.items()) {
       if (key == "comment" || key == "description") continue;
@@ -96,51 +100,37 @@ struct Node {
   Node required(const std::string& key) const { return child(key); }
 };
 
+// A term from its home's fields: the keys it knows, vectors and numbers >= 0.
+template <class Term, class Info>
+Term parse_term(const Node& n, Info info) {
+  std::vector<std::string_view> keys{"type"};
+  for_each_field(info, [&](const auto& field) { keys.push_back(field.key); });
+  n.expect_object(keys);
+  Term term;
+  for_each_field(info, [&](const auto& field) {
+    if (!field.required && !n.has(field.key)) return;
+    const Node value = n.child(field.key);
+    if constexpr (std::decay_t<decltype(field)>::is_vector) {
+      term.*field.member = value.vec3();
+    } else {
+      term.*field.member = value.non_negative();
+    }
+  });
+  return term;
+}
+
 LocalTerm parse_force(const Node& n) {
   if (!n.value.is_object()) n.fail("expected an object");
   const std::string type = n.required("type").string();
-  if (type == "gravity") {
-    n.expect_object({"type", "g"});
-    return Gravity{n.required("g").vec3()};
-  }
-  if (type == "linear_drag") {
-    n.expect_object({"type", "k"});
-    return LinearDrag{n.required("k").non_negative()};
-  }
-  if (type == "quadratic_drag") {
-    n.expect_object({"type", "k"});
-    return QuadraticDrag{n.required("k").non_negative()};
-  }
-  if (type == "spring") {
-    n.expect_object({"type", "anchor", "k", "damping"});
-    Spring s;
-    if (n.has("anchor")) s.anchor = n.child("anchor").vec3();
-    s.k = n.required("k").non_negative();
-    if (n.has("damping")) s.damping = n.child("damping").non_negative();
-    return s;
-  }
-  if (type == "central") {
-    n.expect_object({"type", "center", "mu"});
-    Central c;
-    if (n.has("center")) c.center = n.child("center").vec3();
-    c.mu = n.required("mu").non_negative();
-    return c;
-  }
-  if (type == "torque") {
-    n.expect_object({"type", "torque"});
-    return Torque{n.required("torque").vec3()};
-  }
-  if (type == "angular_drag") {
-    n.expect_object({"type", "c"});
-    return AngularDrag{n.required("c").non_negative()};
-  }
-  if (type == "point_force") {
-    n.expect_object({"type", "point", "force"});
-    return PointForce{n.required("point").vec3(), n.required("force").vec3()};
-  }
-  n.child("type").fail("unknown force '" + type +
-                       "' (known: gravity, linear_drag, quadratic_drag, spring, central, "
-                       "torque, angular_drag, point_force)");
+  std::optional<LocalTerm> term;
+  std::string known;
+  for_each_term([&]<class Term>() {
+    constexpr TermInfo<Term> info;
+    known += (known.empty() ? "" : ", ") + std::string(info.name);
+    if (type == info.name) term = parse_term<Term>(n, info);
+  });
+  if (!term) n.child("type").fail("unknown force '" + type + "' (known: " + known + ")");
+  return *term;
 }
 
 BodySpec parse_body(const Node& n) {
