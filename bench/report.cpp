@@ -57,7 +57,7 @@ std::optional<Figure> find(const Runs& runs, const std::string& run, const char*
   return c->second;
 }
 
-std::string fused(const std::string& kind, const std::string& method, const std::string& p,
+std::string run_name(const std::string& kind, const std::string& method, const std::string& p,
                   const std::string& isa, int threads, long n) {
   return kind + "/" + method + "/" + p + "/" + isa + "/threads:" + std::to_string(threads) + "/" +
          std::to_string(n) + "/real_time";
@@ -120,8 +120,8 @@ class Report {
     for (const std::string p : {"float", "double"}) {
       std::printf("%-6s", p.c_str());
       for (const char* m : {"euler", "midpoint", "heun", "rk4", "symplectic_euler", "velocity_verlet"}) {
-        const auto f = find(runs_, fused("fused", m, p, isa_, 1, 100000), "ns_per_body_step");
-        const auto c = find(runs_, fused("ceiling", m, p, isa_, 1, 100000), "ns_per_body_step");
+        const auto f = find(runs_, run_name("fused", m, p, isa_, 1, 100000), "ns_per_body_step");
+        const auto c = find(runs_, run_name("ceiling", m, p, isa_, 1, 100000), "ns_per_body_step");
         std::printf("  %s %s (%s)", m, cell(median(f), "%.3f").c_str(),
                     cell(percent(ratio(c, f)), "%.0f%%").c_str());
       }
@@ -132,10 +132,10 @@ class Report {
   void isa_table() {
     std::printf("\nRK4, N = 100000, 1 thread, by instruction set: ns per body-step (speed-up over scalar)\n");
     for (const std::string p : {"float", "double"}) {
-      const auto scalar = find(runs_, fused("fused", "rk4", p, "scalar", 1, 100000), "ns_per_body_step");
+      const auto scalar = find(runs_, run_name("fused", "rk4", p, "scalar", 1, 100000), "ns_per_body_step");
       std::printf("%-6s", p.c_str());
       for (const char* isa : {"scalar", "sse2", "avx2", "avx512"}) {
-        const auto f = find(runs_, fused("fused", "rk4", p, isa, 1, 100000), "ns_per_body_step");
+        const auto f = find(runs_, run_name("fused", "rk4", p, isa, 1, 100000), "ns_per_body_step");
         if (!f) continue;
         std::printf("  %s %.3f (%s)", isa, f->median, cell(ratio(scalar, f), "%.1fx").c_str());
       }
@@ -150,7 +150,7 @@ class Report {
         const std::string suffix = "/" + isa_ + "/threads:" + std::to_string(threads) + "/100000/real_time";
         const auto rigid = find(runs_, "rigid/rk4/" + p + suffix, "ns_per_body_step");
         const auto ceiling = find(runs_, "rigid-ceiling/rk4/" + p + suffix, "ns_per_body_step");
-        const auto particle = find(runs_, fused("fused", "rk4", p, isa_, threads, 100000), "ns_per_body_step");
+        const auto particle = find(runs_, run_name("fused", "rk4", p, isa_, threads, 100000), "ns_per_body_step");
         if (!rigid) continue;
         std::printf("%-6s N = 100000, %d thread%s: %.3f (%s a particle step; ceiling %s)\n", p.c_str(),
                     threads, threads > 1 ? "s" : "", rigid->median, cell(ratio(rigid, particle), "%.1fx").c_str(),
@@ -221,16 +221,16 @@ class Report {
   }
 
   void rk4_row(const std::string& p, long n) {
-    const auto one = find(runs_, fused("fused", "rk4", p, isa_, 1, n), "ns_per_body_step");
+    const auto one = find(runs_, run_name("fused", "rk4", p, isa_, 1, n), "ns_per_body_step");
     if (!one) return;
     cvs_.push_back(one->cv);
-    const auto two = find(runs_, fused("fused", "rk4", p, isa_, 2, n), "ns_per_body_step");
+    const auto two = find(runs_, run_name("fused", "rk4", p, isa_, 2, n), "ns_per_body_step");
     const auto naive = find(runs_, baseline("naive_aos", p, n), "ns_per_body_step");
     const auto odeint = find(runs_, baseline("odeint", p, n), "ns_per_body_step");
-    const auto ceiling = find(runs_, fused("ceiling", "rk4", p, isa_, 1, 100000), "ns_per_body_step");
-    const auto bw1 = ratio(find(runs_, fused("fused", "rk4", p, isa_, 1, n), "GB_per_s"),
+    const auto ceiling = find(runs_, run_name("ceiling", "rk4", p, isa_, 1, 100000), "ns_per_body_step");
+    const auto bw1 = ratio(find(runs_, run_name("fused", "rk4", p, isa_, 1, n), "GB_per_s"),
                            find(runs_, stream(n, 1), "GB_per_s"));
-    const auto bw2 = ratio(find(runs_, fused("fused", "rk4", p, isa_, 2, n), "GB_per_s"),
+    const auto bw2 = ratio(find(runs_, run_name("fused", "rk4", p, isa_, 2, n), "GB_per_s"),
                            find(runs_, stream(n, 2), "GB_per_s"));
     std::printf("%-6s %8ld | %7.3f ±%2.0f%% %7s %8s %8s %6s | %12s %7s %6s\n", p.c_str(), n, one->median,
                 100 * one->cv, cell(ratio(naive, one), "%.1fx").c_str(),

@@ -120,8 +120,6 @@ class ForceModel {
   std::vector<LocalTerm> local_;
   std::vector<ForceCallback<T>> callbacks_;
   std::vector<std::shared_ptr<const CoupledTerm<T>>> coupled_;
-  int central_count_ = 0;
-  int point_force_count_ = 0;
 };
 
 // Name of a term as scenes spell it ("gravity", "linear_drag", ...).

@@ -85,7 +85,7 @@ KINEMA_INLINE auto body_terms(const Forces<V>& f, const V& inv_mass) {
   BodyTerms<V, decltype(dynamic)> b{f.neg_spring_k * inv_mass, f.neg_linear * inv_mass,
                                     f.neg_quadratic * inv_mass, {}, dynamic};
   for (int d = 0; d < 3; ++d) {
-    b.g[d] = pick(dynamic, Pushed ? fused(inv_mass, f.force[d], f.g[d]) : f.g[d], V(0));
+    b.g[d] = pick(dynamic, Pushed ? mul_add(inv_mass, f.force[d], f.g[d]) : f.g[d], V(0));
   }
   return b;
 }
@@ -102,7 +102,7 @@ KINEMA_INLINE Vec<V> anchored(const Forces<V>& f, const Vec<V>& x) {
 template <class V, class B>
 KINEMA_INLINE Vec<V> linear_part(const B& body, const Vec<V>& xr) {
   Vec<V> p;
-  for (int d = 0; d < 3; ++d) p.c[d] = fused(body.neg_k, xr.c[d], body.g[d]);
+  for (int d = 0; d < 3; ++d) p.c[d] = mul_add(body.neg_k, xr.c[d], body.g[d]);
   return p;
 }
 
@@ -116,7 +116,7 @@ KINEMA_INLINE Vec<V> linear_part_at(const B& body, value_t<V> step, const Vec<V>
                                     const Vec<V>& p) {
   const V slope = body.neg_k * V(step);
   Vec<V> out;
-  for (int d = 0; d < 3; ++d) out.c[d] = fused(slope, sum.c[d], p.c[d]);
+  for (int d = 0; d < 3; ++d) out.c[d] = mul_add(slope, sum.c[d], p.c[d]);
   return out;
 }
 
@@ -129,19 +129,19 @@ KINEMA_INLINE Vec<V> accel(const Forces<V>& f, const B& body, const Vec<V>& p, c
                            const Vec<V>& v) {
   V neg_drag = body.neg_linear;
   if constexpr (Quadratic) {
-    V speed = root(fused(v.c[0], v.c[0], fused(v.c[1], v.c[1], v.c[2] * v.c[2])));
-    neg_drag = fused(body.neg_quadratic, speed, neg_drag);
+    V speed = root(mul_add(v.c[0], v.c[0], mul_add(v.c[1], v.c[1], v.c[2] * v.c[2])));
+    neg_drag = mul_add(body.neg_quadratic, speed, neg_drag);
   }
   Vec<V> a;
-  for (int d = 0; d < 3; ++d) a.c[d] = fused(neg_drag, v.c[d], p.c[d]);
+  for (int d = 0; d < 3; ++d) a.c[d] = mul_add(neg_drag, v.c[d], p.c[d]);
   if constexpr (Central) {
     for (int c = 0; c < f.central_count; ++c) {
       Vec<V> r;
       for (int d = 0; d < 3; ++d) r.c[d] = x.c[d] - f.center[c][d];
-      V r2 = fused(r.c[0], r.c[0], fused(r.c[1], r.c[1], r.c[2] * r.c[2]));
+      V r2 = mul_add(r.c[0], r.c[0], mul_add(r.c[1], r.c[1], r.c[2] * r.c[2]));
       // -mu / |r|^3; masked, as a padding body at the centre gives 0/0.
       V scale = pick(body.dynamic, f.neg_mu[c] / (r2 * root(r2)), V(0));
-      for (int d = 0; d < 3; ++d) a.c[d] = fused(scale, r.c[d], a.c[d]);
+      for (int d = 0; d < 3; ++d) a.c[d] = mul_add(scale, r.c[d], a.c[d]);
     }
   }
   return a;
@@ -160,13 +160,13 @@ template <class V>
 KINEMA_INLINE V accumulate(value_t<V> ratio, const V& k, const V& sum) {
   if (ratio == 1) return sum + k;
   if (ratio == 2) return sum + (k + k);
-  return fused(V(ratio), k, sum);
+  return mul_add(V(ratio), k, sum);
 }
 
 template <class V, int N>
 KINEMA_INLINE Vec<V, N> step_by(const V& h, const Vec<V, N>& dir, const Vec<V, N>& base) {
   Vec<V, N> out;
-  for (int d = 0; d < N; ++d) out.c[d] = fused(h, dir.c[d], base.c[d]);
+  for (int d = 0; d < N; ++d) out.c[d] = mul_add(h, dir.c[d], base.c[d]);
   return out;
 }
 
@@ -372,7 +372,7 @@ void add_forces(const ForceJob<value_t<V>>& job, std::size_t begin, std::size_t 
     const Vec<V> a = load3<V>(job.acc, i), force = load3<V>(job.force, i);
     Vec<V> sum;
     for (int d = 0; d < 3; ++d) {
-      sum.c[d] = pick(inv_mass != V(0), fused(inv_mass, scale * force.c[d], a.c[d]), a.c[d]);
+      sum.c[d] = pick(inv_mass != V(0), mul_add(inv_mass, scale * force.c[d], a.c[d]), a.c[d]);
     }
     store3(job.acc, i, sum);
   }

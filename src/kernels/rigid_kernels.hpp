@@ -21,7 +21,7 @@ struct Rotation {
 template <class V>
 KINEMA_INLINE Rotation<V> rotation(const Quat4<V>& q) {
   const V w = q.c[0], x = q.c[1], y = q.c[2], z = q.c[3];
-  const V s = V(2) / fused(w, w, fused(x, x, fused(y, y, z * z)));
+  const V s = V(2) / mul_add(w, w, mul_add(x, x, mul_add(y, y, z * z)));
   const V xs = x * s, ys = y * s, zs = z * s;
   const V wx = w * xs, wy = w * ys, wz = w * zs, xx = x * xs, xy = x * ys, xz = x * zs;
   const V yy = y * ys, yz = y * zs, zz = z * zs, one(1);
@@ -34,7 +34,7 @@ template <class V>
 KINEMA_INLINE Vec<V> times(const Rotation<V>& r, const Vec<V>& v) {
   Vec<V> out;
   for (int d = 0; d < 3; ++d) {
-    out.c[d] = fused(r.m[d][0], v.c[0], fused(r.m[d][1], v.c[1], r.m[d][2] * v.c[2]));
+    out.c[d] = mul_add(r.m[d][0], v.c[0], mul_add(r.m[d][1], v.c[1], r.m[d][2] * v.c[2]));
   }
   return out;
 }
@@ -43,15 +43,15 @@ template <class V>
 KINEMA_INLINE Vec<V> transposed_times(const Rotation<V>& r, const Vec<V>& v) {
   Vec<V> out;
   for (int d = 0; d < 3; ++d) {
-    out.c[d] = fused(r.m[0][d], v.c[0], fused(r.m[1][d], v.c[1], r.m[2][d] * v.c[2]));
+    out.c[d] = mul_add(r.m[0][d], v.c[0], mul_add(r.m[1][d], v.c[1], r.m[2][d] * v.c[2]));
   }
   return out;
 }
 
 template <class V>
 KINEMA_INLINE Vec<V> cross(const Vec<V>& a, const Vec<V>& b) {
-  return {{fused(a.c[1], b.c[2], -(a.c[2] * b.c[1])), fused(a.c[2], b.c[0], -(a.c[0] * b.c[2])),
-           fused(a.c[0], b.c[1], -(a.c[1] * b.c[0]))}};
+  return {{mul_add(a.c[1], b.c[2], -(a.c[2] * b.c[1])), mul_add(a.c[2], b.c[0], -(a.c[0] * b.c[2])),
+           mul_add(a.c[0], b.c[1], -(a.c[1] * b.c[0]))}};
 }
 
 // omega = R diag(1/I) R^T L
@@ -70,9 +70,9 @@ KINEMA_INLINE Quat4<V> quaternion_rate(const Vec<V>& omega, const Quat4<V>& q) {
   for (int d = 0; d < 3; ++d) o.c[d] = half * omega.c[d];  // exact
   const Vec<V> u{{q.c[1], q.c[2], q.c[3]}};
   const Vec<V> ou = cross(o, u);
-  return {{-fused(o.c[0], u.c[0], fused(o.c[1], u.c[1], o.c[2] * u.c[2])),
-           fused(q.c[0], o.c[0], ou.c[0]), fused(q.c[0], o.c[1], ou.c[1]),
-           fused(q.c[0], o.c[2], ou.c[2])}};
+  return {{-mul_add(o.c[0], u.c[0], mul_add(o.c[1], u.c[1], o.c[2] * u.c[2])),
+           mul_add(q.c[0], o.c[0], ou.c[0]), mul_add(q.c[0], o.c[1], ou.c[1]),
+           mul_add(q.c[0], o.c[2], ou.c[2])}};
 }
 
 template <class V>
@@ -95,7 +95,7 @@ template <class V, class B>
 KINEMA_INLINE Vec<V> torque(const Rotational<V>& f, const B& body, const Rotation<V>& r,
                      const Vec<V>& omega) {
   Vec<V> t;
-  for (int d = 0; d < 3; ++d) t.c[d] = fused(f.neg_drag, omega.c[d], f.torque[d]);
+  for (int d = 0; d < 3; ++d) t.c[d] = mul_add(f.neg_drag, omega.c[d], f.torque[d]);
   for (int p = 0; p < f.point_count; ++p) {
     const Vec<V> arm = cross(times(r, f.point[p]), f.force[p]);
     for (int d = 0; d < 3; ++d) t.c[d] = t.c[d] + arm.c[d];
@@ -113,7 +113,7 @@ struct RigidState {
 
 template <class V>
 KINEMA_INLINE Quat4<V> normalized(const Quat4<V>& q) {
-  const V norm = root(fused(q.c[0], q.c[0], fused(q.c[1], q.c[1], fused(q.c[2], q.c[2], q.c[3] * q.c[3]))));
+  const V norm = root(mul_add(q.c[0], q.c[0], mul_add(q.c[1], q.c[1], mul_add(q.c[2], q.c[2], q.c[3] * q.c[3]))));
   Quat4<V> out;
   for (int k = 0; k < 4; ++k) out.c[k] = q.c[k] / norm;
   return out;

@@ -3,7 +3,7 @@
 // Included by each per-ISA translation unit inside its own namespace (KINEMA_ISA_NS), so
 // inline functions compiled with different flags never merge at link time.
 //
-// fused(a, b, c) is a*b + c with one rounding on every path: the FMA instructions on AVX2
+// mul_add(a, b, c) is a*b + c with one rounding on every path: the FMA instructions on AVX2
 // and AVX-512, std::fma on the scalar path, and on SSE2 an exact emulation for float
 // (exact_fma.hpp) and std::fma per lane for double. With -ffp-contract=off the compiler never fuses anything else,
 // so every path computes the same bits.
@@ -62,15 +62,15 @@ KINEMA_INLINE void store(value_t<V>* p, const V& v) {
 // roundings). Faster where there is no FMA unit; no longer the other paths' bits.
 template <class T>
   requires std::is_floating_point_v<T>
-KINEMA_INLINE T fused(T a, T b, T c) {
+KINEMA_INLINE T mul_add(T a, T b, T c) {
   return a * b + c;
 }
-KINEMA_INLINE xsimd::batch<float, xsimd::sse2> fused(const xsimd::batch<float, xsimd::sse2>& a,
+KINEMA_INLINE xsimd::batch<float, xsimd::sse2> mul_add(const xsimd::batch<float, xsimd::sse2>& a,
                                               const xsimd::batch<float, xsimd::sse2>& b,
                                               const xsimd::batch<float, xsimd::sse2>& c) {
   return a * b + c;
 }
-KINEMA_INLINE xsimd::batch<double, xsimd::sse2> fused(const xsimd::batch<double, xsimd::sse2>& a,
+KINEMA_INLINE xsimd::batch<double, xsimd::sse2> mul_add(const xsimd::batch<double, xsimd::sse2>& a,
                                                const xsimd::batch<double, xsimd::sse2>& b,
                                                const xsimd::batch<double, xsimd::sse2>& c) {
   return a * b + c;
@@ -80,19 +80,19 @@ KINEMA_INLINE xsimd::batch<double, xsimd::sse2> fused(const xsimd::batch<double,
 // inline emulation below is slower here: a lone dependent chain exposes its latency.)
 template <class T>
   requires std::is_floating_point_v<T>
-KINEMA_INLINE T fused(T a, T b, T c) {
+KINEMA_INLINE T mul_add(T a, T b, T c) {
   return std::fma(a, b, c);
 }
 
 // SSE2 float: four lanes emulated at once (exact_fma.hpp), 1.5x faster than four libm
 // calls (measured: rk4, 100k bodies, 86 against 127 ns per body-step, Zen 4).
-KINEMA_INLINE xsimd::batch<float, xsimd::sse2> fused(const xsimd::batch<float, xsimd::sse2>& a,
+KINEMA_INLINE xsimd::batch<float, xsimd::sse2> mul_add(const xsimd::batch<float, xsimd::sse2>& a,
                                               const xsimd::batch<float, xsimd::sse2>& b,
                                               const xsimd::batch<float, xsimd::sse2>& c) {
   return exact_fma(__m128(a), __m128(b), __m128(c));
 }
 
-KINEMA_INLINE xsimd::batch<double, xsimd::sse2> fused(const xsimd::batch<double, xsimd::sse2>& a,
+KINEMA_INLINE xsimd::batch<double, xsimd::sse2> mul_add(const xsimd::batch<double, xsimd::sse2>& a,
                                                const xsimd::batch<double, xsimd::sse2>& b,
                                                const xsimd::batch<double, xsimd::sse2>& c) {
   // SSE2 has no FMA: one correctly rounded std::fma per lane.
@@ -108,13 +108,13 @@ KINEMA_INLINE xsimd::batch<double, xsimd::sse2> fused(const xsimd::batch<double,
 #endif
 
 #if defined(__FMA__)
-KINEMA_INLINE xsimd::batch<float, xsimd::fma3<xsimd::avx2>> fused(
+KINEMA_INLINE xsimd::batch<float, xsimd::fma3<xsimd::avx2>> mul_add(
     const xsimd::batch<float, xsimd::fma3<xsimd::avx2>>& a,
     const xsimd::batch<float, xsimd::fma3<xsimd::avx2>>& b,
     const xsimd::batch<float, xsimd::fma3<xsimd::avx2>>& c) {
   return _mm256_fmadd_ps(a, b, c);
 }
-KINEMA_INLINE xsimd::batch<double, xsimd::fma3<xsimd::avx2>> fused(
+KINEMA_INLINE xsimd::batch<double, xsimd::fma3<xsimd::avx2>> mul_add(
     const xsimd::batch<double, xsimd::fma3<xsimd::avx2>>& a,
     const xsimd::batch<double, xsimd::fma3<xsimd::avx2>>& b,
     const xsimd::batch<double, xsimd::fma3<xsimd::avx2>>& c) {
@@ -124,12 +124,12 @@ KINEMA_INLINE xsimd::batch<double, xsimd::fma3<xsimd::avx2>> fused(
 
 #if defined(__AVX512F__)
 // xsimd 8.1's fma on avx512f batches is a multiply then an add: use the instruction.
-KINEMA_INLINE xsimd::batch<float, xsimd::avx512f> fused(const xsimd::batch<float, xsimd::avx512f>& a,
+KINEMA_INLINE xsimd::batch<float, xsimd::avx512f> mul_add(const xsimd::batch<float, xsimd::avx512f>& a,
                                                  const xsimd::batch<float, xsimd::avx512f>& b,
                                                  const xsimd::batch<float, xsimd::avx512f>& c) {
   return _mm512_fmadd_ps(a, b, c);
 }
-KINEMA_INLINE xsimd::batch<double, xsimd::avx512f> fused(
+KINEMA_INLINE xsimd::batch<double, xsimd::avx512f> mul_add(
     const xsimd::batch<double, xsimd::avx512f>& a, const xsimd::batch<double, xsimd::avx512f>& b,
     const xsimd::batch<double, xsimd::avx512f>& c) {
   return _mm512_fmadd_pd(a, b, c);

@@ -440,7 +440,7 @@ Scene load_scene(const std::filesystem::path& path) {
 namespace {
 
 template <class T>
-Vec3<T> narrow(const Vec3<double>& v) {
+Vec3<T> converted(const Vec3<double>& v) {
   return {T(v[0]), T(v[1]), T(v[2])};
 }
 
@@ -591,9 +591,9 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
   const bool generated = scene.generate && scene.generate->rigid;
   set.reserve(scene.rigid_bodies.size() + (generated ? scene.generate->count : 0));
   auto add = [&](const RigidSpec& b) {
-    set.add({narrow<T>(b.position), narrow<T>(b.velocity),
+    set.add({converted<T>(b.position), converted<T>(b.velocity),
              {T(b.orientation[0]), T(b.orientation[1]), T(b.orientation[2]), T(b.orientation[3])},
-             narrow<T>(b.angular_momentum), T(b.mass), narrow<T>(b.inertia)});
+             converted<T>(b.angular_momentum), T(b.mass), converted<T>(b.inertia)});
   };
   for (const RigidSpec& b : scene.rigid_bodies) add(b);
   if (generated) {
@@ -620,7 +620,7 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
 template <class T>
 ParticleSet<T> make_particles(const Scene& scene) {
   check_generated<T>(scene);
-  auto v3 = [](const Vec3<double>& v) { return narrow<T>(v); };
+  auto v3 = [](const Vec3<double>& v) { return converted<T>(v); };
   ParticleSet<T> set;
   const std::size_t generated = scene.generate && !scene.generate->rigid ? scene.generate->count : 0;
   set.reserve(scene.particles.size() + generated);
