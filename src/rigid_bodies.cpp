@@ -55,8 +55,9 @@ Vec3<double> rotate(const Quat<double>& q, const Vec3<double>& v) {
           v[2] + q[0] * t[2] + (u[0] * t[1] - u[1] * t[0])};
 }
 
-PrincipalFrame principal_frame(const Matrix& inertia) {
-  Matrix a = inertia, v{{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
+namespace {
+
+void check_symmetric(const Matrix& a) {
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
       if (!std::isfinite(a[i][j])) throw Error("inertia: not finite");
@@ -65,8 +66,12 @@ PrincipalFrame principal_frame(const Matrix& inertia) {
       }
     }
   }
-  // Scaled by a power of two (exact) so that the largest entry is about 1: the sums below
-  // cannot overflow near 1e308 nor underflow near 1e-308.
+}
+
+// Scales `a` by a power of two (exact) so that its largest entry is about 1, and returns
+// the exponent: the sums of the Jacobi sweeps cannot overflow near 1e308 nor underflow
+// near 1e-308.
+int normalize(Matrix& a) {
   double largest = 0;
   for (const auto& row : a) {
     for (double x : row) largest = std::max(largest, std::abs(x));
@@ -76,10 +81,15 @@ PrincipalFrame principal_frame(const Matrix& inertia) {
   for (auto& row : a) {
     for (double& x : row) x = std::ldexp(x, -exponent);
   }
-  // Cyclic Jacobi: each rotation zeroes one off-diagonal entry; a few sweeps converge.
+  return exponent;
+}
+
+// Cyclic Jacobi: each rotation zeroes one off-diagonal entry of `a`; a few sweeps converge.
+// The rotations accumulate in `v`, whose columns become the eigenvectors.
+void diagonalize(Matrix& a, Matrix& v) {
   for (int sweep = 0; sweep < 50; ++sweep) {
     const double off = std::abs(a[0][1]) + std::abs(a[0][2]) + std::abs(a[1][2]);
-    if (off <= 1e-15 * (std::abs(a[0][0]) + std::abs(a[1][1]) + std::abs(a[2][2]))) break;
+    if (off <= 1e-15 * (std::abs(a[0][0]) + std::abs(a[1][1]) + std::abs(a[2][2]))) return;
     for (int p = 0; p < 2; ++p) {
       for (int q = p + 1; q < 3; ++q) {
         if (a[p][q] == 0) continue;
@@ -94,13 +104,22 @@ PrincipalFrame principal_frame(const Matrix& inertia) {
           const double apk = a[p][k], aqk = a[q][k];
           a[p][k] = c * apk - s * aqk, a[q][k] = s * apk + c * aqk;
         }
-        for (int k = 0; k < 3; ++k) {  // v = v J: columns become the eigenvectors
+        for (int k = 0; k < 3; ++k) {  // v = v J
           const double vkp = v[k][p], vkq = v[k][q];
           v[k][p] = c * vkp - s * vkq, v[k][q] = s * vkp + c * vkq;
         }
       }
     }
   }
+}
+
+}  // namespace
+
+PrincipalFrame principal_frame(const Matrix& inertia) {
+  check_symmetric(inertia);
+  Matrix a = inertia, v{{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
+  const int exponent = normalize(a);
+  diagonalize(a, v);
   const double det = v[0][0] * (v[1][1] * v[2][2] - v[1][2] * v[2][1]) -
                      v[0][1] * (v[1][0] * v[2][2] - v[1][2] * v[2][0]) +
                      v[0][2] * (v[1][0] * v[2][1] - v[1][1] * v[2][0]);
