@@ -11,27 +11,27 @@
 
 namespace kinema::cli {
 
-struct ChartOptions {
+// What chart and stability share: a scene, the methods, the span, a sample of bodies.
+struct SweepOptions {
   std::string scene_path;
   std::vector<std::string> methods;  // empty: every built-in method
-  std::vector<double> dts;           // empty: the scene's dt times 2^-3 .. 2^4
   std::optional<double> duration;    // default: the scene's dt x steps
   std::size_t max_bodies = 256;      // bodies sampled from the scene
-  int repeat = 3;                    // timed runs per point (the minimum is kept)
-  std::string out = "charts";
+  std::string out;                   // output folder
   bool quiet = false;
+};
+
+struct ChartOptions : SweepOptions {
+  ChartOptions() { out = "charts"; }
+  std::vector<double> dts;  // empty: the scene's dt times 2^-3 .. 2^4
+  int repeat = 3;           // timed runs per point (the minimum is kept)
 };
 
 int chart_scene(const ChartOptions& options);
 
-struct StabilityOptions {
-  std::string scene_path;
-  std::vector<std::string> methods;
-  std::optional<double> dt;
-  std::optional<double> duration;
-  std::size_t max_bodies = 256;
-  std::string out = "stability";
-  bool quiet = false;
+struct StabilityOptions : SweepOptions {
+  StabilityOptions() { out = "stability"; }
+  std::optional<double> dt;  // default: the scene's
 };
 
 int stability_scene(const StabilityOptions& options);

@@ -89,36 +89,34 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_flag("--quiet,-q", o.quiet, "Print nothing on success");
 }
 
+// The options chart and stability share.
+void add_sweep_options(CLI::App& command, SweepOptions& o) {
+  command.add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
+  command.add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  command.add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
+      ->check(positive_finite);
+  command.add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
+      ->transform(decimal(1, std::uint64_t(1) << 32));
+  command.add_option("--out", o.out, "Output folder (default: " + o.out + ")")->check(not_empty);
+  command.add_flag("--quiet,-q", o.quiet, "No progress bar and no summary");
+}
+
 void add_chart_command(CLI::App& app, ChartOptions& o) {
   CLI::App* chart = app.add_subcommand(
       "chart", "Work-precision diagram: error against cost for each method over a range of steps");
-  chart->add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
-  chart->add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  add_sweep_options(*chart, o);
   chart->add_option("--dts", o.dts, "Step sizes (default: the scene's dt times 1/8 .. 16)")
       ->delimiter(',')
       ->check(positive_finite);
-  chart->add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
-      ->check(positive_finite);
-  chart->add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
-      ->transform(decimal(1, std::uint64_t(1) << 32));
   chart->add_option("--repeat", o.repeat, "Timed runs per point; the fastest counts (default 3)")
       ->transform(decimal(1, 100));
-  chart->add_option("--out", o.out, "Output folder (default: charts)")->check(not_empty);
-  chart->add_flag("--quiet,-q", o.quiet, "No progress bar and no summary");
 }
 
 void add_stability_command(CLI::App& app, StabilityOptions& o) {
   CLI::App* s = app.add_subcommand(
       "stability", "Energy error against time, trajectories, and the stability regions");
-  s->add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
-  s->add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  add_sweep_options(*s, o);
   s->add_option("--dt", o.dt, "Step size (default: the scene's)")->check(positive_finite);
-  s->add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
-      ->check(positive_finite);
-  s->add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
-      ->transform(decimal(1, std::uint64_t(1) << 32));
-  s->add_option("--out", o.out, "Output folder (default: stability)")->check(not_empty);
-  s->add_flag("--quiet,-q", o.quiet, "No progress bar and no summary");
 }
 
 }  // namespace
