@@ -35,10 +35,13 @@ std::string escaped(const char* format, unsigned value) {
 
 }  // namespace
 
-std::string printable(std::string_view text) {
+std::string printable(std::string_view text, std::size_t limit) {
   std::string out;
-  out.reserve(text.size());
+  out.reserve(std::min(text.size(), limit));
   for (std::size_t i = 0; i < text.size();) {
+    if (out.size() >= limit) {
+      return out + "... (" + std::to_string(text.size() - i) + " more bytes)";
+    }
     const auto c = static_cast<unsigned char>(text[i]);
     const std::size_t n = c >= 0x80 ? utf8_length(text, i) : 0;
     if (c >= 0x20 && c < 0x7F) {

@@ -57,10 +57,10 @@ Vec3<double> rotate(const Quat<double>& q, const Vec3<double>& v) {
 
 namespace {
 
+// On the normalized tensor: near 1e308 the difference and the sum would overflow.
 void check_symmetric(const Matrix& a) {
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
-      if (!std::isfinite(a[i][j])) throw Error("inertia: not finite");
       if (std::abs(a[i][j] - a[j][i]) > 1e-9 * (std::abs(a[i][j]) + std::abs(a[j][i]))) {
         throw Error("inertia: the tensor is not symmetric");
       }
@@ -74,7 +74,10 @@ void check_symmetric(const Matrix& a) {
 int normalize(Matrix& a) {
   double largest = 0;
   for (const auto& row : a) {
-    for (double x : row) largest = std::max(largest, std::abs(x));
+    for (double x : row) {
+      if (!std::isfinite(x)) throw Error("inertia: not finite");
+      largest = std::max(largest, std::abs(x));
+    }
   }
   if (largest == 0) throw Error("inertia: the tensor is zero");
   const int exponent = std::ilogb(largest);
@@ -116,9 +119,9 @@ void diagonalize(Matrix& a, Matrix& v) {
 }  // namespace
 
 PrincipalFrame principal_frame(const Matrix& inertia) {
-  check_symmetric(inertia);
   Matrix a = inertia, v{{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
   const int exponent = normalize(a);
+  check_symmetric(a);
   diagonalize(a, v);
   const double det = v[0][0] * (v[1][1] * v[2][2] - v[1][2] * v[2][1]) -
                      v[0][1] * (v[1][0] * v[2][2] - v[1][2] * v[2][0]) +

@@ -82,16 +82,18 @@ struct Stepper<T>::Impl {
     return T(kernels::acceleration_scale(method.tableau)) * step_size;
   }
 
-  void check_step_size(T step_size) const {
+  // What a step of the given set would throw: `forces` are the particles' or the rigid
+  // bodies' (which add the point forces' push).
+  void check_step_size(T step_size, const kernels::LocalForces<T>& forces) const {
     if (!(std::isfinite(step_size) && step_size > 0)) {
       throw Error("step size h must be positive and finite in " + type_name<T>() + ", got " +
                   shortest_text(step_size));
     }
-    check_scaled_forces(lowered.particle, accel_scale(step_size), step_size);
+    check_scaled_forces(forces, accel_scale(step_size), step_size);
   }
 
-  StepContext<T> start(ParticleSet<T>& bodies, T step_size) {
-    check_step_size(step_size);
+  StepContext<T> start(ParticleSet<T>& bodies, T step_size, const kernels::LocalForces<T>& forces) {
+    check_step_size(step_size, forces);
     clock.use(step_size);
     return {bodies, step_size, accel_scale(step_size)};
   }
@@ -106,7 +108,7 @@ struct Stepper<T>::Impl {
       throw Error("rigid bodies need a built-in method and local force terms only (no "
                   "callbacks, no coupled terms)");
     }
-    const StepContext<T> c = start(b.centers_, step_size);
+    const StepContext<T> c = start(b.centers_, step_size, lowered.rigid);
     const kernels::RigidJob<T> job{arrays(b.centers_), {b.q(0), b.q(1), b.q(2), b.q(3)},
                                    {b.l(0), b.l(1), b.l(2)},
                                    {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
@@ -119,7 +121,7 @@ struct Stepper<T>::Impl {
   }
 
   void advance(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
-    StepContext<T> c = start(b, step_size);
+    StepContext<T> c = start(b, step_size, lowered.particle);
     if (fused_fn == nullptr) return advance_staged(c, steps);
     // Local, time-independent forces: each block can take all its steps while it sits in
     // cache. Every body sees the same operations as step by step, so the bits agree.
@@ -178,7 +180,8 @@ void Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps) {
 
 template <class T>
 void Stepper<T>::check_step_size(T h) const {
-  impl_->check_step_size(h);
+  impl_->check_step_size(h, impl_->lowered.particle);
+  impl_->check_step_size(h, impl_->lowered.rigid);
 }
 
 template <class T>

@@ -78,8 +78,10 @@ inline Result run_kinema(const std::vector<std::string>& args, const fs::path& s
   if (while_running) while_running(pid);
   int status = 0;
   rusage usage{};
-  while (::wait4(pid, &status, 0, &usage) < 0 && errno == EINTR) {
+  pid_t waited;
+  while ((waited = ::wait4(pid, &status, 0, &usage)) < 0 && errno == EINTR) {
   }
+  if (waited != pid) return r;  // code -1: no exit status
   r.killed = !WIFEXITED(status);
   r.code = r.killed ? 128 + WTERMSIG(status) : WEXITSTATUS(status);
   r.peak_kib = usage.ru_maxrss;

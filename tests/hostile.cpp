@@ -62,7 +62,8 @@ std::vector<Case> scene_cases() {
   return {
       // JSON as text: syntax, numbers out of range, duplicate keys, bytes that end parsing.
       {"{\"particles\": [", run_args(), 1, "invalid JSON"},
-      {"", {"run", (work_dir() / "empty.json").string()}, 1, "cannot open the file"},
+      {"", {"run", (work_dir() / "missing.json").string()}, 1, "cannot open the file"},
+      {"", {"run", write("empty.json", "").string()}, 1, "invalid JSON"},
       {" ", run_args(), 1, "invalid JSON"},
       {"[1, 2, 3]", run_args(), 1, "(top level): expected an object"},
       {"{" + P + "} trailing", run_args(), 1, "invalid JSON"},
@@ -76,7 +77,8 @@ std::vector<Case> scene_cases() {
        "particles[0].position: duplicate key"},
       {R"({"generate": {"count": 1, "count": 2, "position_min": [0,0,0], "position_max": [1,1,1]}})",
        run_args(), 1, "generate.count: duplicate key"},
-      {deep, run_args(), 1, "name: expected a string"},
+      {deep, run_args(), 1, "nested deeper than 64 levels"},
+      {std::string(100000, '['), run_args(), 1, "nested deeper than 64 levels"},
       {with_body("\"name\": \"\xff\xfe\""), run_args(), 1, "invalid JSON"},
       {"{" + P + " // a comment\n}", run_args(), 1, "invalid JSON"},
       {with_body("\"bad\\nkey\": 1"), run_args(), 1, "bad\\x0Akey: unknown key"},
@@ -159,6 +161,9 @@ std::vector<Case> scene_cases() {
       // Rigid bodies.
       {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[5e307,5e307,0],[5e307,5e307,0],[0,0,1e308]]}]})", run_args(), 1, "rigid_bodies[0].inertia: the tensor is singular"},
       {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[1,1,0],[1,1,0],[0,0,1]]}]})", run_args(), 1, "the tensor is singular"},
+      {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[1e308,1e308,0],[-1e308,1e308,0],[0,0,1e308]]}]})", run_args(), 1, "the tensor is not symmetric"},
+      {R"({"precision": "float", "dt": 4, "rigid_bodies": [{"position": [0,0,0], "mass": 1e10}],
+          "forces": [{"type": "point_force", "point": [0,0,0], "force": [2e38,0,0]}]})", run_args(), 1, "overflows float; take a smaller step"},
       {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[1,0.5,0],[0,1,0],[0,0,1]]}]})", run_args(), 1, "the tensor is not symmetric"},
       {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[2,0,0],[0,-1,0],[0,0,2]]}]})", run_args(), 1, "not positive definite"},
       {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[7e307,3e307,0],[3e307,7e307,0],[0,0,7e307]]}], "precision": "double", "steps": 2})", run_args(), 0, ""},
@@ -317,8 +322,11 @@ TEST_CASE("a signal stops a run at a step boundary: whole lines, a complete last
     const Result r = run_kinema(
         {"run", scene.string(), "-q", "--every", "1", "--out", csv.string(), "--summary", summary.string()}, {},
         [&](pid_t pid) {
-          // Past the first 4 KiB buffers, where a killed run used to cut a number in half.
-          while (!fs::exists(csv) || fs::file_size(csv) < 200000) {
+          // Past the first 4 KiB buffers, where a killed run used to cut a number in half
+          // (a minute at most: a run that ended early fails the checks below).
+          const auto give_up = std::chrono::steady_clock::now() + std::chrono::minutes(1);
+          while ((!fs::exists(csv) || fs::file_size(csv) < 200000) &&
+                 std::chrono::steady_clock::now() < give_up) {
             std::this_thread::sleep_for(std::chrono::milliseconds(5));
           }
           ::kill(pid, signal);
@@ -359,6 +367,16 @@ TEST_CASE("more threads than cores: silent with -q, and the summary says what ra
   CHECK(r.err.empty());
   CHECK(r.out.empty());
   CHECK(nlohmann::json::parse(read(summary))["threads"] == kinema::hardware_threads());
+}
+
+TEST_CASE("an error message stays one bounded line, however long the text in it", "[cli][hostile]") {
+  const std::string key(100000, 'k');
+  const fs::path scene = write("long_key.json", R"({"particles": [{"position": [1,0,0]}], ")" + key + R"(": 1})");
+  const Result r = run_kinema({"run", scene.string(), "-q", "--method", std::string(100000, 'm')});
+  CHECK(r.code == 1);
+  CHECK(lines(r.err) == 1);
+  CHECK(r.err.size() < 1100);
+  CHECK(r.err.find("more bytes)") != std::string::npos);
 }
 
 TEST_CASE("a full standard output is an error, not a silent success", "[cli][hostile]") {

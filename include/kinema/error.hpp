@@ -14,7 +14,8 @@ class Error : public std::runtime_error {
 
 // `text` made safe for one line of a terminal or of a script's string literal: control
 // characters (C0, DEL, C1) and bytes that are not valid UTF-8 become \xNN (C1 code points
-// \u00NN); every other character, Unicode included, stays as it is.
-std::string printable(std::string_view text);
+// \u00NN); every other character, Unicode included, stays as it is. Past `limit` bytes of
+// output the rest is left out and counted ("... (N more bytes)").
+std::string printable(std::string_view text, std::size_t limit = std::string_view::npos);
 
 }  // namespace kinema

@@ -85,6 +85,10 @@ Scene load_scene(const std::filesystem::path& path);
 template <class T>
 void check_scene(const Scene& scene);
 
+// Memory this process may use: physical memory, or less under ulimit -v or a cgroup
+// (memory.max) limit.
+double usable_memory_bytes();
+
 // Bytes of body state (every SoA array, padding aside) the scene's bodies take in T.
 template <class T>
 double state_bytes(const Scene& scene);

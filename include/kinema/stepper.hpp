@@ -74,7 +74,8 @@ class Stepper {
   void step(RigidBodySet<T>& io_bodies, T h);
   void advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps);
   // Throws the kinema::Error a step of size h would throw (h not positive and finite in T,
-  // or h times the force parameters overflowing T), without touching any body.
+  // or h times the force parameters, a rigid body's point forces included, overflowing T),
+  // without touching any body.
   void check_step_size(T h) const;
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);

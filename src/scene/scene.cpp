@@ -269,69 +269,101 @@ double uniform(std::mt19937_64& rng, double lo, double hi) {
   return lo + (hi - lo) * u;
 }
 
-// Follows the parser through the document, so that an error the JSON library finds (a
-// number out of range, a syntax error) can name its path, and refuses duplicate keys (the
-// library would keep the last one silently).
-class PathTracker {
+// Builds the document from the parser's events (SAX), keeping the path it is at: an error
+// the JSON library finds (a number out of range, a syntax error) names its path, a repeated
+// key is refused (the library would keep the last one silently), and so is nesting past
+// kMaxDepth. Linear in the text: the library's own callback mode rescans each parent array
+// whenever an element ends.
+class DocumentBuilder : public nlohmann::json_sax<json> {
  public:
-  struct Duplicate {};  // thrown on a repeated key; path() then names it
+  static constexpr std::size_t kMaxDepth = 64;
 
-  bool operator()(int, json::parse_event_t event, const json& parsed) {
-    switch (event) {
-      case json::parse_event_t::object_start:
-      case json::parse_event_t::array_start:
-        begin_element();
-        frames_.push_back({event == json::parse_event_t::object_start, {}, 0, {}});
-        break;
-      case json::parse_event_t::object_end:
-      case json::parse_event_t::array_end:
-        frames_.pop_back();
-        end_value();
-        break;
-      case json::parse_event_t::key:
-        take_key(parsed.get<std::string>());
-        break;
-      case json::parse_event_t::value:
-        begin_element();
-        end_value();
-        break;
-    }
+  struct Stop {  // thrown to stop the parse; path() says where
+    std::string what;
+  };
+
+  json document;
+
+  bool null() override { return value(nullptr); }
+  bool boolean(bool v) override { return value(v); }
+  bool number_integer(number_integer_t v) override { return value(v); }
+  bool number_unsigned(number_unsigned_t v) override { return value(v); }
+  bool number_float(number_float_t v, const string_t&) override { return value(v); }
+  bool string(string_t& v) override { return value(std::move(v)); }
+  bool binary(binary_t& v) override { return value(json::binary(std::move(v))); }
+  bool start_object(std::size_t) override { return open(json::object()); }
+  bool start_array(std::size_t) override { return open(json::array()); }
+  bool end_object() override { return close(); }
+  bool end_array() override { return close(); }
+
+  bool key(string_t& k) override {
+    Frame& f = frames_.back();
+    f.key = k;
+    f.in_key = true;
+    if (!f.keys.insert(k).second) throw Stop{"duplicate key (each key may appear once)"};
+    f.slot = &(*f.node)[k];
     return true;
   }
 
-  // Where the parser is: "forces[2].k", or "" at the top level. In the innermost array the
-  // parser is reading the element after the last one it finished.
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception& e) override {
+    throw Stop{std::string("invalid JSON: ") + e.what()};
+  }
+
+  // Where the parser is: "forces[2].k", or "" at the top level.
   std::string path() const {
     std::string out;
     for (std::size_t i = 0; i < frames_.size(); ++i) {
       const Frame& f = frames_[i];
-      const bool innermost = i + 1 == frames_.size();
-      if (f.object && f.has_key) out += (out.empty() ? "" : ".") + f.key;
-      if (!f.object) out += "[" + std::to_string(innermost ? f.elements : f.elements - 1) + "]";
+      if (f.node->is_object() && f.in_key) out += (out.empty() ? "" : ".") + f.key;
+      if (!f.node->is_array()) continue;
+      // The innermost array is reading its next element; an outer one, its last.
+      const std::size_t index = f.node->size() - (i + 1 < frames_.size() ? 1 : 0);
+      out += "[" + std::to_string(index) + "]";
     }
     return out;
   }
 
  private:
   struct Frame {
-    bool object;
+    json* node;
+    json* slot = nullptr;  // objects: the value of the key being read
     std::string key;
-    std::size_t elements;
+    bool in_key = false;   // objects: reading the value of `key`
     std::set<std::string> keys;
-    bool has_key = false;
   };
 
-  void begin_element() {
-    if (!frames_.empty() && !frames_.back().object) ++frames_.back().elements;
+  // Where the next value goes: the document, the next array element, or the key's slot.
+  json* place(json&& v) {
+    if (frames_.empty()) return &(document = std::move(v));
+    Frame& f = frames_.back();
+    if (f.node->is_array()) {
+      f.node->push_back(std::move(v));
+      return &f.node->back();
+    }
+    *f.slot = std::move(v);
+    return f.slot;
+  }
+  bool value(json&& v) {
+    place(std::move(v));
+    end_value();
+    return true;
   }
   // A key names the path only until its value is complete.
   void end_value() {
-    if (!frames_.empty() && frames_.back().object) frames_.back().has_key = false;
+    if (!frames_.empty() && frames_.back().node->is_object()) frames_.back().in_key = false;
   }
-  void take_key(std::string key) {
-    Frame& f = frames_.back();
-    f.key = key, f.has_key = true;
-    if (!f.keys.insert(std::move(key)).second) throw Duplicate{};
+  bool open(json&& container) {
+    if (frames_.size() == kMaxDepth) {
+      throw Stop{"nested deeper than " + std::to_string(kMaxDepth) + " levels"};
+    }
+    json* node = place(std::move(container));
+    frames_.push_back(Frame{node, nullptr, {}, false, {}});
+    return true;
+  }
+  bool close() {
+    frames_.pop_back();
+    end_value();
+    return true;
   }
 
   std::vector<Frame> frames_;
@@ -339,22 +371,20 @@ class PathTracker {
 
 [[noreturn]] void invalid_json(std::string_view origin, const std::string& path,
                                const std::string& what) {
-  throw Error(printable(std::string(origin) + ": " + (path.empty() ? "" : path + ": ") +
-                       "invalid JSON: " + what));
+  throw Error(printable(std::string(origin) + ": " + (path.empty() ? "" : path + ": ") + what));
 }
 
 json parse_json(std::string_view text, std::string_view origin) {
   if (const std::size_t nul = text.find('\0'); nul != std::string_view::npos) {
-    invalid_json(origin, "", "a NUL byte at offset " + std::to_string(nul));
+    invalid_json(origin, "", "invalid JSON: a NUL byte at offset " + std::to_string(nul));
   }
-  PathTracker tracker;
+  DocumentBuilder builder;
   try {
-    return json::parse(text.begin(), text.end(), std::ref(tracker));
-  } catch (const PathTracker::Duplicate&) {
-    Node{json(), tracker.path(), origin}.fail("duplicate key (each key may appear once)");
-  } catch (const json::exception& e) {
-    invalid_json(origin, tracker.path(), e.what());
+    json::sax_parse(text.begin(), text.end(), &builder);
+  } catch (const DocumentBuilder::Stop& stop) {
+    invalid_json(origin, builder.path(), stop.what);
   }
+  return std::move(builder.document);
 }
 
 }  // namespace
@@ -460,17 +490,6 @@ namespace {
 // inverse principal moments (3).
 constexpr double kParticleArrays = 7, kRigidArrays = 17;
 
-// Physical memory, or less when the process is limited (ulimit -v).
-double memory_limit_bytes() {
-  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
-  double bytes = pages > 0 && page > 0 ? double(pages) * double(page) : HUGE_VAL;
-  rlimit limit{};
-  if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
-    bytes = std::min(bytes, double(limit.rlim_cur));
-  }
-  return bytes;
-}
-
 std::string gib(double bytes) {
   char text[32];
   std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1 << 30));
@@ -504,7 +523,7 @@ void check_generated(const Scene& scene) {
   auto fail = [&](const std::string& key, const std::string& what) {
     throw Error(printable("generate." + key + ": " + what));
   };
-  const double need = state_bytes<T>(scene), have = memory_limit_bytes();
+  const double need = state_bytes<T>(scene), have = usable_memory_bytes();
   if (need > have) {
     fail("count", std::to_string(g.count) + (g.rigid ? " rigid bodies" : " particles") + " in " +
                       type + " need " + gib(need) + " of state, more than the " + gib(have) +
@@ -553,6 +572,20 @@ void check_listed_masses(const Scene& scene) {
 }
 
 }  // namespace
+
+double usable_memory_bytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  double bytes = pages > 0 && page > 0 ? double(pages) * double(page) : HUGE_VAL;
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
+    bytes = std::min(bytes, double(limit.rlim_cur));
+  }
+  // cgroup v2 ("max" when unlimited, then the read fails and nothing changes).
+  std::ifstream cgroup("/sys/fs/cgroup/memory.max");
+  double cgroup_bytes = 0;
+  if (cgroup >> cgroup_bytes && cgroup_bytes > 0) bytes = std::min(bytes, cgroup_bytes);
+  return bytes;
+}
 
 template <class T>
 double state_bytes(const Scene& scene) {

@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstdint>
 #include <limits>
 
@@ -35,7 +36,8 @@ CLI::Validator decimal(std::uint64_t least, std::uint64_t most) {
 }
 
 // A finite number > 0 in decimal notation (CLI11's PositiveNumber lets inf through and
-// prints its range with 309 digits).
+// prints its range with 309 digits). It is handed on as an exact hexadecimal float: CLI11
+// 2.1 converts through long double, which would round some decimal texts twice.
 const CLI::Validator positive_finite(
     [](std::string& text) -> std::string {
       double value = 0;
@@ -45,6 +47,9 @@ const CLI::Validator positive_finite(
           !(value > 0)) {
         return "expected a finite number > 0, got '" + printable(text) + "'";
       }
+      char exact[40];
+      std::snprintf(exact, sizeof exact, "%a", value);
+      text = exact;
       return {};
     },
     "NUMBER > 0");
@@ -66,8 +71,8 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_option("--tolerance", o.tolerance,
                   "With auto: the largest error allowed at the end (length units; radians for "
                   "rigid orientations)")
-      ->check(positive_finite);
-  run->add_option("--dt", o.dt, "Override the step size (seconds, > 0)")->check(positive_finite);
+      ->transform(positive_finite);
+  run->add_option("--dt", o.dt, "Override the step size (seconds, > 0)")->transform(positive_finite);
   run->add_option("--steps", o.steps, "Override the number of steps")->transform(decimal(0, kMaxCount));
   run->add_option("--precision", precision, "Override the scene's precision: float or double")
       ->check(CLI::IsMember({"float", "double"}));
@@ -94,7 +99,7 @@ void add_sweep_options(CLI::App& command, SweepOptions& o) {
   command.add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
   command.add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
   command.add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
-      ->check(positive_finite);
+      ->transform(positive_finite);
   command.add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
       ->transform(decimal(1, std::uint64_t(1) << 32));
   command.add_option("--out", o.out, "Output folder (default: " + o.out + ")")->check(not_empty);
@@ -107,7 +112,7 @@ void add_chart_command(CLI::App& app, ChartOptions& o) {
   add_sweep_options(*chart, o);
   chart->add_option("--dts", o.dts, "Step sizes (default: the scene's dt times 1/8 .. 16)")
       ->delimiter(',')
-      ->check(positive_finite);
+      ->transform(positive_finite);
   chart->add_option("--repeat", o.repeat, "Timed runs per point; the fastest counts (default 3)")
       ->transform(decimal(1, 100));
 }
@@ -116,7 +121,7 @@ void add_stability_command(CLI::App& app, StabilityOptions& o) {
   CLI::App* s = app.add_subcommand(
       "stability", "Energy error against time, trajectories, and the stability regions");
   add_sweep_options(*s, o);
-  s->add_option("--dt", o.dt, "Step size (default: the scene's)")->check(positive_finite);
+  s->add_option("--dt", o.dt, "Step size (default: the scene's)")->transform(positive_finite);
 }
 
 }  // namespace

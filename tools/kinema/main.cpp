@@ -15,6 +15,9 @@
 
 namespace {
 
+// An error message is one line of bounded length, whatever the input put into it.
+constexpr std::size_t kMessageBytes = 1000;
+
 int run(const kinema::cli::CommandLine& line) {
   using namespace kinema::cli;
   try {
@@ -26,7 +29,7 @@ int run(const kinema::cli::CommandLine& line) {
                  signal_name(e.signal).c_str());
     return 128 + e.signal;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "kinema: error: %s\n", kinema::printable(e.what()).c_str());
+    std::fprintf(stderr, "kinema: error: %s\n", kinema::printable(e.what(), kMessageBytes).c_str());
   }
   return 1;
 }
@@ -40,7 +43,7 @@ int main(int argc, char** argv) {
     kinema::cli::parse_command_line(*app, line, argc, argv);
   } catch (const CLI::ParseError& e) {
     if (e.get_exit_code() == 0) return app->exit(e);  // --help
-    std::fprintf(stderr, "kinema: error: %s (see kinema --help)\n", kinema::printable(e.what()).c_str());
+    std::fprintf(stderr, "kinema: error: %s (see kinema --help)\n", kinema::printable(e.what(), kMessageBytes).c_str());
     return 2;
   }
   kinema::cli::catch_interrupts();

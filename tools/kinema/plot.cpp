@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "interrupt.hpp"
 #include "kinema/error.hpp"
 
 extern char** environ;
@@ -25,9 +26,12 @@ void OutputFile::close() {
   if (!*this) throw Error(printable(path_.string()) + ": cannot write (disk full?)");
 }
 
+// Titles longer than this are cut: a chart title is one line.
+constexpr std::size_t kMaxTitleBytes = 300;
+
 std::string gnuplot_quote(const std::string& text) {
   std::string out = "'";
-  for (char c : printable(text)) {
+  for (char c : printable(text, kMaxTitleBytes)) {
     out += c;
     if (c == '\'') out += '\'';
   }
@@ -85,6 +89,7 @@ void render_chart(const std::filesystem::path& dir, const std::string& name,
   }
   const std::string log = name + ".log";
   const int status = run_gnuplot(dir, name + ".gp", log);
+  stop_if_interrupted();  // a Ctrl-C reaches gnuplot too: report the signal, not gnuplot
   if (status == -ENOENT) throw Error("gnuplot is not installed (Debian: gnuplot-nox)");
   if (status < 0) {
     throw Error("cannot start gnuplot in " + printable(dir.string()) + ": " + std::strerror(-status));

@@ -69,6 +69,8 @@ class SummaryFile {
   ~SummaryFile() {
     if (file_ != nullptr) std::fclose(file_);
   }
+  SummaryFile(const SummaryFile&) = delete;
+  SummaryFile& operator=(const SummaryFile&) = delete;
   void write(const nlohmann::ordered_json& summary) {
     if (file_ == nullptr) return;
     const std::string text = summary.dump(2) + "\n";
@@ -88,13 +90,18 @@ class SummaryFile {
   std::FILE* file_ = nullptr;
 };
 
-// Where the state first stopped being finite.
+// Where the state first stopped being finite: at step `last` (and `first` == `last`) when
+// found exactly, else somewhere in [first, last].
 struct BlowUp {
-  std::uint64_t step;
-  double t;
+  std::uint64_t first, last;
+  double t;          // at `last`
   std::size_t body;  // particles first, then rigid bodies
   std::string field;
 };
+
+// A replay of the run to find the exact step is skipped past this many body-steps, or when
+// a second copy of the state would not fit in memory.
+constexpr double kReplayBodySteps = double(std::uint64_t(1) << 32);
 
 template <class T>
 std::optional<NonFinite> first_non_finite(const World<T>& world) {
@@ -105,17 +112,27 @@ std::optional<NonFinite> first_non_finite(const World<T>& world) {
   return std::nullopt;
 }
 
-// Steps a fresh world to `from` (the last step known finite), then one step at a time:
-// results do not depend on how steps are grouped, so this finds the very step.
+// The run went non-finite in steps (from, from + n]: `world` is at from + n. Steps a fresh
+// world to `from`, then one step at a time (results do not depend on how steps are grouped,
+// so this finds the very step), unless that would cost too much or a signal comes.
 template <class T>
-BlowUp find_blow_up(const Scene& scene, const StepperOptions& options, std::uint64_t from) {
-  World<T> world(scene, method_by_name(scene.method), options);
-  const T h = T(scene.dt);
-  if (from > 0) world.advance(h, from);
-  for (std::uint64_t step = from + 1;; ++step) {
-    world.advance(h, 1);
-    if (auto bad = first_non_finite(world)) return {step, world.time(), bad->body, bad->field};
+BlowUp find_blow_up(const Scene& scene, const StepperOptions& options, const World<T>& world,
+                    std::uint64_t from, std::uint64_t n) {
+  const NonFinite at_end = *first_non_finite(world);
+  BlowUp range{from + 1, from + n, world.time(), at_end.body, at_end.field};
+  const double bodies = double(world.particles.size() + world.rigid.size());
+  if (double(from + n) * bodies > kReplayBodySteps ||
+      2 * state_bytes<T>(scene) > usable_memory_bytes()) {
+    return range;
   }
+  World<T> replay(scene, method_by_name(scene.method), options);
+  const T h = T(scene.dt);
+  if (from > 0) replay.advance(h, from);
+  for (std::uint64_t step = from + 1; step <= from + n && interrupting_signal() == 0; ++step) {
+    replay.advance(h, 1);
+    if (auto bad = first_non_finite(replay)) return {step, step, replay.time(), bad->body, bad->field};
+  }
+  return range;
 }
 
 // What happened before stepping that the summary reports.
@@ -130,7 +147,6 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   // More threads than the machine has would only wait on each other (and make oneTBB warn).
   options.threads = std::min(o.threads == 0 ? hardware_threads() : o.threads, hardware_threads());
   options.relaxed_fma = o.relaxed_fma;
-  SummaryFile summary_file(o.summary_path);
   World<T> world = [&] {
     try {
       return World<T>(scene, method_by_name(scene.method), options);
@@ -138,6 +154,8 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
       throw Error(o.scene_path + ": " + e.what());
     }
   }();
+  // Opened once the world stands (a scene that fails leaves no file behind), before the run.
+  SummaryFile summary_file(o.summary_path);
   std::optional<TrajectoryWriter> trajectory;
   if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
   const T h = T(scene.dt);
@@ -160,7 +178,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     world.advance(h, n);
     wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
     const bool finite = world.finite();
-    if (!finite) blow_up = find_blow_up<T>(scene, options, done);
+    if (!finite) blow_up = find_blow_up<T>(scene, options, world, done, n);
     done += n;
     progress.update(double(done) / double(scene.steps));
     if (trajectory && (done % o.every == 0 || done == scene.steps || !finite)) {
@@ -192,8 +210,13 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   summary["energy_final"] = world.total_energy();
   summary["finite"] = !blow_up;
   if (blow_up) {
-    summary["first_non_finite"] = {{"step", blow_up->step}, {"t", blow_up->t},
-                                   {"body", blow_up->body}, {"field", blow_up->field}};
+    auto& where = summary["first_non_finite"];
+    if (blow_up->first == blow_up->last) {
+      where["step"] = blow_up->last;
+    } else {
+      where["between_steps"] = {blow_up->first, blow_up->last};
+    }
+    where.update({{"t", blow_up->t}, {"body", blow_up->body}, {"field", blow_up->field}});
   }
   const int signal = interrupting_signal();
   if (signal != 0 && done < scene.steps) {
@@ -205,11 +228,13 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   summary_file.write(summary);
   if (!o.quiet) print_summary(summary);
   if (blow_up) {
+    const std::string steps = blow_up->first == blow_up->last
+        ? "after step " + std::to_string(blow_up->last)
+        : "between steps " + std::to_string(blow_up->first) + " and " + std::to_string(blow_up->last);
     std::fprintf(stderr,
-                 "kinema: error: the state is no longer finite after step %llu (t = %g): "
-                 "body %zu, %s (try a smaller dt or a more stable method)\n",
-                 static_cast<unsigned long long>(blow_up->step), blow_up->t, blow_up->body,
-                 blow_up->field.c_str());
+                 "kinema: error: the state is no longer finite %s (t = %g): body %zu, %s (try a "
+                 "smaller dt or a more stable method)\n",
+                 steps.c_str(), blow_up->t, blow_up->body, blow_up->field.c_str());
     return 3;
   }
   if (summary.contains("interrupted")) {
