@@ -3,9 +3,9 @@
 // parameters as scenes spell them (their kinds validate them), which bodies it acts on, how
 // it adds into the sums the kernels are given, its potential energy and the reference
 // solution that covers it. The validation (forces.cpp), the lowering (force_lowering.cpp),
-// the energies (diagnostics.cpp), the scene parser and the reference solutions read these
-// homes and nothing else. A new term: its struct in kinema/forces.hpp (and LocalTerm), its
-// TermInfo here, its arithmetic in the kernels.
+// the energies (diagnostics.cpp), the scene parser and the reference solutions (through the
+// sums and the rules) know the terms only through these homes. A new term: its struct in
+// kinema/forces.hpp (and LocalTerm), its TermInfo here, its arithmetic in the kernels.
 
 #include <array>
 #include <cmath>

@@ -5,11 +5,6 @@
 namespace kinema {
 namespace {
 
-template <class T>
-kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
-  return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass()};
-}
-
 }  // namespace
 
 template <class T>

@@ -4,9 +4,16 @@
 
 #include <cstddef>
 
+#include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
 
 namespace kinema {
+
+// A set's arrays as the kernels take them.
+template <class T>
+kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
+  return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass()};
+}
 
 template <class T>
 struct StepContext {

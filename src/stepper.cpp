@@ -16,11 +16,6 @@
 namespace kinema {
 namespace {
 
-template <class T>
-kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
-  return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass()};
-}
-
 // Simulated time as origin + steps x h: no running sum, so step k sees exactly t0 + k h.
 template <class T>
 struct Clock {

@@ -109,14 +109,14 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
   const ParticleSet<double> p = make_particles<double>(scene);
   const std::size_t np = std::min(p.size(), max_bodies);
   for (std::size_t j = 0; j < np; ++j) {
-    const std::size_t i = j * p.size() / np;
+    const std::size_t i = std::size_t((unsigned __int128)j * p.size() / np);  // no overflow
     const double inv = p.inv_mass()[i];
     out.particles.push_back({p.position(i), p.velocity(i), inv == 0 ? 1 : 1 / inv, inv == 0});
   }
   const RigidBodySet<double> r = make_rigid_bodies<double>(scene);
   const std::size_t nr = std::min(r.size(), max_bodies);
   for (std::size_t j = 0; j < nr; ++j) {
-    const std::size_t i = j * r.size() / nr;
+    const std::size_t i = std::size_t((unsigned __int128)j * r.size() / nr);
     RigidSpec b;
     b.position = r.centers().position(i);
     b.velocity = r.centers().velocity(i);

@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "force_lowering.hpp"
 #include "force_terms.hpp"
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
@@ -494,11 +495,6 @@ std::string gib(double bytes) {
   char text[32];
   std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1 << 30));
   return text;
-}
-
-template <class T>
-std::string type_name() {
-  return std::string(precision_name(sizeof(T) == 4 ? Precision::single : Precision::dual));
 }
 
 template <class T>
