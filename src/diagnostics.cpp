@@ -3,6 +3,7 @@
 #include <cmath>
 #include <utility>
 
+#include "coupled_forces.hpp"
 #include "force_terms.hpp"
 
 namespace kinema {
@@ -44,7 +45,8 @@ double potential_energy(const ParticleSet<T>& b, const ForceModel<T>& forces) {
   const ParticleState<T> all{b.padded_size(), b.px(), b.py(), b.pz(),
                              b.vx(), b.vy(), b.vz(), b.inv_mass()};
   for (const auto& term : forces.coupled_terms()) u += term->potential_energy(all);
-  return u;
+  if (forces.nbody()) u += nbody_potential(b, *forces.nbody());
+  return u + spring_potential(b, forces.springs());
 }
 
 template <class T>

@@ -5,6 +5,7 @@
 #include <span>
 #include <string>
 
+#include "coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/forces.hpp"
 
@@ -15,6 +16,7 @@ struct LoweredForces {
   kernels::LocalForces<T> particle;       // what a particle feels (point forces push rigid bodies only)
   kernels::LocalForces<T> rigid;          // what a rigid body's centre feels
   kernels::RotationalForces<T> rotation;  // torques on rigid bodies
+  CoupledForces<T> coupled;               // forces between particles
 };
 
 // Throws kinema::Error when a parameter, or a sum of them, overflows T.

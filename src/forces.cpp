@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
 
 #include "force_terms.hpp"
 #include "kinema/error.hpp"
@@ -30,7 +33,78 @@ void validate(const Term& t, Info info) {
   });
 }
 
+void check_number(double value, const std::string& what) {
+  if (!(std::isfinite(value) && value >= 0)) throw Error(what + ": must be finite and >= 0");
+}
+
+std::string pair_name(const std::string& what, std::size_t k) {
+  return what + "[" + std::to_string(k) + "]";
+}
+
+void check_pair(const SpringPair& p, const std::string& name) {
+  for (auto [key, index] : {std::pair{".i", p.i}, std::pair{".j", p.j}}) {
+    if (index >= kMaxSpringBodies) {
+      throw Error(name + key + ": body " + std::to_string(index) + " is past the largest index " +
+                  std::to_string(kMaxSpringBodies - 1));
+    }
+  }
+  if (p.i == p.j) throw Error(name + ": joins body " + std::to_string(p.i) + " to itself");
+  check_number(p.rest, name + ".rest");
+  check_number(p.k, name + ".k");
+  check_number(p.damping, name + ".damping");
+}
+
+// The first pair that repeats an earlier one (either order), and a body past the limit of
+// springs per body.
+void check_repeats(std::span<const SpringPair> pairs, const std::string& what, std::size_t first) {
+  struct Key {
+    std::uint32_t lo, hi;
+    std::size_t index;
+  };
+  std::vector<Key> keys(pairs.size());
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    keys[k] = {std::min(pairs[k].i, pairs[k].j), std::max(pairs[k].i, pairs[k].j), k};
+  }
+  auto order = [](const Key& a, const Key& b) {
+    return std::tie(a.lo, a.hi, a.index) < std::tie(b.lo, b.hi, b.index);
+  };
+  std::sort(keys.begin(), keys.end(), order);
+  for (std::size_t k = 1; k < keys.size(); ++k) {
+    if (keys[k].lo != keys[k - 1].lo || keys[k].hi != keys[k - 1].hi) continue;
+    throw Error(pair_name(what, first + keys[k].index) + ": repeats " +
+                pair_name(what, first + keys[k - 1].index) + " (bodies " +
+                std::to_string(keys[k].lo) + " and " + std::to_string(keys[k].hi) + ")");
+  }
+}
+
+void check_degrees(std::span<const SpringPair> pairs, const std::string& what) {
+  std::vector<std::uint32_t> ends;
+  ends.reserve(2 * pairs.size());
+  for (const SpringPair& p : pairs) ends.push_back(p.i), ends.push_back(p.j);
+  std::sort(ends.begin(), ends.end());
+  for (std::size_t a = 0; a < ends.size();) {
+    std::size_t b = a;
+    while (b < ends.size() && ends[b] == ends[a]) ++b;
+    if (b - a > kMaxSpringsPerBody) {
+      throw Error(what + ": body " + std::to_string(ends[a]) + " has " + std::to_string(b - a) +
+                  " springs, more than " + std::to_string(kMaxSpringsPerBody));
+    }
+    a = b;
+  }
+}
+
 }  // namespace
+
+void check_springs(std::span<const SpringPair> pairs, const std::string& what, std::size_t first) {
+  for (std::size_t k = 0; k < pairs.size(); ++k) check_pair(pairs[k], pair_name(what, first + k));
+  check_repeats(pairs, what, first);
+  check_degrees(pairs, what);
+}
+
+void check_nbody(const NBody& term, const std::string& what) {
+  check_number(term.G, what + ".G");
+  check_number(term.softening, what + ".softening");
+}
 
 template <class T>
 ForceModel<T>& ForceModel<T>::add(const LocalTerm& term) {
@@ -59,6 +133,23 @@ template <class T>
 ForceModel<T>& ForceModel<T>::add(std::shared_ptr<const CoupledTerm<T>> term) {
   if (!term) throw Error("coupled force: null term");
   coupled_.push_back(std::move(term));
+  return *this;
+}
+
+template <class T>
+ForceModel<T>& ForceModel<T>::add(const NBody& term) {
+  check_nbody(term, "nbody");
+  if (nbody_) throw Error("nbody: at most 1 per model");
+  nbody_ = term;
+  return *this;
+}
+
+template <class T>
+ForceModel<T>& ForceModel<T>::add(const Springs& term) {
+  std::vector<SpringPair> joined = springs_;
+  joined.insert(joined.end(), term.pairs.begin(), term.pairs.end());
+  check_springs(joined, "springs.pairs");
+  springs_ = std::move(joined);
   return *this;
 }
 

@@ -3,14 +3,12 @@
 #include <algorithm>
 
 namespace kinema {
-namespace {
-
-}  // namespace
 
 template <class T>
 StagedPath<T>::StagedPath(const ForceModel<T>& forces, const Method& method,
-                          const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local)
-    : forces_(forces), method_(method), table_(table), local_(local),
+                          const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local,
+                          const CoupledForces<T>& coupled)
+    : forces_(forces), method_(method), table_(table), local_(local), coupled_(coupled),
       stage_fn_(table.stage[local.has_quadratic()][local.has_central()]) {
   plan();
 }
@@ -58,7 +56,9 @@ void StagedPath<T>::step(const StepContext<T>& c, JobSystem& jobs, std::size_t i
   const std::size_t n = c.bodies.padded_size();
   if (coupled()) {
     for (int p = 0; p < phase_count_; ++p) {
-      for_each_block(jobs, inline_below, n, [&](Block b) { run(c, phases_[p], b); });
+      // Gravity costs a block n interactions per body: worth the threads at any n.
+      const bool quadratic = phases_[p].kind == PhaseKind::coupled && coupled_.nbody;
+      for_each_block(jobs, quadratic ? 0 : inline_below, n, [&](Block b) { run(c, phases_[p], b); });
     }
     return;
   }
@@ -187,8 +187,29 @@ void StagedPath<T>::run_coupled(const StepContext<T>& c, const Phase& p, Block b
                              state_x(c, s, 2),        state_v(c, s, 0), state_v(c, s, 1),
                              state_v(c, s, 2),        c.bodies.inv_mass()};
   const ParticleBlock<T> view = block_view(c, s, b, phase_time(c, p));
+  if (coupled_.nbody) add_gravity(c, s, b);
+  if (!coupled_.springs.empty()) add_springs(c, s, b);
   for (const auto& term : forces_.coupled_terms()) term->accumulate(all, view);
   add_forces(c, s, b);
+}
+
+template <class T>
+void StagedPath<T>::add_gravity(const StepContext<T>& c, int s, Block b) {
+  kernels::NBodyJob<T> job{};
+  for (int d = 0; d < 3; ++d) job.x[d] = state_x(c, s, d), job.acc[d] = stage_a_[s][d].data();
+  job.inv_mass = c.bodies.inv_mass();
+  job.sources = c.bodies.padded_size();
+  job.eps2 = coupled_.eps2;
+  job.scale_G = c.accel_scale * T(coupled_.nbody->G);
+  table_.nbody(job, b.begin, b.end);
+}
+
+template <class T>
+void StagedPath<T>::add_springs(const StepContext<T>& c, int s, Block b) {
+  const T* x[3] = {state_x(c, s, 0), state_x(c, s, 1), state_x(c, s, 2)};
+  const T* v[3] = {state_v(c, s, 0), state_v(c, s, 1), state_v(c, s, 2)};
+  T* force[3] = {force_[0].data(), force_[1].data(), force_[2].data()};
+  table_.springs(coupled_.springs.job(x, v, force), b.begin, b.end);
 }
 
 template <class T>

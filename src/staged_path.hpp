@@ -8,6 +8,7 @@
 #include <cstddef>
 
 #include "blocks.hpp"
+#include "coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
@@ -20,9 +21,10 @@ namespace kinema {
 template <class T>
 class StagedPath {
  public:
-  // Keeps references: `forces`, `method`, `table` and `local` must outlive the path.
+  // Keeps references: every argument must outlive the path.
   StagedPath(const ForceModel<T>& forces, const Method& method,
-             const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local);
+             const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local,
+             const CoupledForces<T>& coupled);
 
   // Scratch for `padded` bodies (a padded count); allocates only when it grows.
   void reserve(std::size_t padded);
@@ -37,7 +39,7 @@ class StagedPath {
   static constexpr int kMaxPhases = 3 * kMaxStages + 1;
 
   void plan();
-  bool coupled() const { return !forces_.coupled_terms().empty(); }
+  bool coupled() const { return forces_.coupled(); }
   bool needs_force_scratch() const { return coupled() || !forces_.callbacks().empty(); }
 
   bool own_state(int s) const;
@@ -52,6 +54,8 @@ class StagedPath {
   void run(const StepContext<T>& c, const Phase& p, Block b);
   void run_stage(const StepContext<T>& c, const Phase& p, Block b);
   void run_coupled(const StepContext<T>& c, const Phase& p, Block b);
+  void add_gravity(const StepContext<T>& c, int s, Block b);
+  void add_springs(const StepContext<T>& c, int s, Block b);
   void run_finish(const StepContext<T>& c, Block b);
   void run_kick_drift(const StepContext<T>& c, const Phase& p, Block b);
   void add_forces(const StepContext<T>& c, int s, Block b);
@@ -62,6 +66,7 @@ class StagedPath {
   const Method& method_;
   const kernels::KernelTable<T>& table_;
   const kernels::LocalForces<T>& local_;
+  const CoupledForces<T>& coupled_;
   kernels::StageFn<T> stage_fn_;
   std::array<Phase, kMaxPhases> phases_{};
   int phase_count_ = 0;

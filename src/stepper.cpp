@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <memory>
+#include <string>
 
 #include "blocks.hpp"
 #include "force_lowering.hpp"
@@ -56,6 +57,7 @@ struct Stepper<T>::Impl {
     table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
     jobs = options.jobs != nullptr ? options.jobs : &default_job_system(options.threads);
     lowered = lower_forces<T>(forces->local_terms());
+    lowered.coupled = lower_coupled<T>(*forces);
     pick_kernels();
   }
 
@@ -66,7 +68,8 @@ struct Stepper<T>::Impl {
     if (builtin >= 0 && forces->fusable() && !options.force_staged) {
       fused_fn = table->fused[builtin][quad][central];
     } else {
-      staged = std::make_unique<StagedPath<T>>(*forces, method, *table, lowered.particle);
+      staged = std::make_unique<StagedPath<T>>(*forces, method, *table, lowered.particle,
+                                               lowered.coupled);
     }
   }
 
@@ -85,6 +88,20 @@ struct Stepper<T>::Impl {
                   shortest_text(step_size));
     }
     check_scaled_forces(forces, accel_scale(step_size), step_size);
+    const auto& nbody = lowered.coupled.nbody;
+    if (nbody && !std::isfinite(accel_scale(step_size) * T(nbody->G))) {
+      throw Error("step size h = " + shortest_text(step_size) + " times nbody.G overflows " +
+                  type_name<T>() + "; take a smaller step");
+    }
+  }
+
+  // Springs must not reach past the set.
+  void check_reach(const ParticleSet<T>& b) const {
+    const std::size_t covered = lowered.coupled.springs.covered;
+    if (covered > b.size()) {
+      throw Error("springs: a pair joins body " + std::to_string(covered - 1) + ", but the set has " +
+                  std::to_string(b.size()) + " bodies");
+    }
   }
 
   StepContext<T> start(ParticleSet<T>& bodies, T step_size, const kernels::LocalForces<T>& forces) {
@@ -116,6 +133,7 @@ struct Stepper<T>::Impl {
   }
 
   void advance(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
+    check_reach(b);
     StepContext<T> c = start(b, step_size, lowered.particle);
     if (fused_fn == nullptr) return advance_staged(c, steps);
     // Local, time-independent forces: each block can take all its steps while it sits in

@@ -7,8 +7,10 @@
 // one pass per stage, all bodies' stage state in memory.
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <variant>
@@ -57,6 +59,38 @@ struct PointForce {
   Vec3<double> point{};
   Vec3<double> force{};
 };
+
+// Coupled terms: forces between the bodies of a set (particles; rigid bodies take local
+// terms only). They take the staged path.
+//
+// Softened Newtonian gravity among all bodies:
+//   a_i = G sum_{j != i} m_j (x_j - x_i) / (|x_j - x_i|^2 + softening^2)^(3/2).
+// A direct sum, each body's over the sources in index order, so the bits are the same on
+// every instruction set and thread count. Bodies with inv_mass 0 (kinematic, padding)
+// neither attract nor are pulled. Two bodies at the same point exert no force on each
+// other (the direction is undefined; with softening 0 the magnitude too).
+struct NBody {
+  double G = 1;
+  double softening = 0;
+};
+
+// A spring between bodies i and j (i != j) with a damper along it; with d = x_i - x_j,
+//   F_i = -k (|d| - rest) d/|d| - damping ((v_i - v_j) . d/|d|) d/|d| = -F_j.
+// Coincident ends exert no force (the direction is undefined).
+struct SpringPair {
+  std::uint32_t i = 0, j = 0;
+  double rest = 0;     // rest length, finite and >= 0
+  double k = 0;        // stiffness, finite and >= 0
+  double damping = 0;  // finite and >= 0
+};
+// A network of springs. Each body sums its springs in the order they were added, so the
+// bits do not depend on threads or instruction sets. Bodies may not have more than
+// kMaxSpringsPerBody springs each, and indices stay below kMaxSpringBodies.
+struct Springs {
+  std::vector<SpringPair> pairs;
+};
+inline constexpr std::size_t kMaxSpringBodies = std::size_t(1) << 30;
+inline constexpr std::size_t kMaxSpringsPerBody = 1024;
 
 using LocalTerm = std::variant<Gravity, LinearDrag, QuadraticDrag, Spring, Central, Torque,
                                AngularDrag, PointForce>;
@@ -109,18 +143,37 @@ class ForceModel {
   ForceModel& add(const LocalTerm& term);
   ForceModel& add(ForceCallback<T> callback);
   ForceModel& add(std::shared_ptr<const CoupledTerm<T>> term);
+  // At most one NBody per model.
+  ForceModel& add(const NBody& term);
+  // Joins the model's network; a pair that repeats one already there (either order) is
+  // refused, naming both.
+  ForceModel& add(const Springs& term);
 
   std::span<const LocalTerm> local_terms() const { return local_; }
   std::span<const ForceCallback<T>> callbacks() const { return callbacks_; }
   std::span<const std::shared_ptr<const CoupledTerm<T>>> coupled_terms() const { return coupled_; }
+  const std::optional<NBody>& nbody() const { return nbody_; }
+  std::span<const SpringPair> springs() const { return springs_; }
+  // True when the model couples bodies: N-body gravity, springs or a CoupledTerm.
+  bool coupled() const { return nbody_ || !springs_.empty() || !coupled_.empty(); }
   // True when every term is local and built in: the fused path applies.
-  bool fusable() const { return callbacks_.empty() && coupled_.empty(); }
+  bool fusable() const { return callbacks_.empty() && !coupled(); }
 
  private:
   std::vector<LocalTerm> local_;
   std::vector<ForceCallback<T>> callbacks_;
   std::vector<std::shared_ptr<const CoupledTerm<T>>> coupled_;
+  std::optional<NBody> nbody_;
+  std::vector<SpringPair> springs_;
 };
+
+// Throws kinema::Error naming `what`[k] and the field of the first bad pair in `pairs`
+// (an index past kMaxSpringBodies, i == j, a parameter out of range, a pair repeated, a
+// body with more than kMaxSpringsPerBody springs). `first` numbers the first pair.
+void check_springs(std::span<const SpringPair> pairs, const std::string& what,
+                   std::size_t first = 0);
+// Throws kinema::Error naming `what` when G or the softening is not finite and >= 0.
+void check_nbody(const NBody& term, const std::string& what);
 
 // Name of a term as scenes spell it ("gravity", "linear_drag", ...).
 std::string term_name(const LocalTerm& term);

@@ -1,6 +1,7 @@
 #pragma once
 // Collects one instruction set's kernels into its table.
 
+#include "kernels/coupled_kernels.hpp"
 #include "kernels/kernel_impl.hpp"
 #include "kernels/rigid_kernels.hpp"
 
@@ -28,6 +29,8 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.stage[1][1] = &stage<true, true, V>;
   t.combine = &combine<V>;
   t.add_forces = &add_forces<V>;
+  t.nbody = &nbody<V>;
+  t.springs = &springs<V>;
   return t;
 }
 

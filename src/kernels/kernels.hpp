@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 
 #include "kinema/isa.hpp"
 #include "kinema/methods.hpp"
@@ -197,6 +198,42 @@ struct ForceJob {
 template <class T>
 using AddForcesFn = void (*)(const ForceJob<T>& job, std::size_t begin, std::size_t end);
 
+// N-body gravity on the targets [begin, end) from every source: acc += scale_G * sum_j
+// m_j r_ij / (|r_ij|^2 + eps2)^(3/2) for targets with inv_mass != 0, each target's sum over
+// j in index order. Sources with inv_mass 0 have no mass.
+template <class T>
+struct NBodyJob {
+  const T* x[3];        // all bodies' positions at the stage
+  const T* inv_mass;
+  std::size_t sources;  // the padded body count
+  T eps2;               // softening squared
+  T scale_G;            // stage acceleration scale times G
+  T* acc[3];
+};
+template <class T>
+using NBodyFn = void (*)(const NBodyJob<T>& job, std::size_t begin, std::size_t end);
+
+// A spring network in sliced ELLPACK form: bodies in slices of kSpringSlice, each slice a
+// run of entries, one per spring slot, kSpringSlice lanes each (lane l for body slice *
+// kSpringSlice + l). A body's slots hold its springs in model order; empty slots point
+// at the body itself with zero parameters (coincident ends: no force).
+inline constexpr std::size_t kSpringSlice = 16;
+template <class T>
+struct SpringJob {
+  const T* x[3];
+  const T* v[3];
+  std::size_t covered;                 // bodies the network reaches (max index + 1)
+  const std::uint32_t* slice_offset;   // slices + 1: the first entry of each slice
+  const std::int32_t* neighbor;        // [entry][lane]
+  const std::int32_t* contiguous;      // per entry: lane 0's neighbor when lane l's is it + l, else -1
+  const T* rest;                       // [entry][lane], likewise k and damping
+  const T* k;
+  const T* damping;
+  T* force[3];                         // forces are added here
+};
+template <class T>
+using SpringFn = void (*)(const SpringJob<T>& job, std::size_t begin, std::size_t end);
+
 inline constexpr std::size_t kBuiltinCount = builtin_methods.size();
 
 template <class T>
@@ -209,6 +246,8 @@ struct KernelTable {
   StageFn<T> stage[2][2];
   CombineFn<T> combine;
   AddForcesFn<T> add_forces;
+  NBodyFn<T> nbody;
+  SpringFn<T> springs;
 };
 
 // The table of an available instruction set (`isa` resolved, not automatic). `relaxed`

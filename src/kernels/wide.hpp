@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <type_traits>
 
 #include <xsimd/xsimd.hpp>
@@ -54,6 +55,41 @@ KINEMA_INLINE void store(value_t<V>* p, const V& v) {
     *p = v;
   } else {
     v.store_aligned(p);
+  }
+}
+
+template <class V>
+KINEMA_INLINE V load_unaligned(const value_t<V>* p) {
+  if constexpr (std::is_floating_point_v<V>) {
+    return *p;
+  } else {
+    return V::load_unaligned(p);
+  }
+}
+
+// Lane l takes base[index[l]]: the gather instructions on AVX2 and AVX-512, one load per
+// lane elsewhere.
+template <class V>
+KINEMA_INLINE V gather(const value_t<V>* base, const std::int32_t* index) {
+  using T = value_t<V>;
+  if constexpr (std::is_floating_point_v<V>) {
+    return base[*index];
+#if defined(__AVX512F__)
+  } else if constexpr (std::is_same_v<V, xsimd::batch<float, xsimd::avx512f>>) {
+    return _mm512_i32gather_ps(_mm512_loadu_si512(index), base, 4);
+  } else if constexpr (std::is_same_v<V, xsimd::batch<double, xsimd::avx512f>>) {
+    return _mm512_i32gather_pd(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(index)), base, 8);
+#endif
+#if defined(__AVX2__)
+  } else if constexpr (std::is_same_v<V, xsimd::batch<float, xsimd::fma3<xsimd::avx2>>>) {
+    return _mm256_i32gather_ps(base, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(index)), 4);
+  } else if constexpr (std::is_same_v<V, xsimd::batch<double, xsimd::fma3<xsimd::avx2>>>) {
+    return _mm256_i32gather_pd(base, _mm_loadu_si128(reinterpret_cast<const __m128i*>(index)), 8);
+#endif
+  } else {
+    alignas(64) T lanes[Lane<V>::width];
+    for (std::size_t l = 0; l < Lane<V>::width; ++l) lanes[l] = base[index[l]];
+    return V::load_aligned(lanes);
   }
 }
 

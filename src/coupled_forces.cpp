@@ -1,0 +1,167 @@
+#include "coupled_forces.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "force_lowering.hpp"
+#include "kinema/error.hpp"
+
+namespace kinema {
+namespace {
+
+using kernels::kSpringSlice;
+
+// Each body's springs as (other end, pair index), in model order.
+struct Adjacency {
+  std::vector<std::uint32_t> start;  // bodies + 1
+  std::vector<std::uint32_t> other, pair;
+
+  Adjacency(std::span<const SpringPair> pairs, std::size_t bodies) : start(bodies + 1, 0) {
+    for (const SpringPair& p : pairs) ++start[p.i + 1], ++start[p.j + 1];
+    for (std::size_t b = 0; b < bodies; ++b) start[b + 1] += start[b];
+    other.resize(start[bodies]);
+    pair.resize(start[bodies]);
+    std::vector<std::uint32_t> next(start.begin(), start.end() - 1);
+    for (std::uint32_t k = 0; k < pairs.size(); ++k) {
+      other[next[pairs[k].i]] = pairs[k].j, pair[next[pairs[k].i]++] = k;
+      other[next[pairs[k].j]] = pairs[k].i, pair[next[pairs[k].j]++] = k;
+    }
+  }
+  std::uint32_t degree(std::size_t body) const { return start[body + 1] - start[body]; }
+};
+
+template <class T>
+void fill_slice(const Adjacency& adjacency, std::span<const SpringPair> pairs, std::size_t slice,
+                SpringNetwork<T>& net) {
+  const std::size_t first_entry = net.slice_offset[slice];
+  const std::size_t entries = net.slice_offset[slice + 1] - first_entry;
+  for (std::size_t lane = 0; lane < kSpringSlice; ++lane) {
+    const std::size_t body = slice * kSpringSlice + lane;
+    const std::uint32_t degree = body < net.covered ? adjacency.degree(body) : 0;
+    for (std::size_t e = 0; e < entries; ++e) {
+      const std::size_t at = (first_entry + e) * kSpringSlice + lane;
+      net.neighbor[at] = std::int32_t(body);  // empty slot: the body itself, no force
+      if (e >= degree) continue;
+      const std::size_t slot = adjacency.start[body] + e;
+      const SpringPair& p = pairs[adjacency.pair[slot]];
+      net.neighbor[at] = std::int32_t(adjacency.other[slot]);
+      net.rest[at] = T(p.rest), net.k[at] = T(p.k), net.damping[at] = T(p.damping);
+    }
+  }
+}
+
+template <class T>
+void mark_contiguous(SpringNetwork<T>& net) {
+  const std::size_t entries = net.contiguous.size();
+  for (std::size_t e = 0; e < entries; ++e) {
+    const std::int32_t* lanes = net.neighbor.data() + e * kSpringSlice;
+    bool run = true;
+    for (std::size_t l = 1; l < kSpringSlice; ++l) run = run && lanes[l] == lanes[0] + std::int32_t(l);
+    net.contiguous[e] = run ? lanes[0] : -1;
+  }
+}
+
+template <class T>
+void check_in(double value, const char* what) {
+  if (!(std::abs(value) <= double(std::numeric_limits<T>::max()))) {
+    throw Error(std::string(what) + ": " + shortest_text(value, 17) + " overflows " + type_name<T>());
+  }
+}
+
+template <class T>
+SpringNetwork<T> lower_springs(std::span<const SpringPair> pairs) {
+  SpringNetwork<T> net;
+  if (pairs.empty()) return net;
+  for (const SpringPair& p : pairs) {
+    net.covered = std::max<std::size_t>(net.covered, std::max(p.i, p.j) + 1);
+    check_in<T>(p.rest, "springs.rest"), check_in<T>(p.k, "springs.k");
+    check_in<T>(p.damping, "springs.damping");
+  }
+  const Adjacency adjacency(pairs, net.covered);
+  const std::size_t slices = (net.covered + kSpringSlice - 1) / kSpringSlice;
+  net.slice_offset.assign(slices + 1, 0);
+  for (std::size_t s = 0; s < slices; ++s) {
+    std::uint32_t widest = 0;
+    for (std::size_t b = s * kSpringSlice; b < std::min(net.covered, (s + 1) * kSpringSlice); ++b) {
+      widest = std::max(widest, adjacency.degree(b));
+    }
+    net.slice_offset[s + 1] = net.slice_offset[s] + widest;
+  }
+  const std::size_t entries = net.slice_offset[slices];
+  net.neighbor.resize(entries * kSpringSlice);
+  net.contiguous.resize(entries);
+  for (auto* a : {&net.rest, &net.k, &net.damping}) a->resize(entries * kSpringSlice);
+  for (std::size_t s = 0; s < slices; ++s) fill_slice(adjacency, pairs, s, net);
+  mark_contiguous(net);
+  return net;
+}
+
+double mass_of(double inv_mass) { return 1.0 / inv_mass; }
+
+}  // namespace
+
+template <class T>
+kernels::SpringJob<T> SpringNetwork<T>::job(const T* const x[3], const T* const v[3],
+                                            T* const force[3]) const {
+  return {{x[0], x[1], x[2]}, {v[0], v[1], v[2]}, covered,  slice_offset.data(),
+          neighbor.data(),    contiguous.data(),  rest.data(), k.data(),
+          damping.data(),     {force[0], force[1], force[2]}};
+}
+
+template <class T>
+CoupledForces<T> lower_coupled(const ForceModel<T>& forces) {
+  CoupledForces<T> out;
+  out.nbody = forces.nbody();
+  if (out.nbody) {
+    check_in<T>(out.nbody->G, "nbody.G");
+    check_in<T>(out.nbody->softening * out.nbody->softening, "nbody.softening squared");
+    out.eps2 = T(out.nbody->softening) * T(out.nbody->softening);
+  }
+  out.springs = lower_springs<T>(forces.springs());
+  return out;
+}
+
+template <class T>
+double nbody_potential(const ParticleSet<T>& b, const NBody& term) {
+  const double eps2 = term.softening * term.softening;
+  double u = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (b.inv_mass()[i] == 0) continue;
+    double row = 0;
+    for (std::size_t j = i + 1; j < b.size(); ++j) {
+      if (b.inv_mass()[j] == 0) continue;
+      const double dx = double(b.px()[j]) - b.px()[i], dy = double(b.py()[j]) - b.py()[i],
+                   dz = double(b.pz()[j]) - b.pz()[i];
+      const double r2 = dx * dx + dy * dy + dz * dz + eps2;
+      if (r2 > 0) row += mass_of(b.inv_mass()[j]) / std::sqrt(r2);
+    }
+    u -= term.G * mass_of(b.inv_mass()[i]) * row;
+  }
+  return u;
+}
+
+template <class T>
+double spring_potential(const ParticleSet<T>& b, std::span<const SpringPair> pairs) {
+  double u = 0;
+  for (const SpringPair& p : pairs) {
+    if (std::max(p.i, p.j) >= b.size()) continue;
+    const double dx = double(b.px()[p.j]) - b.px()[p.i], dy = double(b.py()[p.j]) - b.py()[p.i],
+                 dz = double(b.pz()[p.j]) - b.pz()[p.i];
+    const double stretch = std::sqrt(dx * dx + dy * dy + dz * dz) - p.rest;
+    u += 0.5 * p.k * stretch * stretch;
+  }
+  return u;
+}
+
+#define KINEMA_COUPLED(T)                                                               \
+  template struct SpringNetwork<T>;                                                     \
+  template CoupledForces<T> lower_coupled(const ForceModel<T>&);                        \
+  template double nbody_potential(const ParticleSet<T>&, const NBody&);                 \
+  template double spring_potential(const ParticleSet<T>&, std::span<const SpringPair>);
+KINEMA_COUPLED(float)
+KINEMA_COUPLED(double)
+#undef KINEMA_COUPLED
+
+}  // namespace kinema

@@ -1,0 +1,48 @@
+#pragma once
+// The coupled terms lowered to the kernels' data, once per stepper: N-body gravity's
+// constants in T and the spring network in the kernels' sliced layout. Also their
+// potential energies, in double, each pair once.
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "kernels/kernels.hpp"
+#include "kinema/bodies.hpp"
+#include "kinema/forces.hpp"
+
+namespace kinema {
+
+template <class T>
+struct SpringNetwork {
+  std::size_t covered = 0;                  // max index + 1; 0 without springs
+  std::vector<std::uint32_t> slice_offset;  // see kernels::SpringJob
+  std::vector<std::int32_t> neighbor, contiguous;
+  AlignedArray<T> rest, k, damping;
+
+  bool empty() const { return covered == 0; }
+  // The kernel's view of it for a stage state; forces go to `force`.
+  kernels::SpringJob<T> job(const T* const x[3], const T* const v[3], T* const force[3]) const;
+};
+
+template <class T>
+struct CoupledForces {
+  std::optional<NBody> nbody;  // as given; the kernels get G and softening^2 in T
+  T eps2 = 0;
+  SpringNetwork<T> springs;
+};
+
+// Throws kinema::Error when G or the softening squared overflows T.
+template <class T>
+CoupledForces<T> lower_coupled(const ForceModel<T>& forces);
+
+// -G sum_{i<j} m_i m_j / sqrt(|x_i - x_j|^2 + softening^2), over bodies with inv_mass != 0.
+template <class T>
+double nbody_potential(const ParticleSet<T>& bodies, const NBody& term);
+// sum 1/2 k (|x_i - x_j| - rest)^2 over the pairs.
+template <class T>
+double spring_potential(const ParticleSet<T>& bodies, std::span<const SpringPair> pairs);
+
+}  // namespace kinema

@@ -1,0 +1,140 @@
+#pragma once
+// The coupled terms' kernels: N-body gravity (SIMD over targets, sources staged in tiles)
+// and spring networks (SIMD over the bodies of a slice, neighbours loaded or gathered).
+// Every lane runs the same operations in the same order on every instruction set, so the
+// bits agree across them.
+
+#include <algorithm>
+#include <cstddef>
+
+#include "kernels/kernel_impl.hpp"
+
+namespace kinema::kernels::KINEMA_ISA_NS {
+
+// Sources staged per pass: a tile of positions and masses stays in L1 while every target
+// group of the block runs over it.
+inline constexpr std::size_t kSourceTile = 512;
+// Target bodies per block, at most: blocks are the stepper's.
+inline constexpr std::size_t kMaxTargets = 1024;
+
+template <class T>
+struct SourceTile {
+  alignas(64) T x[3][kSourceTile];
+  alignas(64) T mass[kSourceTile];
+  std::size_t count = 0;
+
+  void fill(const NBodyJob<T>& job, std::size_t first) {
+    count = std::min(kSourceTile, job.sources - first);
+    for (std::size_t j = 0; j < count; ++j) {
+      for (int d = 0; d < 3; ++d) x[d][j] = job.x[d][first + j];
+      const T w = job.inv_mass[first + j];
+      mass[j] = w != 0 ? T(1) / w : T(0);
+    }
+  }
+};
+
+// The partial sums of U lane groups of targets, starting at target i, over one tile.
+template <int U, class V>
+KINEMA_INLINE void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2,
+                                     const NBodyJob<value_t<V>>& job, std::size_t i,
+                                     value_t<V>* sum[3], std::size_t at) {
+  constexpr std::size_t W = Lane<V>::width;
+  V x[U][3], a[U][3];
+  for (int u = 0; u < U; ++u) {
+    for (int d = 0; d < 3; ++d) {
+      x[u][d] = load<V>(job.x[d] + i + u * W);
+      a[u][d] = load<V>(sum[d] + at + u * W);
+    }
+  }
+  for (std::size_t j = 0; j < tile.count; ++j) {
+    const V sx(tile.x[0][j]), sy(tile.x[1][j]), sz(tile.x[2][j]), m(tile.mass[j]);
+    for (int u = 0; u < U; ++u) {
+      const V dx = sx - x[u][0], dy = sy - x[u][1], dz = sz - x[u][2];
+      const V r2 = mul_add(dx, dx, mul_add(dy, dy, mul_add(dz, dz, eps2)));
+      // r2 == 0 only for a body and itself (or a twin) without softening: no force.
+      const V s = pick(r2 != V(0), m / (r2 * root(r2)), V(0));
+      a[u][0] = mul_add(s, dx, a[u][0]);
+      a[u][1] = mul_add(s, dy, a[u][1]);
+      a[u][2] = mul_add(s, dz, a[u][2]);
+    }
+  }
+  for (int u = 0; u < U; ++u) {
+    for (int d = 0; d < 3; ++d) store(sum[d] + at + u * W, a[u][d]);
+  }
+}
+
+template <class V>
+void nbody(const NBodyJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  using T = value_t<V>;
+  constexpr std::size_t W = Lane<V>::width;
+  constexpr int U = 4;  // target groups in registers: enough to hide the divider's latency
+  alignas(64) T sum_x[kMaxTargets]{}, sum_y[kMaxTargets]{}, sum_z[kMaxTargets]{};
+  T* sum[3] = {sum_x, sum_y, sum_z};
+  SourceTile<T> tile;
+  const V eps2(job.eps2);
+  for (std::size_t first = 0; first < job.sources; first += kSourceTile) {
+    tile.fill(job, first);
+    std::size_t i = begin;
+    for (; i + U * W <= end; i += U * W) gravity_from_tile<U, V>(tile, eps2, job, i, sum, i - begin);
+    for (; i < end; i += W) gravity_from_tile<1, V>(tile, eps2, job, i, sum, i - begin);
+  }
+  const V scale(job.scale_G);
+  for (std::size_t i = begin; i < end; i += W) {
+    const V inv_mass = load<V>(job.inv_mass + i);
+    for (int d = 0; d < 3; ++d) {
+      const V a = load<V>(job.acc[d] + i);
+      store(job.acc[d] + i, pick(inv_mass != V(0), mul_add(scale, load<V>(sum[d] + i - begin), a), a));
+    }
+  }
+}
+
+// One spring slot's force on the lanes' bodies: x, v theirs, xj, vj the other ends'.
+template <class V>
+KINEMA_INLINE void add_spring(const Vec<V>& x, const Vec<V>& v, const Vec<V>& xj, const Vec<V>& vj,
+                              V rest, V k, V damping, Vec<V>& f) {
+  Vec<V> d, dv;
+  for (int c = 0; c < 3; ++c) d.c[c] = xj.c[c] - x.c[c], dv.c[c] = vj.c[c] - v.c[c];
+  const V length = root(mul_add(d.c[0], d.c[0], mul_add(d.c[1], d.c[1], d.c[2] * d.c[2])));
+  const V inv = pick(length != V(0), V(1) / length, V(0));
+  Vec<V> u;
+  for (int c = 0; c < 3; ++c) u.c[c] = d.c[c] * inv;
+  const V along = mul_add(dv.c[0], u.c[0], mul_add(dv.c[1], u.c[1], dv.c[2] * u.c[2]));
+  // Both ends compute the same coefficient and opposite unit vectors: F_j = -F_i exactly.
+  const V coefficient = mul_add(k, length - rest, damping * along);
+  for (int c = 0; c < 3; ++c) f.c[c] = mul_add(coefficient, u.c[c], f.c[c]);
+}
+
+template <class V>
+KINEMA_INLINE Vec<V> other_ends(const value_t<V>* const p[3], const SpringJob<value_t<V>>& job,
+                                std::size_t entry, std::size_t lane) {
+  Vec<V> out;
+  const std::int32_t first = job.contiguous[entry];
+  for (int c = 0; c < 3; ++c) {
+    out.c[c] = first >= 0 ? load_unaligned<V>(p[c] + first + lane)
+                          : gather<V>(p[c], job.neighbor + entry * kSpringSlice + lane);
+  }
+  return out;
+}
+
+template <class V>
+void springs(const SpringJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  constexpr std::size_t W = Lane<V>::width;
+  const std::size_t stop = std::min(end, job.covered);
+  for (std::size_t slice = begin / kSpringSlice; slice * kSpringSlice < stop; ++slice) {
+    for (std::size_t lane = 0; lane < kSpringSlice; lane += W) {
+      const std::size_t i = slice * kSpringSlice + lane;
+      if (i >= end) break;
+      const Vec<V> x = load3<V>(job.x, i), v = load3<V>(job.v, i);
+      Vec<V> f{};
+      for (int c = 0; c < 3; ++c) f.c[c] = V(0);
+      for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
+        const std::size_t at = e * kSpringSlice + lane;
+        add_spring(x, v, other_ends<V>(job.x, job, e, lane), other_ends<V>(job.v, job, e, lane),
+                   load<V>(job.rest + at), load<V>(job.k + at), load<V>(job.damping + at), f);
+      }
+      for (int c = 0; c < 3; ++c) store(job.force[c] + i, load<V>(job.force[c] + i) + f.c[c]);
+    }
+  }
+}
+
+}  // namespace kinema::kernels::KINEMA_ISA_NS

@@ -1,0 +1,278 @@
+// N-body gravity: the kernel against a plain loop, the two-body Kepler orbit, conservation
+// of momentum, rk4's order on the energy error, and bit-identical results everywhere.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include "kernels/kernels.hpp"
+#include "support.hpp"
+#include "thread_pool.hpp"
+
+using namespace kinema;
+
+namespace {
+
+// A reproducible cluster: positions in a unit ball-ish box, masses from 0.5 to 2, small
+// velocities. Every 37th body is kinematic (no mass: neither attracts nor moves).
+template <class T>
+ParticleSet<T> cluster(std::size_t n, bool kinematic = false, std::uint64_t seed = 5) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> pos(-1, 1), vel(-0.2, 0.2), mass(0.5, 2);
+  ParticleSet<T> set;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3<T> x{T(pos(rng)), T(pos(rng)), T(pos(rng))}, v{T(vel(rng)), T(vel(rng)), T(vel(rng))};
+    if (kinematic && i % 37 == 0) {
+      set.add_kinematic(x, v);
+    } else {
+      set.add(x, v, T(mass(rng)));
+    }
+  }
+  return set;
+}
+
+// The kernel's sums over a whole set, block by block, with stage scale 1.
+template <class T>
+std::vector<T> kernel_sums(const ParticleSet<T>& b, Isa isa, T G, T eps2) {
+  const std::size_t n = b.padded_size();
+  AlignedArray<T> acc(3 * n);  // the kernels' stores are aligned
+  kernels::NBodyJob<T> job{{b.px(), b.py(), b.pz()}, b.inv_mass(), n, eps2, G,
+                           {acc.data(), acc.data() + n, acc.data() + 2 * n}};
+  const auto& table = kernels::kernel_table<T>(isa);
+  for (std::size_t begin = 0; begin < n; begin += kBlockBodies) {
+    table.nbody(job, begin, std::min(n, begin + kBlockBodies));
+  }
+  return {acc.data(), acc.data() + 3 * n};
+}
+
+// The same sums as a plain loop over (i, j) in T, with the kernel's operations in its
+// order: the kernel must give these bits.
+template <class T>
+std::vector<T> plain_sums(const ParticleSet<T>& b, T G, T eps2) {
+  const std::size_t n = b.padded_size();
+  std::vector<T> acc(3 * n, T(0));
+  const T* x[3] = {b.px(), b.py(), b.pz()};
+  for (std::size_t i = 0; i < n; ++i) {
+    if (b.inv_mass()[i] == 0) continue;
+    T a[3] = {0, 0, 0};
+    for (std::size_t j = 0; j < n; ++j) {
+      const T w = b.inv_mass()[j], m = w != 0 ? T(1) / w : T(0);
+      T d[3];
+      for (int k = 0; k < 3; ++k) d[k] = x[k][j] - x[k][i];
+      const T r2 = std::fma(d[0], d[0], std::fma(d[1], d[1], std::fma(d[2], d[2], eps2)));
+      const T s = r2 != 0 ? m / (r2 * std::sqrt(r2)) : T(0);
+      for (int k = 0; k < 3; ++k) a[k] = std::fma(s, d[k], a[k]);
+    }
+    for (int k = 0; k < 3; ++k) acc[k * n + i] = std::fma(G, a[k], T(0));
+  }
+  return acc;
+}
+
+template <class T>
+void check_kernel_bits() {
+  const ParticleSet<T> b = cluster<T>(2500, true);  // three blocks, the last one short
+  const T G = T(0.75), eps2 = T(1e-4);
+  const std::vector<T> plain = plain_sums(b, G, eps2);
+  for (Isa isa : {Isa::scalar, Isa::sse2, Isa::avx2, Isa::avx512}) {
+    if (!isa_available(isa)) continue;
+    INFO("isa " << isa_name(isa));
+    CHECK(kernel_sums(b, isa, G, eps2) == plain);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("nbody: every instruction set gives the bits of a plain loop in the same order", "[nbody]") {
+  check_kernel_bits<float>();
+  check_kernel_bits<double>();
+}
+
+TEST_CASE("nbody: the sums are the softened Newtonian accelerations", "[nbody]") {
+  const ParticleSet<double> b = cluster<double>(1500, true);
+  const double eps2 = 1e-4;
+  const std::vector<double> got = kernel_sums(b, test::test_isa(), 1.0, eps2);
+  const std::size_t n = b.padded_size();
+  double worst = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (b.inv_mass()[i] == 0) continue;
+    long double a[3] = {0, 0, 0}, scale = 0;
+    for (std::size_t j = 0; j < b.size(); ++j) {
+      if (b.inv_mass()[j] == 0 || j == i) continue;
+      const long double m = 1.0L / b.inv_mass()[j];
+      const long double dx = (long double)b.px()[j] - b.px()[i], dy = (long double)b.py()[j] - b.py()[i],
+                        dz = (long double)b.pz()[j] - b.pz()[i];
+      const long double r2 = dx * dx + dy * dy + dz * dz + eps2, s = m / (r2 * std::sqrt(r2));
+      a[0] += s * dx, a[1] += s * dy, a[2] += s * dz;
+      scale += s * std::sqrt(r2);  // sum of |terms|: what the round-off scales with
+    }
+    for (int k = 0; k < 3; ++k) {
+      const double error = std::abs(double(got[k * n + i] - a[k])) / double(scale);
+      worst = std::max(worst, error);
+    }
+  }
+  // Against a long double reference: round-off of a 1500-term sum, relative to the sum of
+  // magnitudes (the sum itself may cancel). A wrong power of r or a lost softening is O(1).
+  CHECK(worst < 1e-13);
+}
+
+namespace {
+
+// Two bodies on an ellipse of semi-major axis a and eccentricity e about their centre of
+// mass, starting at periapsis: returns the set and the orbital period.
+ParticleSet<double> binary(double m1, double m2, double a, double e, double& period) {
+  const double mu = m1 + m2;  // G = 1
+  const double r = a * (1 - e), speed = std::sqrt(mu * (1 + e) / r);  // relative, at periapsis
+  period = 2 * std::numbers::pi * std::sqrt(a * a * a / mu);
+  ParticleSet<double> b;
+  b.add({-r * m2 / mu, 0, 0}, {0, -speed * m2 / mu, 0}, m1);
+  b.add({r * m1 / mu, 0, 0}, {0, speed * m1 / mu, 0}, m2);
+  return b;
+}
+
+double separation(const ParticleSet<double>& b) {
+  return test::distance({b.px()[0], b.py()[0], b.pz()[0]}, {b.px()[1], b.py()[1], b.pz()[1]});
+}
+
+Vec3<double> centre_of_mass(const ParticleSet<double>& b) {
+  Vec3<double> c{};
+  double total = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const double m = 1 / b.inv_mass()[i];
+    total += m;
+    for (int d = 0; d < 3; ++d) c[d] += m * b.position(i)[d];
+  }
+  for (double& x : c) x /= total;
+  return c;
+}
+
+}  // namespace
+
+TEST_CASE("nbody: two bodies follow the Kepler ellipse, the centre of mass stays put", "[nbody]") {
+  const double a = 1.5, e = 0.6;
+  double period = 0;
+  ParticleSet<double> b = binary(1.0, 0.25, a, e, period);
+  ForceModel<double> f;
+  f.add(NBody{1.0, 0.0});
+  Stepper<double> s(f, rk4, test::serial_options());
+  const int steps = 4000;
+  const double h = period / steps;
+  double closest = separation(b), farthest = closest;
+  for (int k = 0; k < steps; ++k) {
+    s.step(b, h);
+    closest = std::min(closest, separation(b)), farthest = std::max(farthest, separation(b));
+    const Vec3<double> c = centre_of_mass(b);
+    REQUIRE(std::hypot(c[0], c[1], c[2]) < 1e-13);
+  }
+  // Periapsis a (1 - e) and apoapsis a (1 + e) (the apoapsis falls on a step: steps even).
+  CHECK(closest == Approx(a * (1 - e)).epsilon(1e-12));
+  CHECK(farthest == Approx(a * (1 + e)).epsilon(1e-7));
+  // After one period, back at periapsis.
+  CHECK(b.px()[1] - b.px()[0] == Approx(a * (1 - e)).epsilon(1e-7));
+  CHECK(std::abs(b.py()[1] - b.py()[0]) < 1e-6);
+}
+
+TEST_CASE("nbody: every method conserves a cluster's momentum to round-off", "[nbody]") {
+  ForceModel<double> f;
+  f.add(NBody{1.0, 0.05});
+  for (const Method* m : builtin_methods) {
+    INFO("method " << m->name);
+    ParticleSet<double> b = cluster<double>(64);
+    const Vec3<double> p0 = momentum(b);
+    double scale = 0;  // sum of m |v|: what the round-off scales with
+    Stepper<double> s(f, *m, test::serial_options());
+    for (int k = 0; k < 200; ++k) {
+      s.step(b, 1e-3);
+      for (std::size_t i = 0; i < b.size(); ++i) {
+        scale = std::max(scale, test::distance(b.velocity(i), {0, 0, 0}) / b.inv_mass()[i]);
+      }
+    }
+    const Vec3<double> p = momentum(b);
+    CHECK(test::distance(p, p0) < 1e-13 * scale * double(b.size()));
+    CHECK(test::distance(p, p0) > 0);  // not trivially: the bodies did move each other
+  }
+}
+
+TEST_CASE("nbody: rk4's energy error on a small cluster shrinks at order 4", "[nbody][convergence]") {
+  ForceModel<double> f;
+  f.add(NBody{1.0, 0.2});
+  std::vector<double> hs, errors;
+  for (double h : {0.04, 0.02, 0.01, 0.005}) {
+    ParticleSet<double> b = cluster<double>(8, false, 11);
+    const double e0 = energy(b, f).total();
+    Stepper<double> s(f, rk4, test::serial_options());
+    s.advance(b, h, std::uint64_t(std::llround(2.0 / h)));
+    hs.push_back(h);
+    errors.push_back(std::abs(energy(b, f).total() - e0));
+  }
+  const double order = test::fitted_order(hs, errors);
+  INFO("errors " << errors[0] << " .. " << errors[3]);
+  CHECK(order > 3.7);
+  CHECK(order < 4.5);
+}
+
+namespace {
+
+template <class T>
+std::uint64_t cluster_hash(const Method& method, StepperOptions o, bool with_local,
+                           std::size_t bodies = 3000) {
+  ForceModel<T> f = with_local ? test::all_local_terms<T>() : ForceModel<T>{};
+  f.add(NBody{0.5, 0.05});
+  ParticleSet<T> b = cluster<T>(bodies, true);
+  Stepper<T> s(f, method, o);
+  s.advance(b, T(1e-3), 2);
+  REQUIRE(all_finite(b));
+  return test::state_hash(b);
+}
+
+// Instruction sets on a smaller cluster (the scalar path is slow), thread counts and job
+// systems on three blocks.
+template <class T>
+void check_nbody_determinism() {
+  for (const Method* m : {&euler, &rk4, &velocity_verlet}) {
+    for (bool local : {false, true}) {
+      INFO(m->name << (local ? " with local terms" : ""));
+      const std::uint64_t small = cluster_hash<T>(*m, test::serial_options(Isa::scalar), local, 1100);
+      for (Isa isa : {Isa::sse2, Isa::avx2, Isa::avx512}) {
+        if (!isa_available(isa)) continue;
+        CHECK(cluster_hash<T>(*m, test::serial_options(isa), local, 1100) == small);
+      }
+      const std::uint64_t serial = cluster_hash<T>(*m, test::serial_options(best_isa()), local);
+      for (unsigned threads : {2u, 3u}) {
+        TbbJobSystem tbb(threads);
+        test::ThreadPool pool(threads);
+        StepperOptions o;
+        o.inline_below = 0;
+        o.jobs = &tbb;
+        CHECK(cluster_hash<T>(*m, o, local) == serial);
+        o.jobs = &pool;
+        CHECK(cluster_hash<T>(*m, o, local) == serial);
+      }
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("nbody: the same bits on every instruction set, thread count and job system", "[nbody]") {
+  check_nbody_determinism<float>();
+  check_nbody_determinism<double>();
+}
+
+TEST_CASE("nbody: with G = 0 the local terms give the fused path's positions", "[nbody]") {
+  for (const Method* m : builtin_methods) {
+    INFO("method " << m->name);
+    ParticleSet<double> fused = cluster<double>(1500), staged = fused;
+    Stepper<double> plain(test::all_local_terms<double>(), *m, test::serial_options());
+    ForceModel<double> with_gravity = test::all_local_terms<double>();
+    with_gravity.add(NBody{0.0, 0.1});
+    Stepper<double> coupled(with_gravity, *m, test::serial_options());
+    REQUIRE(plain.fused());
+    plain.advance(fused, 0.01, 5);
+    coupled.advance(staged, 0.01, 5);
+    for (std::size_t i = 0; i < fused.size(); ++i) {
+      REQUIRE(fused.position(i) == staged.position(i));
+      REQUIRE(fused.velocity(i) == staged.velocity(i));
+    }
+  }
+}
