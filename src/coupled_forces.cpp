@@ -1,6 +1,7 @@
 #include "coupled_forces.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -32,34 +33,75 @@ struct Adjacency {
   std::uint32_t degree(std::size_t body) const { return start[body + 1] - start[body]; }
 };
 
+// Which spring of its body each lane takes in each entry of a slice: an index into the
+// adjacency, or -1 for none. Where the slice's bodies reach few distinct offsets (j - i),
+// as in chains and grids, an entry holds one offset: its lanes' other ends are consecutive
+// bodies, loaded without a gather. Otherwise entries follow each body's springs in model
+// order. Either way the order is fixed here, once.
+using SliceLayout = std::vector<std::array<std::int64_t, kSpringSlice>>;
+
+SliceLayout slice_layout(const Adjacency& adjacency, std::size_t slice, std::size_t covered) {
+  const std::size_t first = slice * kSpringSlice, last = std::min(covered, first + kSpringSlice);
+  std::uint32_t widest = 0;
+  std::vector<std::int64_t> offsets;
+  for (std::size_t b = first; b < last; ++b) {
+    widest = std::max(widest, adjacency.degree(b));
+    for (std::uint32_t s = adjacency.start[b]; s < adjacency.start[b + 1]; ++s) {
+      offsets.push_back(std::int64_t(adjacency.other[s]) - std::int64_t(b));
+    }
+  }
+  std::sort(offsets.begin(), offsets.end());
+  offsets.erase(std::unique(offsets.begin(), offsets.end()), offsets.end());
+  const bool by_offset = offsets.size() <= 2 * std::size_t(widest);
+  SliceLayout layout(by_offset ? offsets.size() : widest);
+  for (auto& entry : layout) entry.fill(-1);
+  for (std::size_t b = first; b < last; ++b) {
+    for (std::uint32_t s = adjacency.start[b]; s < adjacency.start[b + 1]; ++s) {
+      const std::int64_t offset = std::int64_t(adjacency.other[s]) - std::int64_t(b);
+      const std::size_t e = by_offset ? std::size_t(std::lower_bound(offsets.begin(), offsets.end(), offset) - offsets.begin())
+                                      : s - adjacency.start[b];
+      layout[e][b - first] = s;
+    }
+  }
+  return layout;
+}
+
 template <class T>
 void fill_slice(const Adjacency& adjacency, std::span<const SpringPair> pairs, std::size_t slice,
-                SpringNetwork<T>& net) {
+                const SliceLayout& layout, SpringNetwork<T>& net) {
   const std::size_t first_entry = net.slice_offset[slice];
-  const std::size_t entries = net.slice_offset[slice + 1] - first_entry;
-  for (std::size_t lane = 0; lane < kSpringSlice; ++lane) {
-    const std::size_t body = slice * kSpringSlice + lane;
-    const std::uint32_t degree = body < net.covered ? adjacency.degree(body) : 0;
-    for (std::size_t e = 0; e < entries; ++e) {
+  for (std::size_t e = 0; e < layout.size(); ++e) {
+    for (std::size_t lane = 0; lane < kSpringSlice; ++lane) {
       const std::size_t at = (first_entry + e) * kSpringSlice + lane;
-      net.neighbor[at] = std::int32_t(body);  // empty slot: the body itself, no force
-      if (e >= degree) continue;
-      const std::size_t slot = adjacency.start[body] + e;
+      const std::int64_t slot = layout[e][lane];
+      // An empty slot: the body itself, all parameters zero, so no force.
+      net.neighbor[at] = std::int32_t(slot < 0 ? slice * kSpringSlice + lane : adjacency.other[slot]);
+      if (slot < 0) continue;
       const SpringPair& p = pairs[adjacency.pair[slot]];
-      net.neighbor[at] = std::int32_t(adjacency.other[slot]);
       net.rest[at] = T(p.rest), net.k[at] = T(p.k), net.damping[at] = T(p.damping);
     }
   }
 }
 
+// An entry is contiguous when its springs' other ends are first + lane for one first, all
+// of whose 16 bodies exist. Its empty lanes then load a real body, harmless: their zero
+// parameters make no force from a finite state.
 template <class T>
-void mark_contiguous(SpringNetwork<T>& net) {
-  const std::size_t entries = net.contiguous.size();
-  for (std::size_t e = 0; e < entries; ++e) {
-    const std::int32_t* lanes = net.neighbor.data() + e * kSpringSlice;
-    bool run = true;
-    for (std::size_t l = 1; l < kSpringSlice; ++l) run = run && lanes[l] == lanes[0] + std::int32_t(l);
-    net.contiguous[e] = run ? lanes[0] : -1;
+void mark_contiguous(const std::vector<SliceLayout>& layouts, SpringNetwork<T>& net) {
+  for (std::size_t slice = 0; slice < layouts.size(); ++slice) {
+    for (std::size_t e = 0; e < layouts[slice].size(); ++e) {
+      const std::size_t entry = net.slice_offset[slice] + e;
+      const std::int32_t* lanes = net.neighbor.data() + entry * kSpringSlice;
+      std::int64_t first = -1;
+      bool run = true;
+      for (std::size_t l = 0; l < kSpringSlice; ++l) {
+        if (layouts[slice][e][l] < 0) continue;
+        if (first < 0) first = std::int64_t(lanes[l]) - std::int64_t(l);
+        run = run && std::int64_t(lanes[l]) - std::int64_t(l) == first;
+      }
+      run = run && first >= 0 && std::size_t(first) + kSpringSlice <= net.covered;
+      net.contiguous[entry] = run ? std::int32_t(first) : -1;
+    }
   }
 }
 
@@ -81,20 +123,18 @@ SpringNetwork<T> lower_springs(std::span<const SpringPair> pairs) {
   }
   const Adjacency adjacency(pairs, net.covered);
   const std::size_t slices = (net.covered + kSpringSlice - 1) / kSpringSlice;
+  std::vector<SliceLayout> layouts(slices);
   net.slice_offset.assign(slices + 1, 0);
   for (std::size_t s = 0; s < slices; ++s) {
-    std::uint32_t widest = 0;
-    for (std::size_t b = s * kSpringSlice; b < std::min(net.covered, (s + 1) * kSpringSlice); ++b) {
-      widest = std::max(widest, adjacency.degree(b));
-    }
-    net.slice_offset[s + 1] = net.slice_offset[s] + widest;
+    layouts[s] = slice_layout(adjacency, s, net.covered);
+    net.slice_offset[s + 1] = net.slice_offset[s] + std::uint32_t(layouts[s].size());
   }
   const std::size_t entries = net.slice_offset[slices];
   net.neighbor.resize(entries * kSpringSlice);
   net.contiguous.resize(entries);
   for (auto* a : {&net.rest, &net.k, &net.damping}) a->resize(entries * kSpringSlice);
-  for (std::size_t s = 0; s < slices; ++s) fill_slice(adjacency, pairs, s, net);
-  mark_contiguous(net);
+  for (std::size_t s = 0; s < slices; ++s) fill_slice(adjacency, pairs, s, layouts[s], net);
+  mark_contiguous(layouts, net);
   return net;
 }
 

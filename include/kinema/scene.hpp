@@ -27,6 +27,9 @@ decltype(auto) with_precision(Precision p, Fn&& fn) {
 
 // Bodies drawn uniformly from boxes, reproducibly from `seed` on every platform. Rigid
 // ones also get a uniformly random orientation and an angular velocity from a box.
+// Particles may instead form a Plummer sphere of scale radius `plummer_radius` (positions
+// cut at 20 radii), with velocities that put it in equilibrium under the scene's nbody G
+// (1 without one), centred at the origin at rest.
 struct GenerateSpec {
   std::size_t count = 0;
   std::uint64_t seed = 1;
@@ -36,6 +39,7 @@ struct GenerateSpec {
   bool rigid = false;
   Vec3<double> inertia{1, 1, 1};  // principal moments
   Vec3<double> angular_velocity_min{}, angular_velocity_max{};
+  double plummer_radius = 0;  // > 0: a Plummer sphere instead of the boxes
 };
 
 struct BodySpec {
@@ -67,6 +71,11 @@ struct Scene {
   std::vector<RigidSpec> rigid_bodies;
   std::optional<GenerateSpec> generate;
   std::vector<LocalTerm> forces;
+  // Coupled terms (particles only): N-body gravity, and spring networks in scene order.
+  // Pair indices count listed particles, then the bodies of network generators in term
+  // order, then generated particles.
+  std::optional<NBody> nbody;
+  std::vector<Springs> springs;
 };
 
 // Parses a scene; throws kinema::Error naming the JSON path of the first problem,

@@ -116,6 +116,8 @@ KINEMA_INLINE Vec<V> other_ends(const value_t<V>* const p[3], const SpringJob<va
   return out;
 }
 
+inline constexpr std::size_t kPrefetchSlots = 32 * kSpringSlice;
+
 template <class V>
 void springs(const SpringJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   constexpr std::size_t W = Lane<V>::width;
@@ -129,6 +131,9 @@ void springs(const SpringJob<value_t<V>>& job, std::size_t begin, std::size_t en
       for (int c = 0; c < 3; ++c) f.c[c] = V(0);
       for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
         const std::size_t at = e * kSpringSlice + lane;
+        // Nine streams at once (state, parameters, forces) outrun the hardware prefetcher:
+        // fetch the parameters kPrefetchSlots ahead.
+        for (const value_t<V>* p : {job.rest, job.k, job.damping}) __builtin_prefetch(p + at + kPrefetchSlots);
         add_spring(x, v, other_ends<V>(job.x, job, e, lane), other_ends<V>(job.v, job, e, lane),
                    load<V>(job.rest + at), load<V>(job.k + at), load<V>(job.damping + at), f);
       }

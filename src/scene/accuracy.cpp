@@ -102,6 +102,8 @@ std::pair<double, double> linear_motion(double y0, double v0, double gamma, doub
 }  // namespace
 
 Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
+  // Bodies that pull on each other are one system: a sample would be another scene.
+  if (scene.nbody || !scene.springs.empty()) max_bodies = std::numeric_limits<std::size_t>::max();
   Scene out = scene;
   out.generate.reset();
   out.particles.clear();
@@ -162,6 +164,7 @@ double state_error(const BodyStates& a, const BodyStates& b) {
 
 std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
   if (!scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid)) return std::nullopt;
+  if (scene.nbody || !scene.springs.empty()) return std::nullopt;  // coupled: no closed form
   // Gravity, linear drag and springs make one linear model; a lone central term an orbit.
   const LocalSums sums = sum_terms(scene.forces);
   int without_reference = 0;

@@ -12,10 +12,10 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
-#include <nlohmann/json.hpp>
-
 #include "force_lowering.hpp"
 #include "force_terms.hpp"
+#include "scene/json_node.hpp"
+#include "scene/networks.hpp"
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
@@ -27,79 +27,8 @@ std::string_view precision_name(Precision p) { return p == Precision::single ? "
 
 namespace {
 
-using json = nlohmann::json;
-
-// A JSON value with the path that leads to it, for error messages.
-struct Node {
-  const json& value;
-  std::string path;
-  std::string_view origin;
-
-  [[noreturn]] void fail(const std::string& what) const {
-    throw Error(printable(std::string(origin) + ": " + (path.empty() ? "(top level)" : path) + ": " + what));
-  }
-  Node child(const std::string& key) const {
-    if (!has(key)) fail("missing key '" + key + "'");
-    return {value[key], path.empty() ? key : path + "." + key, origin};
-  }
-  Node element(std::size_t i) const {
-    return {value.at(i), path + "[" + std::to_string(i) + "]", origin};
-  }
-  bool has(const std::string& key) const { return value.contains(key); }
-
-  void expect_object(std::initializer_list<std::string_view> known) const {
-    expect_object(std::vector<std::string_view>(known));
-  }
-  void expect_object(const std::vector<std::string_view>& known) const {
-    if (!value.is_object()) fail("expected an object");
-    for (const auto& [key, _] : value.items()) {
-      if (key == "comment" || key == "description") continue;
-      if (std::find(known.begin(), known.end(), key) == known.end()) {
-        std::string list;
-        for (auto k : known) list += (list.empty() ? "" : ", ") + std::string(k);
-        child(key).fail("unknown key (known: " + list + ")");
-      }
-    }
-  }
-  double number() const {
-    if (!value.is_number()) fail("expected a number");
-    const double x = value.get<double>();
-    if (!std::isfinite(x)) fail("expected a finite number");
-    return x;
-  }
-  double positive() const {
-    const double x = number();
-    if (!(x > 0)) fail("expected a number > 0");
-    return x;
-  }
-  double non_negative() const {
-    const double x = number();
-    if (!(x >= 0)) fail("expected a number >= 0");
-    return x;
-  }
-  std::uint64_t count(bool allow_zero) const {
-    // Integers past 2^63 parse as unsigned, negative ones as signed.
-    const bool negative = value.is_number_integer() && !value.is_number_unsigned() &&
-                          value.get<std::int64_t>() < 0;
-    if (!value.is_number_integer() || negative || (!allow_zero && value.get<std::uint64_t>() == 0)) {
-      fail(allow_zero ? "expected an integer >= 0" : "expected an integer >= 1");
-    }
-    return value.get<std::uint64_t>();
-  }
-  std::string string() const {
-    if (!value.is_string()) fail("expected a string");
-    return value.get<std::string>();
-  }
-  bool boolean() const {
-    if (!value.is_boolean()) fail("expected true or false");
-    return value.get<bool>();
-  }
-  Vec3<double> vec3() const {
-    if (!value.is_array() || value.size() != 3) fail("expected an array of 3 numbers");
-    return {element(0).number(), element(1).number(), element(2).number()};
-  }
-  Node required(const std::string& key) const { return child(key); }
-};
+using scene_json::json;
+using scene_json::Node;
 
 // A term from its home's fields: the keys it knows, vectors and numbers >= 0.
 template <class Term, class Info>
@@ -225,19 +154,26 @@ RigidSpec parse_rigid(const Node& n) {
   return b;
 }
 
+// The keys of the Plummer form: no boxes, no rigid bodies.
+void parse_plummer(const Node& n, GenerateSpec& g) {
+  const Node d = n.child("distribution");
+  if (d.string() != "plummer") d.fail("expected \"box\" or \"plummer\"");
+  if (g.rigid) d.fail("a Plummer sphere is made of particles");
+  for (const char* key : {"position_min", "position_max", "velocity_min", "velocity_max"}) {
+    if (n.has(key)) n.child(key).fail("only for \"distribution\": \"box\"");
+  }
+  g.plummer_radius = n.required("radius").positive();
+}
+
 GenerateSpec parse_generate(const Node& n) {
   n.expect_object({"count", "seed", "position_min", "position_max", "velocity_min",
                    "velocity_max", "mass", "kind", "inertia", "angular_velocity_min",
-                   "angular_velocity_max"});
+                   "angular_velocity_max", "distribution", "radius"});
   GenerateSpec g;
   g.count = n.required("count").count(true);
   // 2^32 bodies of 7 double arrays is 240 GB: far past any machine this runs on.
   if (g.count > (std::uint64_t(1) << 32)) n.child("count").fail("expected at most 2^32 bodies");
   if (n.has("seed")) g.seed = n.child("seed").count(true);
-  g.position_min = n.required("position_min").vec3();
-  g.position_max = n.required("position_max").vec3();
-  if (n.has("velocity_min")) g.velocity_min = n.child("velocity_min").vec3();
-  if (n.has("velocity_max")) g.velocity_max = n.child("velocity_max").vec3();
   if (n.has("mass")) g.mass = n.child("mass").positive();
   if (n.has("kind")) {
     const Node kind = n.child("kind");
@@ -245,6 +181,16 @@ GenerateSpec parse_generate(const Node& n) {
     if (name != "particle" && name != "rigid") kind.fail("expected \"particle\" or \"rigid\"");
     g.rigid = name == "rigid";
   }
+  const bool plummer = n.has("distribution") && n.child("distribution").string() != "box";
+  if (plummer) {
+    parse_plummer(n, g);
+    return g;
+  }
+  if (n.has("radius")) n.child("radius").fail("only for \"distribution\": \"plummer\"");
+  g.position_min = n.required("position_min").vec3();
+  g.position_max = n.required("position_max").vec3();
+  if (n.has("velocity_min")) g.velocity_min = n.child("velocity_min").vec3();
+  if (n.has("velocity_max")) g.velocity_max = n.child("velocity_max").vec3();
   for (const char* key : {"inertia", "angular_velocity_min", "angular_velocity_max"}) {
     if (n.has(key) && !g.rigid) n.child(key).fail("only for \"kind\": \"rigid\"");
   }
@@ -435,13 +381,25 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
     }
   }
   if (root.has("generate")) s.generate = parse_generate(root.child("generate"));
+  std::vector<Node> spring_terms;
   if (root.has("forces")) {
     const Node list = root.child("forces");
     if (!list.value.is_array()) list.fail("expected an array");
     for (std::size_t i = 0; i < list.value.size(); ++i) {
-      s.forces.push_back(parse_force(list.element(i)));
+      const Node term = list.element(i);
+      const std::string type = term.value.is_object() && term.has("type") ? term.child("type").string() : "";
+      if (!is_coupled_force(type)) {
+        s.forces.push_back(parse_force(term));
+        continue;
+      }
+      if (type == "nbody" && (!s.rigid_bodies.empty() || (s.generate && s.generate->rigid))) {
+        term.fail("nbody acts on particles only; the scene has rigid bodies");
+      }
+      parse_coupled_force(term, type, s);
+      if (type == "springs") spring_terms.push_back(term);
     }
   }
+  check_coupled(s, spring_terms);
   if (s.particles.empty() && s.rigid_bodies.empty() && (!s.generate || s.generate->count == 0)) {
     root.fail("the scene has no bodies (give 'particles', 'rigid_bodies' or 'generate')");
   }
@@ -537,6 +495,7 @@ void check_generated(const Scene& scene) {
   for (const auto& [key, box] : boxes) {
     if (!holds<T>(*box)) fail(key, "overflows " + type);
   }
+  if (g.plummer_radius > 0 && !holds<T>(40 * g.plummer_radius)) fail("radius", "overflows " + type);
   if (!g.rigid) return;
   for (int d = 0; d < 3; ++d) {
     const T inverse = T(1) / T(g.inertia[d]);
@@ -646,6 +605,54 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
   return set;
 }
 
+namespace {
+
+// A uniformly random direction.
+Vec3<double> random_direction(std::mt19937_64& rng) {
+  const double z = uniform(rng, -1, 1), phi = uniform(rng, 0, 2 * std::numbers::pi);
+  const double s = std::sqrt(std::max(0.0, 1 - z * z));
+  return {s * std::cos(phi), s * std::sin(phi), z};
+}
+
+// One body of a Plummer sphere (scale a, total mass M): the radius from the inverted
+// cumulative mass, the speed by rejection from g(q) = q^2 (1 - q^2)^(7/2) as a fraction of
+// the escape speed sqrt(2 G M) (r^2 + a^2)^(-1/4) (Aarseth, Henon and Wielen, 1974).
+void plummer_body(std::mt19937_64& rng, double a, double GM, Vec3<double>& x, Vec3<double>& v) {
+  double r = 0;
+  do {
+    r = a / std::sqrt(std::pow(uniform(rng, 0, 1), -2.0 / 3) - 1);
+  } while (!(r <= 20 * a));
+  double q = 0;
+  do {
+    q = uniform(rng, 0, 1);
+  } while (uniform(rng, 0, 0.1) > q * q * std::pow(1 - q * q, 3.5));
+  const double speed = q * std::sqrt(2 * GM) * std::pow(r * r + a * a, -0.25);
+  const Vec3<double> along = random_direction(rng), heading = random_direction(rng);
+  for (int d = 0; d < 3; ++d) x[d] = r * along[d], v[d] = speed * heading[d];
+}
+
+// The generated bodies of a Plummer scene, moved so their centre of mass is at rest at
+// the origin.
+template <class T>
+void add_plummer(const Scene& scene, ParticleSet<T>& set) {
+  const GenerateSpec& g = *scene.generate;
+  const double G = scene.nbody ? scene.nbody->G : 1;
+  std::mt19937_64 rng(g.seed);
+  std::vector<Vec3<double>> x(g.count), v(g.count);
+  Vec3<double> mean_x{}, mean_v{};
+  for (std::size_t i = 0; i < g.count; ++i) {
+    plummer_body(rng, g.plummer_radius, G * g.mass * double(g.count), x[i], v[i]);
+    for (int d = 0; d < 3; ++d) mean_x[d] += x[i][d] / double(g.count), mean_v[d] += v[i][d] / double(g.count);
+  }
+  for (std::size_t i = 0; i < g.count; ++i) {
+    Vec3<T> p, u;
+    for (int d = 0; d < 3; ++d) p[d] = T(x[i][d] - mean_x[d]), u[d] = T(v[i][d] - mean_v[d]);
+    set.add(p, u, T(g.mass));
+  }
+}
+
+}  // namespace
+
 template <class T>
 ParticleSet<T> make_particles(const Scene& scene) {
   check_generated<T>(scene);
@@ -660,7 +667,9 @@ ParticleSet<T> make_particles(const Scene& scene) {
       set.add(v3(b.position), v3(b.velocity), T(b.mass));
     }
   }
-  if (generated > 0) {
+  if (generated > 0 && scene.generate->plummer_radius > 0) {
+    add_plummer(scene, set);
+  } else if (generated > 0) {
     const GenerateSpec& g = *scene.generate;
     std::mt19937_64 rng(g.seed);
     for (std::size_t i = 0; i < g.count; ++i) {
@@ -682,6 +691,12 @@ ForceModel<T> make_forces(const Scene& scene) {
     } catch (const Error& e) {
       throw Error("forces[" + std::to_string(i) + "]: " + e.what());
     }
+  }
+  try {
+    if (scene.nbody) model.add(*scene.nbody);
+    for (const Springs& network : scene.springs) model.add(network);
+  } catch (const Error& e) {
+    throw Error(std::string("forces: ") + e.what());
   }
   return model;
 }

@@ -1,0 +1,178 @@
+#include "scene/networks.hpp"
+
+#include <cmath>
+#include <vector>
+
+namespace kinema {
+namespace {
+
+using scene_json::Node;
+
+std::uint32_t index_in(const Node& n) {
+  const std::uint64_t i = n.count(true);
+  if (i >= kMaxSpringBodies) n.fail("expected a body index below 2^30");
+  return std::uint32_t(i);
+}
+
+SpringPair parse_pair(const Node& n) {
+  if (!n.value.is_array() || n.value.size() != 5) n.fail("expected [i, j, rest, k, damping]");
+  return {index_in(n.element(0)), index_in(n.element(1)), n.element(2).non_negative(),
+          n.element(3).non_negative(), n.element(4).non_negative()};
+}
+
+// The parameters a generator's springs and bodies share.
+struct Network {
+  std::size_t first = 0;  // index of the generator's first body in the scene
+  double spacing = 1, k = 0, shear_k = 0, damping = 0, mass = 1;
+  Vec3<double> origin{};
+};
+
+Network parse_network(const Node& n, std::size_t first) {
+  Network net;
+  net.first = first;
+  net.spacing = n.required("spacing").positive();
+  net.k = n.required("k").non_negative();
+  net.shear_k = n.has("shear_k") ? n.child("shear_k").non_negative() : net.k;
+  if (n.has("damping")) net.damping = n.child("damping").non_negative();
+  if (n.has("mass")) net.mass = n.child("mass").positive();
+  if (n.has("origin")) net.origin = n.child("origin").vec3();
+  return net;
+}
+
+std::uint64_t body_count(const Node& n, const char* key) {
+  const std::uint64_t count = n.required(key).count(false);
+  if (count > kMaxNetworkBodies) n.child(key).fail("expected at most 2^22 bodies");
+  return count;
+}
+
+void pin(const Node& n, std::vector<BodySpec>& bodies, std::size_t first, std::size_t count) {
+  if (!n.value.is_array()) n.fail("expected an array of body indices");
+  for (std::size_t k = 0; k < n.value.size(); ++k) {
+    const Node at = n.element(k);
+    const std::uint64_t i = at.count(true);
+    if (i >= count) at.fail("expected an index below " + std::to_string(count) + " (the generator's bodies)");
+    bodies[first + i].kinematic = true;
+  }
+}
+
+void add_spring(Springs& springs, const Network& net, std::size_t a, std::size_t b, double rest, double k) {
+  springs.pairs.push_back({std::uint32_t(net.first + a), std::uint32_t(net.first + b), rest, k, net.damping});
+}
+
+// count bodies from origin along a unit direction, spacing apart, each joined to the next.
+Springs make_chain(const Node& n, Scene& scene) {
+  n.expect_object({"count", "spacing", "k", "damping", "mass", "origin", "direction", "pinned"});
+  const Network net = parse_network(n, scene.particles.size());
+  const std::uint64_t count = body_count(n, "count");
+  Vec3<double> dir{0, -1, 0};
+  if (n.has("direction")) {
+    dir = n.child("direction").vec3();
+    const double length = std::hypot(dir[0], dir[1], dir[2]);
+    if (!(length > 0 && std::isfinite(length))) n.child("direction").fail("expected a nonzero direction");
+    for (double& d : dir) d /= length;
+  }
+  Springs springs;
+  for (std::uint64_t i = 0; i < count; ++i) {
+    BodySpec b;
+    for (int d = 0; d < 3; ++d) b.position[d] = net.origin[d] + double(i) * net.spacing * dir[d];
+    b.mass = net.mass;
+    scene.particles.push_back(b);
+    if (i > 0) add_spring(springs, net, i - 1, i, net.spacing, net.k);
+  }
+  if (n.has("pinned")) {
+    pin(n.child("pinned"), scene.particles, net.first, count);
+  } else {
+    scene.particles[net.first].kinematic = true;
+  }
+  return springs;
+}
+
+// rows x columns bodies in the x-z plane (columns along x, rows along z), with structural
+// springs to the right and below and shear springs along both diagonals of each cell.
+Springs make_grid(const Node& n, Scene& scene) {
+  n.expect_object({"rows", "columns", "spacing", "k", "shear_k", "damping", "mass", "origin", "pinned"});
+  const Network net = parse_network(n, scene.particles.size());
+  const std::uint64_t rows = body_count(n, "rows"), columns = body_count(n, "columns");
+  if (rows * columns > kMaxNetworkBodies) n.fail("expected at most 2^22 bodies (rows x columns)");
+  const double diagonal = net.spacing * std::sqrt(2.0);
+  auto at = [&](std::uint64_t r, std::uint64_t c) { return r * columns + c; };
+  Springs springs;
+  for (std::uint64_t r = 0; r < rows; ++r) {
+    for (std::uint64_t c = 0; c < columns; ++c) {
+      BodySpec b;
+      b.position = {net.origin[0] + double(c) * net.spacing, net.origin[1], net.origin[2] + double(r) * net.spacing};
+      b.mass = net.mass;
+      scene.particles.push_back(b);
+      if (c + 1 < columns) add_spring(springs, net, at(r, c), at(r, c + 1), net.spacing, net.k);
+      if (r + 1 < rows) add_spring(springs, net, at(r, c), at(r + 1, c), net.spacing, net.k);
+      if (r + 1 < rows && c + 1 < columns) {
+        add_spring(springs, net, at(r, c), at(r + 1, c + 1), diagonal, net.shear_k);
+        add_spring(springs, net, at(r, c + 1), at(r + 1, c), diagonal, net.shear_k);
+      }
+    }
+  }
+  if (!n.has("pinned")) return springs;
+  const Node pinned = n.child("pinned");
+  if (pinned.value.is_string()) {
+    if (pinned.string() != "top_corners") pinned.fail("expected \"top_corners\" or an array of body indices");
+    scene.particles[net.first].kinematic = scene.particles[net.first + columns - 1].kinematic = true;
+  } else {
+    pin(pinned, scene.particles, net.first, rows * columns);
+  }
+  return springs;
+}
+
+Springs parse_springs(const Node& n, Scene& scene) {
+  int forms = 0;
+  for (const char* key : {"pairs", "chain", "grid"}) forms += n.has(key);
+  if (forms != 1) n.fail("expected one of 'pairs', 'chain' or 'grid'");
+  n.expect_object({"type", "pairs", "chain", "grid"});
+  if (n.has("chain")) return make_chain(n.child("chain"), scene);
+  if (n.has("grid")) return make_grid(n.child("grid"), scene);
+  const Node list = n.child("pairs");
+  if (!list.value.is_array()) list.fail("expected an array of [i, j, rest, k, damping]");
+  Springs springs;
+  springs.pairs.reserve(list.value.size());
+  for (std::size_t k = 0; k < list.value.size(); ++k) springs.pairs.push_back(parse_pair(list.element(k)));
+  try {
+    check_springs(springs.pairs, list.path);
+  } catch (const Error& e) {
+    throw Error(printable(std::string(n.origin) + ": " + e.what()));
+  }
+  return springs;
+}
+
+}  // namespace
+
+bool is_coupled_force(std::string_view type) { return type == "nbody" || type == "springs"; }
+
+void parse_coupled_force(const Node& n, const std::string& type, Scene& scene) {
+  if (type == "springs") {
+    scene.springs.push_back(parse_springs(n, scene));
+    return;
+  }
+  n.expect_object({"type", "G", "softening"});
+  if (scene.nbody) n.fail("at most one nbody term per scene");
+  NBody term;
+  if (n.has("G")) term.G = n.child("G").non_negative();
+  if (n.has("softening")) term.softening = n.child("softening").non_negative();
+  scene.nbody = term;
+}
+
+void check_coupled(const Scene& scene, std::span<const Node> terms) {
+  const bool generated_particles = scene.generate && !scene.generate->rigid;
+  const std::size_t particles = scene.particles.size() + (generated_particles ? scene.generate->count : 0);
+  const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
+  for (std::size_t t = 0; t < terms.size(); ++t) {
+    if (rigid) terms[t].fail("springs act on particles only; the scene has rigid bodies");
+    const auto& pairs = scene.springs[t].pairs;
+    for (std::size_t k = 0; k < pairs.size(); ++k) {
+      const std::uint32_t last = std::max(pairs[k].i, pairs[k].j);
+      if (last < particles) continue;
+      terms[t].fail("pair " + std::to_string(k) + " joins body " + std::to_string(last) +
+                    ", but the scene has " + std::to_string(particles) + " particles");
+    }
+  }
+}
+
+}  // namespace kinema

@@ -1,0 +1,26 @@
+#pragma once
+// The coupled terms of a scene: "nbody", and "springs" given as pairs or made by a chain
+// or grid generator, which also makes the bodies it joins.
+
+#include <cstddef>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "kinema/scene.hpp"
+#include "scene/json_node.hpp"
+
+namespace kinema {
+
+// A generator makes at most this many bodies (a 2048 x 2048 cloth).
+inline constexpr std::size_t kMaxNetworkBodies = std::size_t(1) << 22;
+
+bool is_coupled_force(std::string_view type);
+// Adds the term `n` to the scene: its NBody, or a network (a generator's bodies go to the
+// end of scene.particles, so they follow the listed particles and earlier generators).
+void parse_coupled_force(const scene_json::Node& n, const std::string& type, Scene& scene);
+// Once every term is read: coupled terms need particles and no rigid bodies, and each
+// pair's bodies must exist. `terms[k]` is the node of scene.springs[k].
+void check_coupled(const Scene& scene, std::span<const scene_json::Node> terms);
+
+}  // namespace kinema
