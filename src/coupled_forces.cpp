@@ -108,7 +108,7 @@ void mark_contiguous(const std::vector<SliceLayout>& layouts, SpringNetwork<T>& 
 template <class T>
 void check_in(double value, const char* what) {
   if (!(std::abs(value) <= double(std::numeric_limits<T>::max()))) {
-    throw Error(std::string(what) + ": " + shortest_text(value, 17) + " overflows " + type_name<T>());
+    throw Error(std::string(what) + ": " + shortest_text(value) + " overflows " + type_name<T>());
   }
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 
 #include "force_terms.hpp"
 #include "kinema/error.hpp"
@@ -62,9 +63,13 @@ kernels::RotationalForces<T> lower_rotational(const LocalSums& s) {
 
 }  // namespace
 
-std::string shortest_text(double x, int digits) {
+std::string shortest_text(double x, int digits, bool as_float) {
   char text[32];
-  std::snprintf(text, sizeof text, "%.*g", digits, x);
+  for (int p = 1; p <= digits; ++p) {
+    std::snprintf(text, sizeof text, "%.*g", p, x);
+    const double back = std::strtod(text, nullptr);
+    if (as_float ? float(back) == float(x) : back == x) break;
+  }
   return text;
 }
 

@@ -1,6 +1,9 @@
 // Scene parsing: the documented contract, defaults, generation, and errors with JSON paths.
 #include <catch2/catch.hpp>
 
+#include <cmath>
+#include <numbers>
+
 #include "support.hpp"
 
 using namespace kinema;
@@ -150,4 +153,87 @@ TEST_CASE("rigid body scene errors name the JSON path", "[scene][rigid][errors]"
     INFO(text);
     CHECK_THROWS_WITH(parse_scene(text), Catch::StartsWith(message));
   }
+}
+
+TEST_CASE("coupled terms in scenes: nbody, spring pairs, chain and grid generators", "[scene][springs]") {
+  const Scene s = parse_scene(R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0]}],
+      "forces": [{"type": "nbody", "G": 2, "softening": 0.5},
+                 {"type": "springs", "pairs": [[0, 1, 1.5, 10, 0.25]]},
+                 {"type": "springs", "chain": {"count": 3, "spacing": 0.5, "k": 4, "direction": [2, 0, 0]}},
+                 {"type": "springs", "grid": {"rows": 2, "columns": 3, "spacing": 1, "k": 7, "shear_k": 5,
+                                              "mass": 2, "origin": [0, 9, 0], "pinned": "top_corners"}}]})");
+  REQUIRE(s.nbody);
+  CHECK(s.nbody->G == 2);
+  CHECK(s.nbody->softening == 0.5);
+  REQUIRE(s.springs.size() == 3);
+  CHECK(s.springs[0].pairs[0].rest == 1.5);
+  CHECK(s.springs[0].pairs[0].damping == 0.25);
+  // The chain's 3 bodies follow the 2 listed ones along +x; its first is pinned.
+  REQUIRE(s.particles.size() == 2 + 3 + 6);
+  CHECK(s.particles[2].kinematic);
+  CHECK(s.particles[4].position == Vec3<double>{1, 0, 0});
+  CHECK(s.springs[1].pairs.size() == 2);
+  CHECK(s.springs[1].pairs[1].i == 3);
+  CHECK(s.springs[1].pairs[1].j == 4);
+  // A 2 x 3 grid: 4 springs along rows, 3 across, 2 x 2 shear springs; the top corners pinned.
+  CHECK(s.springs[2].pairs.size() == 4 + 3 + 4);
+  CHECK(s.particles[5].kinematic);
+  CHECK(s.particles[7].kinematic);
+  CHECK_FALSE(s.particles[6].kinematic);
+  CHECK(s.particles[10].position == Vec3<double>{2, 9, 1});
+  CHECK(s.particles[10].mass == 2);
+  const ForceModel<double> f = make_forces<double>(s);
+  CHECK(f.springs().size() == 1 + 2 + 11);
+  CHECK_FALSE(f.fusable());
+}
+
+TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") {
+  const std::string two = R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0]}], "forces": [)";
+  const std::pair<std::string, const char*> cases[] = {
+      {two + R"({"type": "springs", "pairs": [[0, 1, 1, 1, 0], [0, 7, 1, 1, 0]]}]})",
+       "scene: forces[0].pairs[1]: joins body 7, but the scene has 2 particles"},
+      {two + R"({"type": "springs", "pairs": [[0, 1, 1, 1, 0], [1, 0, 2, 1, 0]]}]})",
+       "scene: forces[0].pairs[1]: repeats forces[0].pairs[0] (bodies 0 and 1)"},
+      {two + R"({"type": "springs", "pairs": [[1, 1, 1, 1, 0]]}]})",
+       "scene: forces[0].pairs[0]: joins body 1 to itself"},
+      {two + R"({"type": "springs", "pairs": [[0, 1, -1, 1, 0]]}]})",
+       "scene: forces[0].pairs[0][2]: expected a number >= 0"},
+      {two + R"({"type": "springs", "pairs": [[0, -1, 1, 1, 0]]}]})",
+       "scene: forces[0].pairs[0][1]: expected an integer >= 0"},
+      {two + R"({"type": "springs", "pairs": [[0, 1, 1, 1]]}]})",
+       "scene: forces[0].pairs[0]: expected [i, j, rest, k, damping]"},
+      {two + R"({"type": "springs"}]})", "scene: forces[0]: expected one of 'pairs', 'chain' or 'grid'"},
+      {two + R"({"type": "springs", "grid": {"rows": 0, "columns": 2, "spacing": 1, "k": 1}}]})",
+       "scene: forces[0].grid.rows: expected an integer >= 1"},
+      {two + R"({"type": "springs", "grid": {"rows": 4096, "columns": 4096, "spacing": 1, "k": 1}}]})",
+       "scene: forces[0].grid: expected at most 2^22 bodies (rows x columns)"},
+      {two + R"({"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1, "pinned": [3]}}]})",
+       "scene: forces[0].chain.pinned[0]: expected an index below 3"},
+      {two + R"({"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1, "direction": [0, 0, 0]}}]})",
+       "scene: forces[0].chain.direction: expected a nonzero direction"},
+      {two + R"({"type": "nbody", "G": -1}]})", "scene: forces[0].G: expected a number >= 0"},
+      {two + R"({"type": "nbody"}, {"type": "nbody"}]})", "scene: forces[1]: at most one nbody term"},
+      {R"({"rigid_bodies": [{"position": [0,0,0]}], "forces": [{"type": "nbody"}]})",
+       "scene: forces[0]: nbody acts on particles only"},
+      {R"({"generate": {"count": 4, "distribution": "plummer"}})", "scene: generate: missing key 'radius'"},
+      {R"({"generate": {"count": 4, "distribution": "plummer", "radius": 1, "position_min": [0,0,0]}})",
+       "scene: generate.position_min: only for \"distribution\": \"box\""},
+  };
+  for (const auto& [text, message] : cases) {
+    INFO(text);
+    CHECK_THROWS_WITH(parse_scene(text), Catch::StartsWith(message));
+  }
+}
+
+TEST_CASE("a Plummer sphere is centred, at rest, and near virial equilibrium", "[scene]") {
+  Scene s = parse_scene(R"({"generate": {"count": 2000, "distribution": "plummer", "radius": 1, "mass": 0.0005},
+                            "forces": [{"type": "nbody", "G": 1}]})");
+  const ParticleSet<double> b = make_particles<double>(s);
+  const ForceModel<double> f = make_forces<double>(s);
+  const Vec3<double> p = momentum(b);
+  CHECK(std::hypot(p[0], p[1], p[2]) < 1e-12);
+  // 2T + U = 0 in equilibrium; the total energy of a Plummer sphere is -3 pi G M^2 / (64 a).
+  const double kinetic = kinetic_energy(b), potential = potential_energy(b, f);
+  CHECK(2 * kinetic / -potential == Approx(1).margin(0.1));
+  CHECK(kinetic + potential == Approx(-3 * std::numbers::pi / 64).epsilon(0.1));
 }

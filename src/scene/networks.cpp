@@ -166,11 +166,12 @@ void check_coupled(const Scene& scene, std::span<const Node> terms) {
   for (std::size_t t = 0; t < terms.size(); ++t) {
     if (rigid) terms[t].fail("springs act on particles only; the scene has rigid bodies");
     const auto& pairs = scene.springs[t].pairs;
+    if (!terms[t].has("pairs")) continue;  // a generator joins its own bodies
     for (std::size_t k = 0; k < pairs.size(); ++k) {
       const std::uint32_t last = std::max(pairs[k].i, pairs[k].j);
       if (last < particles) continue;
-      terms[t].fail("pair " + std::to_string(k) + " joins body " + std::to_string(last) +
-                    ", but the scene has " + std::to_string(particles) + " particles");
+      terms[t].child("pairs").element(k).fail("joins body " + std::to_string(last) + ", but the scene has " +
+                                              std::to_string(particles) + " particles");
     }
   }
 }
