@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <utility>
+#include <vector>
 
 #include "coupled_forces.hpp"
 #include "force_terms.hpp"
@@ -149,7 +150,20 @@ bool all_finite(const RigidBodySet<T>& b) {
   return !first_non_finite(b);
 }
 
+template <class T>
+double spring_frequency_bound(const ParticleSet<T>& b, std::span<const SpringPair> pairs) {
+  std::vector<double> stiffness(b.size(), 0.0);  // sum of k at each body
+  for (const SpringPair& p : pairs) {
+    if (std::max(p.i, p.j) >= b.size()) continue;
+    stiffness[p.i] += p.k, stiffness[p.j] += p.k;
+  }
+  double worst = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) worst = std::max(worst, 2 * double(b.inv_mass()[i]) * stiffness[i]);
+  return std::sqrt(worst);
+}
+
 #define KINEMA_INSTANTIATE(T)                                                  \
+  template double spring_frequency_bound(const ParticleSet<T>&, std::span<const SpringPair>); \
   template double kinetic_energy(const ParticleSet<T>&);                       \
   template double potential_energy(const ParticleSet<T>&, const ForceModel<T>&); \
   template EnergyReport energy(const ParticleSet<T>&, const ForceModel<T>&);   \

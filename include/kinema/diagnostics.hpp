@@ -4,6 +4,7 @@
 // out of energies and momentum.
 
 #include <optional>
+#include <span>
 
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
@@ -39,6 +40,13 @@ struct NonFinite {
 };
 template <class T>
 std::optional<NonFinite> first_non_finite(const ParticleSet<T>& bodies);
+
+// An upper bound on the angular frequency of a spring network's fastest mode (damping
+// aside): sqrt(max_i 2 inv_mass_i sum_j k_ij), by Gershgorin's theorem on M^-1 K. Methods
+// stable on the imaginary axis hold below h = c / omega: c = 2 for symplectic_euler and
+// velocity_verlet, 2 sqrt(2) for rk4. 0 without springs.
+template <class T>
+double spring_frequency_bound(const ParticleSet<T>& bodies, std::span<const SpringPair> pairs);
 
 // Rigid bodies: kinetic energy includes the rotational part 1/2 L . omega; the potential
 // is that of the centres of mass; angular momentum adds each body's spin L to m x cross v.

@@ -228,13 +228,20 @@ constexpr std::uint64_t kMostPilotSteps = std::uint64_t(1) << 22;
 
 struct SearchSpent {};  // thrown when the next pilot would pass kSearchBodySteps
 
+// What one step of the pilot scene is charged, in body-steps: its bodies, or under N-body
+// gravity its bodies squared (an interaction costs about what a body's local terms do).
+double charged_bodies(const Scene& scene) {
+  const double n = double(scene.particles.size() + scene.rigid_bodies.size());
+  return std::max(kChargedBodies, scene.nbody ? n * n : n);
+}
+
 // Pilot runs of one method on a sample of bodies, memoized by step count; every run is
 // charged to `spent` (body-steps).
 class Pilot {
  public:
   Pilot(const Scene& scene, const Method& method, double duration, double& spent)
       : scene_(scene), method_(method), duration_(duration), spent_(spent),
-        bodies_(std::max(kChargedBodies, double(scene.particles.size() + scene.rigid_bodies.size()))) {}
+        bodies_(charged_bodies(scene)) {}
 
   // Error estimate of the n-step run, from runs at n, 2n and 4n: the difference d of the
   // first two times 2^p / (2^p - 1), p the observed order (capped by the nominal one).

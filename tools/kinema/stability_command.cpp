@@ -125,7 +125,9 @@ std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t
                    std::ofstream& path_dat, double& max_z) {
   World<T> world(scene, m, on_calling_thread());
   const double e0 = world.total_energy();
-  const std::uint64_t every = std::max<std::uint64_t>(1, steps / 2000);
+  // N-body potential energy costs a pair sum of its own: fewer points there.
+  const std::uint64_t points = scene.nbody ? 100 : 2000;
+  const std::uint64_t every = std::max<std::uint64_t>(1, steps / points);
   const ParticleSet<T>& centres = world.particles.size() ? world.particles : world.rigid.centers();
   std::size_t plotted = 0;
   for (std::uint64_t k = 0; k <= steps; k += every) {
@@ -141,6 +143,26 @@ std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t
     world.advance(T(dt), n);
   }
   return plotted;
+}
+
+// For a spring network: the bound on its fastest mode and the steps it allows the methods
+// that are stable on the imaginary axis, into spring_limit.csv and one printed line.
+std::string spring_limits(const Scene& scene, const fs::path& dir) {
+  if (scene.springs.empty()) return "";
+  const ForceModel<double> forces = make_forces<double>(scene);
+  const double omega = spring_frequency_bound(make_particles<double>(scene), forces.springs());
+  OutputFile csv(dir / "spring_limit.csv");
+  csv << "omega_bound,method,largest_stable_h\n";
+  const std::pair<const char*, double> limits[] = {
+      {"symplectic_euler", 2}, {"velocity_verlet", 2}, {"rk4", 2 * std::sqrt(2.0)}};
+  for (const auto& [method, c] : limits) csv << omega << ',' << method << ',' << c / omega << '\n';
+  csv.close();
+  char line[256];
+  std::snprintf(line, sizeof line,
+                "springs: fastest mode omega <= %.4g rad/s; undamped, velocity_verlet and "
+                "symplectic_euler hold for h < %.4g, rk4 for h < %.4g, euler never\n",
+                omega, 2 / omega, 2 * std::sqrt(2.0) / omega);
+  return line;
 }
 
 }  // namespace
@@ -194,6 +216,7 @@ int stability_scene(const StabilityOptions& o) {
   const bool planar = max_z == 0;
   if (planar) render_chart(dir, "trajectory", path_plot);
   write_regions(dir, methods);
+  const std::string springs = spring_limits(scene, dir);
   progress.finish();
   if (!o.quiet) {
     std::printf("kinema stability: %s, h = %g, %llu steps; wrote %s/{energy,trajectory,"
@@ -201,6 +224,7 @@ int stability_scene(const StabilityOptions& o) {
                 printable(scene.name).c_str(), dt, static_cast<unsigned long long>(steps),
                 printable(o.out).c_str(),
                 planar ? "" : " (no trajectory chart: the motion is not planar)");
+    std::fputs(springs.c_str(), stdout);
   }
   return 0;
 }
