@@ -51,8 +51,9 @@ using namespace kinema;
 namespace {
 
 template <class T>
-long allocations_in_steps(const Method& method, ForceModel<T> forces, bool staged, bool tbb) {
-  ParticleSet<T> bodies = test::cloud<T>(30000);
+long allocations_in_steps(const Method& method, ForceModel<T> forces, bool staged, bool tbb,
+                          std::size_t count = 30000) {
+  ParticleSet<T> bodies = test::cloud<T>(count);
   TbbJobSystem jobs(2);
   StepperOptions o = tbb ? StepperOptions{} : test::serial_options();
   if (tbb) o.jobs = &jobs, o.inline_below = 0;
@@ -74,7 +75,26 @@ ForceModel<T> with_callback(ForceModel<T> f) {
   return f;
 }
 
+// N-body gravity and a chain of springs through every body.
+template <class T>
+ForceModel<T> coupled(ForceModel<T> f, std::uint32_t bodies) {
+  f.add(NBody{1e-3, 0.1});
+  Springs chain;
+  for (std::uint32_t i = 1; i < bodies; ++i) chain.pairs.push_back({i - 1, i, 0.5, 2, 0.1});
+  f.add(chain);
+  return f;
+}
+
 }  // namespace
+
+TEST_CASE("steps with coupled terms allocate nothing", "[allocation]") {
+  for (bool tbb : {false, true}) {
+    for (const Method* m : {&euler, &rk4, &velocity_verlet}) {
+      INFO(m->name << (tbb ? " on tbb" : " serial"));
+      CHECK(allocations_in_steps<float>(*m, coupled(test::all_local_terms<float>(), 3000), false, tbb, 3000) == 0);
+    }
+  }
+}
 
 TEST_CASE("step and advance allocate nothing", "[allocation]") {
   for (bool tbb : {false, true}) {

@@ -41,7 +41,7 @@ Network parse_network(const Node& n, std::size_t first) {
 
 std::uint64_t body_count(const Node& n, const char* key) {
   const std::uint64_t count = n.required(key).count(false);
-  if (count > kMaxNetworkBodies) n.child(key).fail("expected at most 2^22 bodies");
+  if (count > kMaxNetworkBodies) n.child(key).fail("expected at most 2^20 bodies");
   return count;
 }
 
@@ -93,7 +93,7 @@ Springs make_grid(const Node& n, Scene& scene) {
   n.expect_object({"rows", "columns", "spacing", "k", "shear_k", "damping", "mass", "origin", "pinned"});
   const Network net = parse_network(n, scene.particles.size());
   const std::uint64_t rows = body_count(n, "rows"), columns = body_count(n, "columns");
-  if (rows * columns > kMaxNetworkBodies) n.fail("expected at most 2^22 bodies (rows x columns)");
+  if (rows * columns > kMaxNetworkBodies) n.fail("expected at most 2^20 bodies (rows x columns)");
   const double diagonal = net.spacing * std::sqrt(2.0);
   auto at = [&](std::uint64_t r, std::uint64_t c) { return r * columns + c; };
   Springs springs;

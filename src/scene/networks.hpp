@@ -12,8 +12,9 @@
 
 namespace kinema {
 
-// A generator makes at most this many bodies (a 2048 x 2048 cloth).
-inline constexpr std::size_t kMaxNetworkBodies = std::size_t(1) << 22;
+// A generator makes at most this many bodies (a 1024 x 1024 cloth): the scene text is
+// short, what it asks for is not (a body and four springs take about 200 bytes here).
+inline constexpr std::size_t kMaxNetworkBodies = std::size_t(1) << 20;
 
 bool is_coupled_force(std::string_view type);
 // Adds the term `n` to the scene: its NBody, or a network (a generator's bodies go to the
