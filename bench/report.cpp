@@ -159,6 +159,39 @@ class Report {
     }
   }
 
+  void coupled_table() {
+    const auto baseline = find(runs_, "baseline/nbody_scalar_double/4096/real_time", "interactions_per_s");
+    if (!find(runs_, nbody_run("float", 1, 4096), "interactions_per_s")) return;
+    std::printf("\nN-body gravity, %s, one Euler step = n^2 interactions (20 flops each)\n", isa_.c_str());
+    std::printf("%-6s %6s | %13s %8s %9s | %13s %7s\n", "prec", "N", "1 thread", "FMA peak",
+                "x scalar", "2 threads", "scaling");
+    for (const std::string p : {"float", "double"}) {
+      for (long n : {4096L, 16384L}) {
+        const auto one = find(runs_, nbody_run(p, 1, n), "interactions_per_s");
+        const auto two = find(runs_, nbody_run(p, 2, n), "interactions_per_s");
+        if (!one) continue;
+        cvs_.push_back(one->cv);
+        const auto flops = find(runs_, nbody_run(p, 1, n), "GFLOP_per_s");
+        std::printf("%-6s %6ld | %9.3f G/s %8s %9s | %9s G/s %7s\n", p.c_str(), n, one->median * 1e-9,
+                    cell(percent(ratio(flops, find(runs_, peak(p, 1), "GFLOP_per_s"))), "%.0f%%").c_str(),
+                    cell(ratio(one, baseline), "%.1fx").c_str(), cell(two ? two->median * 1e-9 : NAN, "%.3f").c_str(),
+                    cell(ratio(two, one), "%.2fx").c_str());
+      }
+    }
+    std::printf("FMA peak: the 1-thread peak of the same precision in this run; x scalar: against a plain "
+                "double loop over (i, j) built for baseline x86-64 (N = 4096).\n");
+    const std::string kernel = "springs/float/" + isa_ + "/512/real_time";
+    const auto springs = find(runs_, kernel, "ns_per_spring");
+    if (!springs) return;
+    cvs_.push_back(springs->cv);
+    const auto bw = ratio(find(runs_, kernel, "GB_per_s"), find(runs_, stream(1382400, 1), "GB_per_s"));
+    std::printf("Cloth 512 x 512 (1.05M springs), float: the spring kernel %.3f ns per spring (%s GB/s, %s of "
+                "in-place streaming over the same 38.7 MB); a whole Euler step %s / %s ns per spring on 1 / 2 threads\n",
+                springs->median, value(kernel, "GB_per_s").c_str(), cell(percent(bw), "%.0f%%").c_str(),
+                value("cloth/float/" + isa_ + "/threads:1/512/real_time", "ns_per_spring", "%.3f").c_str(),
+                value("cloth/float/" + isa_ + "/threads:2/512/real_time", "ns_per_spring", "%.3f").c_str());
+  }
+
   void paired_scaling() {
     bool header = false;
     for (const std::string p : {"float", "double"}) {
@@ -215,6 +248,10 @@ class Report {
   }
 
  private:
+  std::string nbody_run(const std::string& p, int threads, long n) const {
+    return "nbody/" + p + "/" + isa_ + "/threads:" + std::to_string(threads) + "/" + std::to_string(n) + "/real_time";
+  }
+
   std::string value(const std::string& run, const char* counter, const char* format = "%.1f") const {
     const auto f = find(runs_, run, counter);
     return f ? cell(f->median, format) : "-";
@@ -293,6 +330,7 @@ int main(int argc, char** argv) {
   report.isa_table();
   report.rigid_table();
   report.paired_scaling();
+  report.coupled_table();
   report.limits();
   report.noise();
   if (csv != nullptr) std::fclose(csv);
