@@ -83,24 +83,20 @@ void fill_slice(const Adjacency& adjacency, std::span<const SpringPair> pairs, s
   }
 }
 
-// An entry is contiguous when its springs' other ends are first + lane for one first, all
-// of whose 16 bodies exist. Its empty lanes then load a real body, harmless: their zero
-// parameters make no force from a finite state.
+// An entry is contiguous when every lane holds a spring whose other end is first + lane.
+// (An empty lane is gathered from its own body: loading some unrelated body there would let
+// that body's non-finite state reach this one through zero parameters.)
 template <class T>
 void mark_contiguous(const std::vector<SliceLayout>& layouts, SpringNetwork<T>& net) {
   for (std::size_t slice = 0; slice < layouts.size(); ++slice) {
     for (std::size_t e = 0; e < layouts[slice].size(); ++e) {
       const std::size_t entry = net.slice_offset[slice] + e;
       const std::int32_t* lanes = net.neighbor.data() + entry * kSpringSlice;
-      std::int64_t first = -1;
       bool run = true;
       for (std::size_t l = 0; l < kSpringSlice; ++l) {
-        if (layouts[slice][e][l] < 0) continue;
-        if (first < 0) first = std::int64_t(lanes[l]) - std::int64_t(l);
-        run = run && std::int64_t(lanes[l]) - std::int64_t(l) == first;
+        run = run && layouts[slice][e][l] >= 0 && lanes[l] == lanes[0] + std::int32_t(l);
       }
-      run = run && first >= 0 && std::size_t(first) + kSpringSlice <= net.covered;
-      net.contiguous[entry] = run ? std::int32_t(first) : -1;
+      net.contiguous[entry] = run ? lanes[0] : -1;
     }
   }
 }

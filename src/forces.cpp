@@ -96,6 +96,7 @@ void check_degrees(std::span<const SpringPair> pairs, const std::string& what) {
 }  // namespace
 
 void check_springs(std::span<const SpringPair> pairs, const std::string& what, std::size_t first) {
+  if (pairs.size() >= kMaxSpringPairs) throw Error(what + ": 2^31 pairs or more");
   for (std::size_t k = 0; k < pairs.size(); ++k) check_pair(pairs[k], pair_name(what, first + k));
   check_repeats(pairs, what, first);
   check_degrees(pairs, what);

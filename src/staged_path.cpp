@@ -4,6 +4,9 @@
 
 namespace kinema {
 
+static_assert(kBlockBodies <= kernels::kMaxNBodyTargets && kBlockBodies % kernels::kSpringSlice == 0,
+              "the coupled kernels take one block per call");
+
 template <class T>
 StagedPath<T>::StagedPath(const ForceModel<T>& forces, const Method& method,
                           const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local,

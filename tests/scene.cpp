@@ -232,6 +232,11 @@ TEST_CASE("a Plummer sphere is centred, at rest, and near virial equilibrium", "
   const ForceModel<double> f = make_forces<double>(s);
   const Vec3<double> p = momentum(b);
   CHECK(std::hypot(p[0], p[1], p[2]) < 1e-12);
+  Vec3<double> centre{};
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    for (int d = 0; d < 3; ++d) centre[d] += b.position(i)[d] / double(b.size());
+  }
+  CHECK(std::hypot(centre[0], centre[1], centre[2]) < 1e-12);
   // 2T + U = 0 in equilibrium; the total energy of a Plummer sphere is -3 pi G M^2 / (64 a).
   const double kinetic = kinetic_energy(b), potential = potential_energy(b, f);
   CHECK(2 * kinetic / -potential == Approx(1).margin(0.1));

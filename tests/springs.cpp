@@ -7,7 +7,10 @@
 #include <complex>
 #include <numbers>
 #include <random>
+#include <set>
 
+#include "coupled_forces.hpp"
+#include "kernels/kernels.hpp"
 #include "support.hpp"
 #include "thread_pool.hpp"
 
@@ -254,7 +257,7 @@ void check_spring_determinism() {
 
 }  // namespace
 
-TEST_CASE("springs: the same bits on every instruction set, thread count and job system", "[springs]") {
+TEST_CASE("springs: the same bits on every instruction set, thread count and job system", "[coupled][determinism]") {
   check_spring_determinism<float>();
   check_spring_determinism<double>();
 }
@@ -283,4 +286,122 @@ TEST_CASE("springs: bad networks are refused, naming the pair", "[springs][error
   Stepper<double> s(f, rk4, test::serial_options());
   CHECK_THROWS_WITH(s.step(b, 0.1), "springs: a pair joins body 5, but the set has 1 bodies");
   CHECK(b.px()[0] == 0);
+}
+
+namespace {
+
+// 2500 bodies (not a multiple of 16) joined at random, 1 to 12 springs each: the slices
+// reach many offsets, so the kernels take the layout in model order and gather.
+template <class T>
+struct RandomNetwork {
+  ParticleSet<T> bodies;
+  ForceModel<T> forces;
+};
+
+template <class T>
+RandomNetwork<T> random_network() {
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> pos(-3, 3), vel(-1, 1), param(0.2, 2);
+  RandomNetwork<T> net;
+  const std::uint32_t n = 2500;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    net.bodies.add({T(pos(rng)), T(pos(rng)), T(pos(rng))}, {T(vel(rng)), T(vel(rng)), T(vel(rng))}, T(param(rng)));
+  }
+  Springs springs;
+  std::set<std::pair<std::uint32_t, std::uint32_t>> seen;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    for (std::uint32_t k = 0; k < 1 + i % 6; ++k) {
+      const std::uint32_t j = std::uint32_t(rng() % n);
+      if (j == i || !seen.insert({std::min(i, j), std::max(i, j)}).second) continue;
+      springs.pairs.push_back({i, j, param(rng), 10 * param(rng), param(rng)});
+    }
+  }
+  net.forces.add(springs);
+  return net;
+}
+
+// The spring kernel's forces on every body, on one instruction set.
+template <class T>
+std::vector<T> kernel_forces(const RandomNetwork<T>& net, Isa isa) {
+  const CoupledForces<T> lowered = lower_coupled<T>(net.forces);
+  const std::size_t n = net.bodies.padded_size();
+  AlignedArray<T> force(3 * n);
+  const T* x[3] = {net.bodies.px(), net.bodies.py(), net.bodies.pz()};
+  const T* v[3] = {net.bodies.vx(), net.bodies.vy(), net.bodies.vz()};
+  T* f[3] = {force.data(), force.data() + n, force.data() + 2 * n};
+  const auto& table = kernels::kernel_table<T>(isa);
+  for (std::size_t begin = 0; begin < n; begin += kBlockBodies) {
+    table.springs(lowered.springs.job(x, v, f), begin, std::min(n, begin + kBlockBodies));
+  }
+  return {force.data(), force.data() + 3 * n};
+}
+
+template <class T>
+void check_random_network(double tolerance) {
+  const RandomNetwork<T> net = random_network<T>();
+  const std::vector<T> scalar = kernel_forces(net, Isa::scalar);
+  for (Isa isa : {Isa::sse2, Isa::avx2, Isa::avx512}) {
+    INFO("isa " << isa_name(isa));
+    if (isa_available(isa)) CHECK(kernel_forces(net, isa) == scalar);
+  }
+  // Against the formula in long double, relative to the sum of the springs' magnitudes.
+  const std::size_t n = net.bodies.padded_size();
+  std::vector<long double> want(3 * n, 0), scale(n, 0);
+  const auto& b = net.bodies;
+  for (const SpringPair& p : net.forces.springs()) {
+    long double d[3], dv[3], len2 = 0;
+    const T* x[3] = {b.px(), b.py(), b.pz()};
+    const T* v[3] = {b.vx(), b.vy(), b.vz()};
+    for (int c = 0; c < 3; ++c) {
+      d[c] = (long double)x[c][p.i] - x[c][p.j], dv[c] = (long double)v[c][p.i] - v[c][p.j], len2 += d[c] * d[c];
+    }
+    const long double len = std::sqrt(len2), along = (dv[0] * d[0] + dv[1] * d[1] + dv[2] * d[2]) / len;
+    const long double coefficient = -T(p.k) * (len - T(p.rest)) - T(p.damping) * along;
+    for (int c = 0; c < 3; ++c) {
+      want[c * n + p.i] += coefficient * d[c] / len, want[c * n + p.j] -= coefficient * d[c] / len;
+    }
+    scale[p.i] += std::abs(coefficient), scale[p.j] += std::abs(coefficient);
+  }
+  double worst = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    for (int c = 0; c < 3; ++c) worst = std::max(worst, double(std::abs(scalar[c * n + i] - want[c * n + i]) / scale[i]));
+  }
+  CHECK(worst < tolerance);
+}
+
+}  // namespace
+
+TEST_CASE("springs: an irregular network gives the same bits on every instruction set, and the "
+          "formula's forces", "[coupled]") {
+  check_random_network<float>(1e-5);
+  check_random_network<double>(1e-13);
+}
+
+TEST_CASE("springs: the irregular network steps to the same bits on any thread count", "[coupled][determinism]") {
+  const RandomNetwork<double> net = random_network<double>();
+  auto hash = [&](StepperOptions o) {
+    ParticleSet<double> b = net.bodies;
+    Stepper<double> s(net.forces, rk4, o);
+    s.advance(b, 1e-3, 3);
+    return test::state_hash(b);
+  };
+  const std::uint64_t serial = hash(test::serial_options());
+  for (unsigned threads : {2u, 3u}) {
+    TbbJobSystem tbb(threads);
+    StepperOptions o;
+    o.jobs = &tbb;
+    o.inline_below = 0;
+    CHECK(hash(o) == serial);
+  }
+}
+
+TEST_CASE("springs: the frequency bound holds the chain's fastest mode, and is close", "[springs]") {
+  const std::uint32_t n = 50;
+  const double k = 300, m = 0.2;
+  const Chain c = chain(n, 1, k, 0, m);
+  const double bound = spring_frequency_bound(c.bodies, c.forces.springs());
+  const double omega_max = std::sqrt(k / m * chain_eigenvalue(n, n - 1));
+  CHECK(bound >= omega_max);
+  CHECK(bound < 1.001 * omega_max);  // interior bodies: 2 sqrt(k / m), the chain's limit
+  CHECK(spring_frequency_bound(c.bodies, std::span<const SpringPair>{}) == 0);
 }

@@ -83,14 +83,17 @@ struct SpringPair {
   double k = 0;        // stiffness, finite and >= 0
   double damping = 0;  // finite and >= 0
 };
-// A network of springs. Each body sums its springs in the order they were added, so the
-// bits do not depend on threads or instruction sets. Bodies may not have more than
-// kMaxSpringsPerBody springs each, and indices stay below kMaxSpringBodies.
+// A network of springs. Each body sums its springs in an order fixed when a stepper is
+// built (by neighbour offset where that lets the kernels load neighbours as one vector, else
+// as added), so the bits do not depend on threads or instruction sets. Bodies may not have
+// more than kMaxSpringsPerBody springs each, indices stay below kMaxSpringBodies and a
+// model holds fewer than kMaxSpringPairs pairs.
 struct Springs {
   std::vector<SpringPair> pairs;
 };
 inline constexpr std::size_t kMaxSpringBodies = std::size_t(1) << 30;
 inline constexpr std::size_t kMaxSpringsPerBody = 1024;
+inline constexpr std::size_t kMaxSpringPairs = std::size_t(1) << 31;
 
 using LocalTerm = std::variant<Gravity, LinearDrag, QuadraticDrag, Spring, Central, Torque,
                                AngularDrag, PointForce>;

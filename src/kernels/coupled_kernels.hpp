@@ -5,6 +5,7 @@
 // bits agree across them.
 
 #include <algorithm>
+#include <cassert>
 #include <cstddef>
 
 #include "kernels/kernel_impl.hpp"
@@ -14,9 +15,9 @@ namespace kinema::kernels::KINEMA_ISA_NS {
 // Sources staged per pass: a tile of positions and masses stays in L1 while every target
 // group of the block runs over it.
 inline constexpr std::size_t kSourceTile = 512;
-// Target bodies per block, at most: blocks are the stepper's.
-inline constexpr std::size_t kMaxTargets = 1024;
 
+// The sources [first, first + kSourceTile) that have mass, in index order: kinematic and
+// padding bodies (inv_mass 0) neither attract nor cost an interaction.
 template <class T>
 struct SourceTile {
   alignas(64) T x[3][kSourceTile];
@@ -24,11 +25,12 @@ struct SourceTile {
   std::size_t count = 0;
 
   void fill(const NBodyJob<T>& job, std::size_t first) {
-    count = std::min(kSourceTile, job.sources - first);
-    for (std::size_t j = 0; j < count; ++j) {
-      for (int d = 0; d < 3; ++d) x[d][j] = job.x[d][first + j];
-      const T w = job.inv_mass[first + j];
-      mass[j] = w != 0 ? T(1) / w : T(0);
+    count = 0;
+    for (std::size_t j = first; j < std::min(job.sources, first + kSourceTile); ++j) {
+      const T w = job.inv_mass[j];
+      if (w == 0) continue;
+      for (int d = 0; d < 3; ++d) x[d][count] = job.x[d][j];
+      mass[count++] = T(1) / w;
     }
   }
 };
@@ -50,9 +52,9 @@ KINEMA_INLINE void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2,
     const V sx(tile.x[0][j]), sy(tile.x[1][j]), sz(tile.x[2][j]), m(tile.mass[j]);
     for (int u = 0; u < U; ++u) {
       const V dx = sx - x[u][0], dy = sy - x[u][1], dz = sz - x[u][2];
-      const V r2 = mul_add(dx, dx, mul_add(dy, dy, mul_add(dz, dz, eps2)));
-      // r2 == 0 only for a body and itself (or a twin) without softening: no force.
-      const V s = pick(r2 != V(0), m / (r2 * root(r2)), V(0));
+      const V d2 = mul_add(dx, dx, mul_add(dy, dy, dz * dz)), r2 = d2 + eps2;
+      // A body and itself (or a twin at the same point): no force, whatever m / eps^3 is.
+      const V s = pick(d2 != V(0), m / (r2 * root(r2)), V(0));
       a[u][0] = mul_add(s, dx, a[u][0]);
       a[u][1] = mul_add(s, dy, a[u][1]);
       a[u][2] = mul_add(s, dz, a[u][2]);
@@ -68,7 +70,8 @@ void nbody(const NBodyJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
   using T = value_t<V>;
   constexpr std::size_t W = Lane<V>::width;
   constexpr int U = 4;  // target groups in registers: enough to hide the divider's latency
-  alignas(64) T sum_x[kMaxTargets]{}, sum_y[kMaxTargets]{}, sum_z[kMaxTargets]{};
+  assert(end - begin <= kMaxNBodyTargets);
+  alignas(64) T sum_x[kMaxNBodyTargets]{}, sum_y[kMaxNBodyTargets]{}, sum_z[kMaxNBodyTargets]{};
   T* sum[3] = {sum_x, sum_y, sum_z};
   SourceTile<T> tile;
   const V eps2(job.eps2);
@@ -121,6 +124,7 @@ inline constexpr std::size_t kPrefetchSlots = 32 * kSpringSlice;
 template <class V>
 void springs(const SpringJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   constexpr std::size_t W = Lane<V>::width;
+  assert(begin % kSpringSlice == 0);  // a slice never straddles two blocks
   const std::size_t stop = std::min(end, job.covered);
   for (std::size_t slice = begin / kSpringSlice; slice * kSpringSlice < stop; ++slice) {
     for (std::size_t lane = 0; lane < kSpringSlice; lane += W) {

@@ -212,11 +212,14 @@ struct NBodyJob {
 };
 template <class T>
 using NBodyFn = void (*)(const NBodyJob<T>& job, std::size_t begin, std::size_t end);
+// Targets per call, at most (the kernel sums them on its stack): the stepper's block.
+inline constexpr std::size_t kMaxNBodyTargets = 1024;
 
 // A spring network in sliced ELLPACK form: bodies in slices of kSpringSlice, each slice a
 // run of entries, one per spring slot, kSpringSlice lanes each (lane l for body slice *
 // kSpringSlice + l). A body's slots hold its springs in model order; empty slots point
-// at the body itself with zero parameters (coincident ends: no force).
+// at the body itself with zero parameters (coincident ends: no force). Calls start on a
+// slice boundary.
 inline constexpr std::size_t kSpringSlice = 16;
 template <class T>
 struct SpringJob {

@@ -45,6 +45,13 @@ std::uint64_t body_count(const Node& n, const char* key) {
   return count;
 }
 
+// Every generator adds to the scene's particles: their total is bounded too.
+void check_room(const Node& n, const Scene& scene, std::uint64_t count) {
+  if (scene.particles.size() + count > kMaxNetworkScene) {
+    n.fail("the listed particles and the bodies of every generator come to more than 2^22");
+  }
+}
+
 void pin(const Node& n, std::vector<BodySpec>& bodies, std::size_t first, std::size_t count) {
   if (!n.value.is_array()) n.fail("expected an array of body indices");
   for (std::size_t k = 0; k < n.value.size(); ++k) {
@@ -64,6 +71,7 @@ Springs make_chain(const Node& n, Scene& scene) {
   n.expect_object({"count", "spacing", "k", "damping", "mass", "origin", "direction", "pinned"});
   const Network net = parse_network(n, scene.particles.size());
   const std::uint64_t count = body_count(n, "count");
+  check_room(n, scene, count);
   Vec3<double> dir{0, -1, 0};
   if (n.has("direction")) {
     dir = n.child("direction").vec3();
@@ -94,6 +102,7 @@ Springs make_grid(const Node& n, Scene& scene) {
   const Network net = parse_network(n, scene.particles.size());
   const std::uint64_t rows = body_count(n, "rows"), columns = body_count(n, "columns");
   if (rows * columns > kMaxNetworkBodies) n.fail("expected at most 2^20 bodies (rows x columns)");
+  check_room(n, scene, rows * columns);
   const double diagonal = net.spacing * std::sqrt(2.0);
   auto at = [&](std::uint64_t r, std::uint64_t c) { return r * columns + c; };
   Springs springs;

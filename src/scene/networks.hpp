@@ -15,6 +15,8 @@ namespace kinema {
 // A generator makes at most this many bodies (a 1024 x 1024 cloth): the scene text is
 // short, what it asks for is not (a body and four springs take about 200 bytes here).
 inline constexpr std::size_t kMaxNetworkBodies = std::size_t(1) << 20;
+// Listed particles and the bodies of every generator together, at most.
+inline constexpr std::size_t kMaxNetworkScene = std::size_t(1) << 22;
 
 bool is_coupled_force(std::string_view type);
 // Adds the term `n` to the scene: its NBody, or a network (a generator's bodies go to the

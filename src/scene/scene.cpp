@@ -159,7 +159,8 @@ void parse_plummer(const Node& n, GenerateSpec& g) {
   const Node d = n.child("distribution");
   if (d.string() != "plummer") d.fail("expected \"box\" or \"plummer\"");
   if (g.rigid) d.fail("a Plummer sphere is made of particles");
-  for (const char* key : {"position_min", "position_max", "velocity_min", "velocity_max"}) {
+  for (const char* key : {"position_min", "position_max", "velocity_min", "velocity_max", "inertia",
+                          "angular_velocity_min", "angular_velocity_max"}) {
     if (n.has(key)) n.child(key).fail("only for \"distribution\": \"box\"");
   }
   g.plummer_radius = n.required("radius").positive();
@@ -495,7 +496,13 @@ void check_generated(const Scene& scene) {
   for (const auto& [key, box] : boxes) {
     if (!holds<T>(*box)) fail(key, "overflows " + type);
   }
-  if (g.plummer_radius > 0 && !holds<T>(40 * g.plummer_radius)) fail("radius", "overflows " + type);
+  if (g.plummer_radius > 0) {
+    if (!holds<T>(40 * g.plummer_radius)) fail("radius", "overflows " + type);
+    const double GM = (scene.nbody ? scene.nbody->G : 1) * g.mass * double(g.count);
+    if (!holds<T>(std::sqrt(2 * GM / g.plummer_radius))) {
+      fail("mass", "the cluster's escape speed overflows " + type);
+    }
+  }
   if (!g.rigid) return;
   for (int d = 0; d < 3; ++d) {
     const T inverse = T(1) / T(g.inertia[d]);
@@ -607,46 +614,53 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
 
 namespace {
 
-// A uniformly random direction.
+// A uniformly random direction (Marsaglia's method), and the Plummer sampling below, use
+// only exactly rounded operations (+ - * / sqrt): the same bodies on every platform.
 Vec3<double> random_direction(std::mt19937_64& rng) {
-  const double z = uniform(rng, -1, 1), phi = uniform(rng, 0, 2 * std::numbers::pi);
-  const double s = std::sqrt(std::max(0.0, 1 - z * z));
-  return {s * std::cos(phi), s * std::sin(phi), z};
+  double u = 0, v = 0, s = 2;
+  while (s >= 1 || s == 0) u = uniform(rng, -1, 1), v = uniform(rng, -1, 1), s = u * u + v * v;
+  const double scale = 2 * std::sqrt(1 - s);
+  return {u * scale, v * scale, 1 - 2 * s};
 }
 
-// One body of a Plummer sphere (scale a, total mass M): the radius from the inverted
-// cumulative mass, the speed by rejection from g(q) = q^2 (1 - q^2)^(7/2) as a fraction of
-// the escape speed sqrt(2 G M) (r^2 + a^2)^(-1/4) (Aarseth, Henon and Wielen, 1974).
+// One body of a Plummer sphere (scale a, total mass M), positions cut at 20 a. The mass
+// inside r is M X^(3/2) with X = r^2 / (r^2 + a^2); X, whose density is proportional to
+// sqrt(X), comes by rejection, then r = a sqrt(X / (1 - X)). The speed is q times the escape
+// speed sqrt(2 G M) (r^2 + a^2)^(-1/4), q by rejection from g(q) = q^2 (1 - q^2)^(7/2)
+// (Aarseth, Henon and Wielen, 1974; g < 0.1).
 void plummer_body(std::mt19937_64& rng, double a, double GM, Vec3<double>& x, Vec3<double>& v) {
-  double r = 0;
-  do {
-    r = a / std::sqrt(std::pow(uniform(rng, 0, 1), -2.0 / 3) - 1);
-  } while (!(r <= 20 * a));
-  double q = 0;
-  do {
-    q = uniform(rng, 0, 1);
-  } while (uniform(rng, 0, 0.1) > q * q * std::pow(1 - q * q, 3.5));
-  const double speed = q * std::sqrt(2 * GM) * std::pow(r * r + a * a, -0.25);
+  double r = INFINITY;
+  while (!(r <= 20 * a)) {
+    double X = 0, w = 1;
+    while (w * w > X) X = uniform(rng, 0, 1), w = uniform(rng, 0, 1);
+    r = a * std::sqrt(X / (1 - X));
+  }
+  double q = 0, g = 1;
+  for (double s = 0; g > q * q * s * s * s * std::sqrt(s);) {
+    q = uniform(rng, 0, 1), g = uniform(rng, 0, 0.1), s = 1 - q * q;
+  }
+  const double speed = q * std::sqrt(2 * GM) / std::sqrt(std::sqrt(r * r + a * a));
   const Vec3<double> along = random_direction(rng), heading = random_direction(rng);
   for (int d = 0; d < 3; ++d) x[d] = r * along[d], v[d] = speed * heading[d];
 }
 
-// The generated bodies of a Plummer scene, moved so their centre of mass is at rest at
-// the origin.
+// The generated bodies of a Plummer scene, moved so their centre of mass is at rest at the
+// origin: a first pass finds the means, a second one, from the same seed, adds the bodies.
 template <class T>
 void add_plummer(const Scene& scene, ParticleSet<T>& set) {
   const GenerateSpec& g = *scene.generate;
-  const double G = scene.nbody ? scene.nbody->G : 1;
+  const double GM = (scene.nbody ? scene.nbody->G : 1) * g.mass * double(g.count);
+  Vec3<double> x, v, mean_x{}, mean_v{};
   std::mt19937_64 rng(g.seed);
-  std::vector<Vec3<double>> x(g.count), v(g.count);
-  Vec3<double> mean_x{}, mean_v{};
   for (std::size_t i = 0; i < g.count; ++i) {
-    plummer_body(rng, g.plummer_radius, G * g.mass * double(g.count), x[i], v[i]);
-    for (int d = 0; d < 3; ++d) mean_x[d] += x[i][d] / double(g.count), mean_v[d] += v[i][d] / double(g.count);
+    plummer_body(rng, g.plummer_radius, GM, x, v);
+    for (int d = 0; d < 3; ++d) mean_x[d] += x[d] / double(g.count), mean_v[d] += v[d] / double(g.count);
   }
+  rng.seed(g.seed);
   for (std::size_t i = 0; i < g.count; ++i) {
+    plummer_body(rng, g.plummer_radius, GM, x, v);
     Vec3<T> p, u;
-    for (int d = 0; d < 3; ++d) p[d] = T(x[i][d] - mean_x[d]), u[d] = T(v[i][d] - mean_v[d]);
+    for (int d = 0; d < 3; ++d) p[d] = T(x[d] - mean_x[d]), u[d] = T(v[d] - mean_v[d]);
     set.add(p, u, T(g.mass));
   }
 }
