@@ -3,7 +3,9 @@
 // one shorter); the cut never depends on the thread count, so neither do the results.
 
 #include <algorithm>
+#include <atomic>
 #include <cstddef>
+#include <exception>
 
 #include "kinema/job_system.hpp"
 #include "kinema/stepper.hpp"
@@ -22,31 +24,44 @@ inline Block block(std::size_t index, std::size_t bodies) {
 
 namespace detail {
 
+// The blocks of one job. A block that throws (a user callback) stops the job: blocks not
+// yet started are skipped, and the first exception is kept for the calling thread, so it
+// never reaches the host's worker threads.
 template <class F>
 struct BlockTask {
   F& fn;
   std::size_t bodies;
+  std::atomic<bool> failed{false};
+  std::exception_ptr error;  // written once, by the block that set `failed`
 
   static void run(std::size_t first, std::size_t last, unsigned, void* context) {
-    const auto& self = *static_cast<const BlockTask*>(context);
-    for (std::size_t b = first; b < last; ++b) self.fn(block(b, self.bodies));
+    auto& self = *static_cast<BlockTask*>(context);
+    for (std::size_t b = first; b < last && !self.failed.load(std::memory_order_relaxed); ++b) {
+      try {
+        self.fn(block(b, self.bodies));
+      } catch (...) {
+        if (!self.failed.exchange(true)) self.error = std::current_exception();
+      }
+    }
   }
 };
 
 }  // namespace detail
 
-// Calls fn(Block) for every block of `bodies` bodies: on the calling thread when the set is
-// smaller than `inline_below`, the job system has one worker or there is one block; else as
-// one job on `jobs`, which may run the blocks in any order on any worker.
+// Calls fn(Block) for every block of `bodies` bodies (a padded count): on the calling thread
+// when `parallel` is false or there is one block; else as one job on `jobs`, which may run
+// the blocks in any order on any worker. What fn throws comes out here, on the calling
+// thread, once every range of the job has returned.
 template <class F>
-void for_each_block(JobSystem& jobs, std::size_t inline_below, std::size_t bodies, F&& fn) {
+void for_each_block(JobSystem& jobs, bool parallel, std::size_t bodies, F&& fn) {
   const std::size_t blocks = block_count(bodies);
-  if (bodies < inline_below || jobs.worker_count() <= 1 || blocks <= 1) {
+  if (!parallel || blocks <= 1) {
     for (std::size_t b = 0; b < blocks; ++b) fn(block(b, bodies));
     return;
   }
-  detail::BlockTask<F> task{fn, bodies};
+  detail::BlockTask<F> task{fn, bodies, {false}, nullptr};
   jobs.wait(jobs.enqueue(&detail::BlockTask<F>::run, blocks, 1, &task));
+  if (task.error) std::rethrow_exception(task.error);
 }
 
 }  // namespace kinema

@@ -51,21 +51,57 @@ void StagedPath<T>::reserve(std::size_t padded) {
   if (needs_force_scratch()) {
     for (auto& f : force_) f.resize(padded);
   }
+  if (may_throw()) {
+    for (auto& kept : saved_) {
+      for (auto& a : kept) a.resize(padded);
+    }
+  }
   capacity_ = padded;
 }
 
 template <class T>
 void StagedPath<T>::step(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
+  if (!may_throw()) return run_phases(c, jobs, inline_below);
+  // User code runs in this step: keep the bodies' state, so a throw leaves them as they were.
+  const bool parallel = c.bodies.size() >= inline_below;
+  for_each_block(jobs, parallel, c.bodies.padded_size(), [&](Block b) { copy_state(c, b, true); });
+  try {
+    run_phases(c, jobs, inline_below);
+  } catch (...) {
+    for (std::size_t i = 0; i < block_count(c.bodies.padded_size()); ++i) {
+      copy_state(c, block(i, c.bodies.padded_size()), false);
+    }
+    throw;
+  }
+}
+
+template <class T>
+void StagedPath<T>::copy_state(const StepContext<T>& c, Block b, bool save) {
+  const auto body = arrays(c.bodies);
+  for (int d = 0; d < 3; ++d) {
+    T* const live[2] = {body.x[d], body.v[d]};
+    for (int a = 0; a < 2; ++a) {
+      T* kept = saved_[a][d].data();
+      T* from = save ? live[a] : kept;
+      T* to = save ? kept : live[a];
+      std::copy(from + b.begin, from + b.end, to + b.begin);
+    }
+  }
+}
+
+template <class T>
+void StagedPath<T>::run_phases(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
   const std::size_t n = c.bodies.padded_size();
+  const bool parallel = c.bodies.size() >= inline_below;
   if (coupled()) {
     for (int p = 0; p < phase_count_; ++p) {
       // Gravity costs a block n interactions per body: worth the threads at any n.
       const bool quadratic = phases_[p].kind == PhaseKind::coupled && coupled_.nbody;
-      for_each_block(jobs, quadratic ? 0 : inline_below, n, [&](Block b) { run(c, phases_[p], b); });
+      for_each_block(jobs, parallel || quadratic, n, [&](Block b) { run(c, phases_[p], b); });
     }
     return;
   }
-  for_each_block(jobs, inline_below, n, [&](Block b) {
+  for_each_block(jobs, parallel, n, [&](Block b) {
     for (int p = 0; p < phase_count_; ++p) run(c, phases_[p], b);
   });
 }

@@ -28,6 +28,9 @@ class StagedPath {
 
   // Scratch for `padded` bodies (a padded count); allocates only when it grows.
   void reserve(std::size_t padded);
+  // One step. Sets of fewer than inline_below bodies run on the calling thread. When user
+  // code (a callback or a CoupledTerm) throws, the bodies are put back as they were and the
+  // exception is rethrown here, on the calling thread.
   void step(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
 
  private:
@@ -39,6 +42,10 @@ class StagedPath {
   static constexpr int kMaxPhases = 3 * kMaxStages + 1;
 
   void plan();
+  void run_phases(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below);
+  // Saves the block's positions and velocities to saved_, or puts them back.
+  void copy_state(const StepContext<T>& c, Block b, bool save);
+  bool may_throw() const { return !forces_.callbacks().empty() || !forces_.coupled_terms().empty(); }
   bool coupled() const { return forces_.coupled(); }
   bool needs_force_scratch() const { return coupled() || !forces_.callbacks().empty(); }
 
@@ -75,6 +82,7 @@ class StagedPath {
   // and the force accumulator of callback and coupled terms. Blocks write disjoint ranges.
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> stage_x_, stage_v_, stage_a_;
   std::array<AlignedArray<T>, 3> force_;
+  std::array<std::array<AlignedArray<T>, 3>, 2> saved_;  // x and v before a step that may throw
 };
 
 extern template class StagedPath<float>;

@@ -110,9 +110,10 @@ struct Stepper<T>::Impl {
     return {bodies, step_size, accel_scale(step_size)};
   }
 
+  // Over the blocks of a set; sets of fewer than inline_below real bodies stay inline.
   template <class Fn>
-  void for_each_block(std::size_t bodies, Fn&& fn) {
-    kinema::for_each_block(*jobs, options.inline_below, bodies, fn);
+  void for_each_block(const ParticleSet<T>& b, Fn&& fn) {
+    kinema::for_each_block(*jobs, b.size() >= options.inline_below, b.padded_size(), fn);
   }
 
   void advance(RigidBodySet<T>& b, T step_size, std::uint64_t steps) {
@@ -126,7 +127,7 @@ struct Stepper<T>::Impl {
                                    {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
                                    lowered.rigid, lowered.rotation, c.h,
                                    options.renormalize_quaternions};
-    for_each_block(b.padded_size(), [&](Block block) {
+    for_each_block(b.centers_, [&](Block block) {
       for (std::uint64_t k = 0; k < steps; ++k) rigid_fn(job, block.begin, block.end);
     });
     clock.steps += steps;
@@ -139,7 +140,7 @@ struct Stepper<T>::Impl {
     // Local, time-independent forces: each block can take all its steps while it sits in
     // cache. Every body sees the same operations as step by step, so the bits agree.
     const kernels::FusedJob<T> job{arrays(b), lowered.particle, c.h};
-    for_each_block(b.padded_size(), [&](Block block) {
+    for_each_block(b, [&](Block block) {
       for (std::uint64_t k = 0; k < steps; ++k) fused_fn(job, block.begin, block.end);
     });
     clock.steps += steps;
