@@ -1,6 +1,7 @@
 #include "kinema/bodies.hpp"
 
 #include <algorithm>
+#include <functional>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -27,10 +28,13 @@ AlignedArray<T>::AlignedArray(const AlignedArray& other) {
 template <class T>
 AlignedArray<T>& AlignedArray<T>::operator=(const AlignedArray& other) {
   if (this == &other) return *this;
-  data_.reset();
-  size_ = 0;
-  resize(other.size_);
-  if (size_ > 0) std::memcpy(data_.get(), other.data_.get(), size_ * sizeof(T));
+  if (size_ < other.size_) {
+    data_.reset();
+    size_ = 0;
+    resize(other.size_);
+  }
+  if (other.size_ > 0) std::memcpy(data_.get(), other.data_.get(), other.size_ * sizeof(T));
+  std::fill(data_.get() + other.size_, data_.get() + size_, T(0));
   return *this;
 }
 
@@ -97,6 +101,20 @@ void check_finite(const Vec3<T>& v, std::size_t body, const char* field) {
   }
 }
 
+template <class T>
+T inverse_mass(T mass, std::size_t i) {
+  if (!(std::isfinite(mass) && mass > 0)) {
+    throw Error("body " + std::to_string(i) + ": mass must be positive and finite, got " +
+                number_text(mass));
+  }
+  const T inv_mass = T(1) / mass;
+  if (!std::isfinite(inv_mass) || inv_mass == 0) {
+    throw Error("body " + std::to_string(i) + ": mass " + number_text(mass) +
+                " has no finite nonzero inverse in this precision");
+  }
+  return inv_mass;
+}
+
 }  // namespace
 
 template <class T>
@@ -120,15 +138,7 @@ std::size_t ParticleSet<T>::add(const Vec3<T>& position, const Vec3<T>& velocity
   const std::size_t i = size_;
   check_finite(position, i, "position");
   check_finite(velocity, i, "velocity");
-  if (!(std::isfinite(mass) && mass > 0)) {
-    throw Error("body " + std::to_string(i) + ": mass must be positive and finite, got " +
-                number_text(mass));
-  }
-  const T inv_mass = T(1) / mass;
-  if (!std::isfinite(inv_mass) || inv_mass == 0) {
-    throw Error("body " + std::to_string(i) + ": mass " + number_text(mass) +
-                " has no finite nonzero inverse in this precision");
-  }
+  const T inv_mass = inverse_mass(mass, i);
   grow_to(i + 1);
   write(i, position, velocity, inv_mass);
   size_ = i + 1;
@@ -176,17 +186,67 @@ void ParticleSet<T>::clear() {
 }
 
 template <class T>
+void ParticleSet<T>::check_index(std::size_t i) const {
+  if (i >= size_) throw Error("body " + std::to_string(i) + ": no such body (the set has " + std::to_string(size_) + ")");
+}
+
+template <class T>
 void ParticleSet<T>::set_position(std::size_t i, const Vec3<T>& p) {
-  if (i >= size_) throw Error("body " + std::to_string(i) + ": no such body");
+  check_index(i);
   check_finite(p, i, "position");
   px_[i] = p[0], py_[i] = p[1], pz_[i] = p[2];
 }
 
 template <class T>
 void ParticleSet<T>::set_velocity(std::size_t i, const Vec3<T>& v) {
-  if (i >= size_) throw Error("body " + std::to_string(i) + ": no such body");
+  check_index(i);
   check_finite(v, i, "velocity");
   vx_[i] = v[0], vy_[i] = v[1], vz_[i] = v[2];
+}
+
+template <class T>
+void ParticleSet<T>::set_mass(std::size_t i, T mass) {
+  check_index(i);
+  inv_mass_[i] = inverse_mass(mass, i);
+}
+
+template <class T>
+void ParticleSet<T>::set_kinematic(std::size_t i) {
+  check_index(i);
+  inv_mass_[i] = 0;
+}
+
+template <class T>
+void ParticleSet<T>::copy_body(std::size_t from, std::size_t to) {
+  for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) (*a)[to] = (*a)[from];
+}
+
+template <class T>
+void ParticleSet<T>::clear_body(std::size_t i) {
+  for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) (*a)[i] = 0;
+}
+
+template <class T>
+std::size_t ParticleSet<T>::remove(std::size_t i) {
+  check_index(i);
+  const std::size_t last = size_ - 1;
+  if (i != last) copy_body(last, i);
+  clear_body(last);  // inert padding again
+  size_ = last;
+  return i != last ? last : kNoBody;
+}
+
+void check_removals(std::span<const std::size_t> indices, std::size_t size, std::size_t* sorted) {
+  std::copy(indices.begin(), indices.end(), sorted);
+  std::sort(sorted, sorted + indices.size(), std::greater<>());
+  for (std::size_t k = 0; k < indices.size(); ++k) {
+    if (sorted[k] >= size) {
+      throw Error("body " + std::to_string(sorted[k]) + ": no such body (the set has " + std::to_string(size) + ")");
+    }
+    if (k > 0 && sorted[k] == sorted[k - 1]) {
+      throw Error("body " + std::to_string(sorted[k]) + ": listed twice for removal");
+    }
+  }
 }
 
 template class AlignedArray<float>;

@@ -20,6 +20,18 @@ void check_finite(const std::array<T, N>& v, std::size_t body, const char* field
   }
 }
 
+template <class T>
+Vec3<T> inverse_moments(const Vec3<T>& moments, std::size_t body) {
+  check_finite(moments, body, "inertia");
+  Vec3<T> inverse;
+  for (int d = 0; d < 3; ++d) {
+    if (!(moments[d] > 0)) fail(body, "inertia moments must be positive");
+    inverse[d] = T(1) / moments[d];
+    if (!std::isfinite(inverse[d])) fail(body, "an inertia moment has no finite inverse in this precision");
+  }
+  return inverse;
+}
+
 using Matrix = std::array<std::array<double, 3>, 3>;
 
 // Rotation matrix (columns: the rotated axes) to a unit quaternion (Shepperd's method:
@@ -165,11 +177,7 @@ std::size_t RigidBodySet<T>::add(const RigidBodyDesc<T>& b) {
   const std::size_t i = size();
   check_finite(b.orientation, i, "orientation");
   check_finite(b.angular_momentum, i, "angular_momentum");
-  check_finite(b.inertia, i, "inertia");
-  for (T m : b.inertia) {
-    if (!(m > 0)) fail(i, "inertia moments must be positive");
-    if (!std::isfinite(T(1) / m)) fail(i, "an inertia moment has no finite inverse in this precision");
-  }
+  const Vec3<T> inverse = inverse_moments(b.inertia, i);
   double norm = 0;
   for (T c : b.orientation) norm += double(c) * double(c);
   norm = std::sqrt(norm);
@@ -183,9 +191,76 @@ std::size_t RigidBodySet<T>::add(const RigidBodyDesc<T>& b) {
   for (int k = 0; k < 4; ++k) q_[k][i] = T(b.orientation[k] / norm);
   for (int d = 0; d < 3; ++d) {
     l_[d][i] = b.angular_momentum[d];
-    inv_inertia_[d][i] = T(1) / b.inertia[d];
+    inv_inertia_[d][i] = inverse[d];
   }
   return i;
+}
+
+template <class T>
+void RigidBodySet<T>::pad_rotation_arrays(std::size_t from) {
+  for (std::size_t i = from; i < q_[0].size(); ++i) q_[0][i] = 1;
+}
+
+template <class T>
+RigidBodySet<T>& RigidBodySet<T>::operator=(const RigidBodySet& other) {
+  if (this == &other) return *this;
+  centers_ = other.centers_;
+  q_ = other.q_, l_ = other.l_, inv_inertia_ = other.inv_inertia_;
+  pad_rotation_arrays(other.q_[0].size());  // past the copied arrays: inert padding
+  return *this;
+}
+
+template <class T>
+void RigidBodySet<T>::set_orientation(std::size_t i, const Quat<T>& q) {
+  centers_.check_index(i);
+  check_finite(q, i, "orientation");
+  double norm = 0;
+  for (T c : q) norm += double(c) * double(c);
+  norm = std::sqrt(norm);
+  if (!(norm > 0)) fail(i, "orientation quaternion is zero");
+  for (int k = 0; k < 4; ++k) q_[k][i] = T(q[k] / norm);
+}
+
+template <class T>
+void RigidBodySet<T>::set_angular_momentum(std::size_t i, const Vec3<T>& l) {
+  centers_.check_index(i);
+  check_finite(l, i, "angular_momentum");
+  for (int d = 0; d < 3; ++d) l_[d][i] = l[d];
+}
+
+template <class T>
+void RigidBodySet<T>::set_mass(std::size_t i, T mass) {
+  centers_.set_mass(i, mass);
+}
+
+template <class T>
+void RigidBodySet<T>::set_inertia(std::size_t i, const Vec3<T>& moments) {
+  centers_.check_index(i);
+  const Vec3<T> inverse = inverse_moments(moments, i);
+  for (int d = 0; d < 3; ++d) inv_inertia_[d][i] = inverse[d];
+}
+
+template <class T>
+void RigidBodySet<T>::set_kinematic(std::size_t i) {
+  centers_.set_kinematic(i);
+  for (int d = 0; d < 3; ++d) inv_inertia_[d][i] = 0;
+}
+
+template <class T>
+std::size_t RigidBodySet<T>::remove(std::size_t i) {
+  centers_.check_index(i);
+  const std::size_t last = size() - 1;
+  auto move_rotation = [&](std::size_t from, std::size_t to) {
+    for (auto& a : q_) a[to] = a[from];
+    for (auto& a : l_) a[to] = a[from];
+    for (auto& a : inv_inertia_) a[to] = a[from];
+  };
+  if (i != last) move_rotation(last, i);
+  for (auto& a : q_) a[last] = 0;
+  for (auto& a : l_) a[last] = 0;
+  for (auto& a : inv_inertia_) a[last] = 0;
+  q_[0][last] = 1;  // inert padding: the identity orientation
+  return centers_.remove(i);
 }
 
 template <class T>

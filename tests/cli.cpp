@@ -224,7 +224,7 @@ TEST_CASE("chart: fitted orders 1, 2, 2, 4, 1, 2 on the eccentric orbit", "[cli]
   CHECK(read(out / "error_vs_step.gp").find("rk4 (fitted order 4.0") != std::string::npos);
 }
 
-TEST_CASE("stability: Euler spirals out, rk4 holds, Verlet stays bounded; measured limits", "[cli][stability]") {
+TEST_CASE("stability: Euler spirals out, rk4 holds, Verlet stays bounded, and the measured limits", "[cli][stability]") {
   const fs::path out = work_dir() / "stability_orbit";
   // Ten orbits at h = T/100.
   const double period = 2 * std::numbers::pi;

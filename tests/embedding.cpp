@@ -136,3 +136,118 @@ TEST_CASE("job systems: several host threads at once, calls from inside a task, 
   CHECK(stepped_hash(on(physics)) == serial);
   CHECK(physics.ranges_on_pool_threads() > 0);
 }
+
+namespace {
+
+// The bodies of `set` in order, as a set built from scratch.
+ParticleSet<double> rebuilt(const ParticleSet<double>& set) {
+  ParticleSet<double> out;
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    if (set.inv_mass()[i] == 0) {
+      out.add_kinematic(set.position(i), set.velocity(i));
+    } else {
+      out.add(set.position(i), set.velocity(i), 1 / set.inv_mass()[i]);
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("particles: removal by swap with the last, batch removal, mass and kinematic edits",
+          "[embedding][bodies]") {
+  ParticleSet<double> b = test::cloud<double>(3000);
+  const Vec3<double> last = b.position(2999);
+  const double* before = b.px();
+  CHECK(b.remove(7) == 2999);
+  CHECK(b.size() == 2999);
+  CHECK(b.position(7) == last);
+  CHECK(b.remove(2998) == ParticleSet<double>::kNoBody);
+  CHECK(b.px() == before);  // no reallocation
+  // Batch: every move reported, in order, so handles can follow their bodies.
+  std::vector<std::size_t> where(b.size());
+  for (std::size_t i = 0; i < where.size(); ++i) where[i] = i;  // handle -> index
+  std::vector<std::size_t> handle_at = where;                     // index -> handle
+  const std::vector<std::size_t> doomed{5, 2000, 17, 2997, 1};
+  std::vector<Vec3<double>> kept_position(b.size());
+  for (std::size_t i = 0; i < b.size(); ++i) kept_position[i] = b.position(i);
+  b.remove(doomed, [&](std::size_t from, std::size_t to) { handle_at[to] = handle_at[from]; });
+  REQUIRE(b.size() == 2998 - doomed.size());
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const std::size_t h = handle_at[i];
+    CHECK(std::find(doomed.begin(), doomed.end(), h) == doomed.end());
+    CHECK(b.position(i) == kept_position[h]);
+  }
+  CHECK_THROWS_WITH(b.remove(std::vector<std::size_t>{3, 3}, [](std::size_t, std::size_t) {}),
+                    "body 3: listed twice for removal");
+  CHECK_THROWS_WITH(b.remove(b.size()), Catch::StartsWith("body 2993: no such body"));
+  // The edited set steps exactly like one built from its bodies: the freed tail is inert.
+  b.set_kinematic(3);
+  b.set_mass(4, 2.5);
+  CHECK_THROWS_WITH(b.set_mass(4, -1), "body 4: mass must be positive and finite, got -1");
+  ParticleSet<double> fresh = rebuilt(b);
+  const ForceModel<double> f = test::all_local_terms<double>();
+  Stepper<double>(f, rk4, test::serial_options()).advance(b, 0.01, 5);
+  Stepper<double>(f, rk4, test::serial_options()).advance(fresh, 0.01, 5);
+  CHECK(test::state_hash(b) == test::state_hash(fresh));
+  CHECK(b.inv_mass()[3] == 0);
+}
+
+TEST_CASE("copying a set into one of the same capacity allocates nothing", "[embedding][bodies]") {
+  ParticleSet<float> a = test::cloud<float>(5000), snapshot = a;
+  const float* memory = snapshot.px();
+  Stepper<float>(test::all_local_terms<float>(), rk4, test::serial_options()).step(a, 0.01f);
+  snapshot = a;
+  CHECK(snapshot.px() == memory);
+  CHECK(test::state_hash(snapshot) == test::state_hash(a));
+}
+
+namespace {
+
+RigidBodySet<double> boxes(std::size_t n) {
+  RigidBodySet<double> set;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double s = double(i % 7);
+    set.add({.position = {s, 1, -s}, .velocity = {0.1 * s, 0, 1}, .orientation = {1, 0.1 * s, 0.2, 0},
+             .angular_momentum = {0.3, s, 0.2}, .mass = 1 + s, .inertia = {1, 2 + s, 3}});
+  }
+  return set;
+}
+
+}  // namespace
+
+TEST_CASE("rigid bodies: setters for every field, kinematic bodies, removal, snapshots",
+          "[embedding][rigid]") {
+  RigidBodySet<double> set = boxes(40);
+  set.set_position(3, {5, 6, 7});
+  set.set_velocity(3, {1, 0, 0});
+  set.set_orientation(3, {0, 0, 2, 0});  // normalized to a half turn about y
+  CHECK(set.orientation(3) == Quat<double>{0, 0, 1, 0});
+  set.set_angular_momentum(3, {0, 0, 4});
+  set.set_inertia(3, {2, 2, 4});
+  CHECK(set.angular_velocity(3)[2] == Approx(1));
+  set.set_mass(3, 8);
+  CHECK_THROWS_WITH(set.set_orientation(3, {0, 0, 0, 0}), "rigid body 3: orientation quaternion is zero");
+  CHECK_THROWS_WITH(set.set_inertia(3, {1, 0, 1}), "rigid body 3: inertia moments must be positive");
+  set.set_kinematic(5);
+  const Quat<double> turned = set.orientation(5);
+  const Vec3<double> moving = set.centers().velocity(5);
+  CHECK(set.remove(0) == 39);
+  RigidBodySet<double> snapshot = boxes(40);  // same capacity
+  const double* memory = snapshot.q(0);
+  snapshot = set;
+  CHECK(snapshot.q(0) == memory);
+  ForceModel<double> f;
+  f.add(Gravity{}).add(Torque{{0, 0.5, 0}}).add(AngularDrag{0.1});
+  Stepper<double>(f, rk4, test::serial_options()).advance(set, 0.01, 10);
+  // The kinematic body kept its velocity and its orientation.
+  CHECK(set.orientation(5) == turned);
+  CHECK(set.centers().velocity(5) == moving);
+  // The snapshot, taken before the steps, steps to the same bits as the edited set.
+  Stepper<double>(f, rk4, test::serial_options()).advance(snapshot, 0.01, 10);
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    INFO("body " << i);
+    REQUIRE(snapshot.orientation(i) == set.orientation(i));
+    REQUIRE(snapshot.centers().position(i) == set.centers().position(i));
+  }
+}

@@ -45,7 +45,7 @@ TEST_CASE("rk4's tableau meets the fourth-order conditions", "[methods]") {
   CHECK(baac == Approx(1.0 / 24));
 }
 
-TEST_CASE("methods are found by name; unknown names list the known ones", "[methods][errors]") {
+TEST_CASE("methods are found by name, and unknown names list the known ones", "[methods][errors]") {
   for (const Method* m : builtin_methods) {
     CHECK(&method_by_name(m->name) == m);
     CHECK(builtin_index(*m) >= 0);

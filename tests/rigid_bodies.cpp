@@ -189,7 +189,7 @@ TEST_CASE("each method converges at its order on a rotating body", "[rigid][conv
   }
 }
 
-TEST_CASE("the quaternion stays unit; without renormalization Euler's grows", "[rigid]") {
+TEST_CASE("the quaternion stays unit, and without renormalization Euler's grows", "[rigid]") {
   RigidBodySet<double> b = one_body(kAsymmetric, {1, 2, 0.5});
   auto s = stepper(euler);
   s.advance(b, 0.01, 5000);

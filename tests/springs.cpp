@@ -195,7 +195,7 @@ TEST_CASE("springs: explicit Euler on a damped stiff chain diverges past the lim
   CHECK(displacement_after(undamped, euler, 0.1 * limit, 20000) > 0.05);
 }
 
-TEST_CASE("springs: action equals reaction to the bit; momentum is conserved", "[springs]") {
+TEST_CASE("springs: action equals reaction to the bit, and momentum is conserved", "[springs]") {
   const Chain grid = free_grid(9, 0.2);
   ParticleSet<double> b = grid.bodies;
   for (std::size_t i = 0; i < b.size(); i += 3) b.set_velocity(i, {0.3, -0.1, 0.2});

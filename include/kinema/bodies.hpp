@@ -19,6 +19,8 @@ using Vec3 = std::array<T, 3>;
 
 template <class T>
 class Stepper;
+template <class T>
+class RigidBodySet;
 
 // Storage alignment and padding unit, in bytes: one AVX-512 register.
 inline constexpr std::size_t kSimdBytes = 64;
@@ -30,6 +32,8 @@ class AlignedArray {
   AlignedArray() = default;
   explicit AlignedArray(std::size_t count);
   AlignedArray(const AlignedArray& other);
+  // Reuses this array's memory when it is large enough (the rest is zeroed): copying a set
+  // into one of the same capacity allocates nothing.
   AlignedArray& operator=(const AlignedArray& other);
   // A moved-from array is empty.
   AlignedArray(AlignedArray&& other) noexcept
@@ -120,10 +124,28 @@ class ParticleSet {
 
   Vec3<T> position(std::size_t i) const { return {px_[i], py_[i], pz_[i]}; }
   Vec3<T> velocity(std::size_t i) const { return {vx_[i], vy_[i], vz_[i]}; }
+  // Setters check the index and the values (kinema::Error naming the body and field).
   void set_position(std::size_t i, const Vec3<T>& p);
   void set_velocity(std::size_t i, const Vec3<T>& v);
+  void set_mass(std::size_t i, T mass);  // positive and finite; makes a kinematic body dynamic
+  void set_kinematic(std::size_t i);     // forces stop moving it (inv_mass 0)
+
+  // Removes body i by moving the last body into its place (no reallocation, no shift).
+  // Returns the index the moved body had (the old last index), or kNoBody when i was last.
+  static constexpr std::size_t kNoBody = std::size_t(-1);
+  std::size_t remove(std::size_t i);
+  // Removes every listed body (distinct indices, any order), each by swap with the last,
+  // from the highest index down; moved(from, to) is told of every body that changed index.
+  template <class Moved>
+  void remove(std::span<const std::size_t> indices, Moved&& moved);
 
  private:
+  friend class RigidBodySet<T>;
+  void check_index(std::size_t i) const;
+  // Copies body `from` to `to` in every array, or clears `to` to inert padding.
+  void copy_body(std::size_t from, std::size_t to);
+  void clear_body(std::size_t i);
+
   void grow_to(std::size_t count);
   void write(std::size_t i, const Vec3<T>& p, const Vec3<T>& v, T inv_mass);
 
@@ -160,6 +182,28 @@ class RigidBodySet {
   // examples use them.)
   std::size_t add(const RigidBodyDesc<T>& body);
   void reserve(std::size_t count);
+  RigidBodySet() = default;
+  RigidBodySet(const RigidBodySet&) = default;
+  // Reuses this set's memory when it is large enough: no allocation for a snapshot.
+  RigidBodySet& operator=(const RigidBodySet& other);
+  RigidBodySet(RigidBodySet&&) noexcept = default;
+  RigidBodySet& operator=(RigidBodySet&&) noexcept = default;
+
+  // Setters, checked as add() checks (kinema::Error naming the body and field).
+  void set_position(std::size_t i, const Vec3<T>& p) { centers_.set_position(i, p); }
+  void set_velocity(std::size_t i, const Vec3<T>& v) { centers_.set_velocity(i, v); }
+  void set_orientation(std::size_t i, const Quat<T>& q);  // normalized here
+  void set_angular_momentum(std::size_t i, const Vec3<T>& l);
+  void set_mass(std::size_t i, T mass);
+  void set_inertia(std::size_t i, const Vec3<T>& principal_moments);
+  // Forces and torques stop moving it: inv_mass and inverse moments 0. It keeps its velocity
+  // and does not turn; set_mass and set_inertia make it dynamic again.
+  void set_kinematic(std::size_t i);
+  // As ParticleSet::remove: the last body moves into i; returns its old index or kNoBody.
+  static constexpr std::size_t kNoBody = ParticleSet<T>::kNoBody;
+  std::size_t remove(std::size_t i);
+  template <class Moved>
+  void remove(std::span<const std::size_t> indices, Moved&& moved);
 
   std::size_t size() const { return centers_.size(); }
   std::size_t padded_size() const { return centers_.padded_size(); }
@@ -182,6 +226,7 @@ class RigidBodySet {
   template <class>
   friend class Stepper;  // steps the centre arrays in place
   void grow_rotation_arrays();
+  void pad_rotation_arrays(std::size_t from);  // identity orientation from `from` on
 
   ParticleSet<T> centers_;
   std::array<AlignedArray<T>, 4> q_;
@@ -209,6 +254,38 @@ Quat<T> multiply(const Quat<T>& a, const Quat<T>& b) {
 
 // v rotated by the unit quaternion q.
 Vec3<double> rotate(const Quat<double>& q, const Vec3<double>& v);
+
+// Both sets remove a batch the same way: highest index first, each by swap with the last.
+template <class Set, class Moved>
+void remove_bodies(Set& set, std::span<const std::size_t> indices, Moved&& moved);
+
+template <class T>
+template <class Moved>
+void ParticleSet<T>::remove(std::span<const std::size_t> indices, Moved&& moved) {
+  remove_bodies(*this, indices, moved);
+}
+
+template <class T>
+template <class Moved>
+void RigidBodySet<T>::remove(std::span<const std::size_t> indices, Moved&& moved) {
+  remove_bodies(*this, indices, moved);
+}
+
+// Throws kinema::Error for an index out of range or listed twice.
+void check_removals(std::span<const std::size_t> indices, std::size_t size, std::size_t* sorted);
+
+template <class Set, class Moved>
+void remove_bodies(Set& set, std::span<const std::size_t> indices, Moved&& moved) {
+  constexpr std::size_t kOnStack = 256;
+  std::size_t stack[kOnStack];
+  std::unique_ptr<std::size_t[]> heap;
+  std::size_t* sorted = indices.size() <= kOnStack ? stack : (heap.reset(new std::size_t[indices.size()]), heap.get());
+  check_removals(indices, set.size(), sorted);  // sorted descending
+  for (std::size_t k = 0; k < indices.size(); ++k) {
+    const std::size_t from = set.remove(sorted[k]);
+    if (from != Set::kNoBody) moved(from, sorted[k]);
+  }
+}
 
 extern template class AlignedArray<float>;
 extern template class AlignedArray<double>;
