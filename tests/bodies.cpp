@@ -96,6 +96,6 @@ TEST_CASE("bad bodies are refused with the body and field named", "[bodies][erro
   CHECK_THROWS_WITH(set.add({0, 0, 0}, {0, 0, 0}, inf), Catch::Contains("body 1: mass"));
   CHECK_THROWS_WITH(set.add({0, 0, 0}, {0, 0, 0}, nan), Catch::Contains("body 1: mass"));
   CHECK_THROWS_WITH(set.set_velocity(0, {nan, 0, 0}), "body 0: velocity is not finite");
-  CHECK_THROWS_WITH(set.set_position(5, {0, 0, 0}), "body 5: no such body");
+  CHECK_THROWS_WITH(set.set_position(5, {0, 0, 0}), "body 5: no such body (the set has 1)");
   CHECK(set.size() == 1);  // nothing half-added
 }
