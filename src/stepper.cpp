@@ -51,14 +51,25 @@ struct Stepper<T>::Impl {
   Clock<T> clock;
 
   Impl(std::shared_ptr<const ForceModel<T>> f, const Method& m, StepperOptions o)
-      : forces(std::move(f)), method(m), options(o) {
-    if (!forces) throw Error("stepper: null force model");
+      : method(m), options(o) {
     validate(method);
     table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
     jobs = options.jobs != nullptr ? options.jobs : &default_job_system(options.threads);
-    lowered = lower_forces<T>(forces->local_terms());
-    lowered.coupled = lower_coupled<T>(*forces);
+    use(std::move(f));
+  }
+
+  // Lowers `f` first: a model that throws leaves everything as it was.
+  void use(std::shared_ptr<const ForceModel<T>> f) {
+    if (!f) throw Error("stepper: null force model");
+    LoweredForces<T> fresh = lower_forces<T>(f->local_terms());
+    fresh.coupled = lower_coupled<T>(*f);
+    const std::size_t scratch = staged ? staged->capacity() : 0;
+    forces = std::move(f);
+    lowered = std::move(fresh);
+    fused_fn = nullptr, rigid_fn = nullptr;
+    staged.reset();
     pick_kernels();
+    if (staged) staged->reserve(scratch);  // the next step allocates no more than the last
   }
 
   void pick_kernels() {
@@ -201,6 +212,11 @@ void Stepper<T>::check_step_size(T h) const {
 template <class T>
 void Stepper<T>::reserve(std::size_t bodies) {
   if (impl_->staged) impl_->staged->reserve(padded_count<T>(bodies));
+}
+
+template <class T>
+void Stepper<T>::set_forces(ForceModel<T> forces) {
+  impl_->use(std::make_shared<const ForceModel<T>>(std::move(forces)));
 }
 
 template <class T>

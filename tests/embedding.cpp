@@ -3,6 +3,8 @@
 // thread), and inline_below counting real bodies.
 #include <catch2/catch.hpp>
 
+#include <cmath>
+#include <numbers>
 #include <stdexcept>
 #include <thread>
 
@@ -250,4 +252,87 @@ TEST_CASE("rigid bodies: setters for every field, kinematic bodies, removal, sna
     REQUIRE(snapshot.orientation(i) == set.orientation(i));
     REQUIRE(snapshot.centers().position(i) == set.centers().position(i));
   }
+}
+
+TEST_CASE("a fixed timestep runs whole steps, caps a slow frame, and leaves the fraction",
+          "[embedding]") {
+  FixedTimestep clock(0.01, 4);
+  CHECK(clock.steps_for(0.025) == 2);
+  CHECK(clock.alpha() == Approx(0.5));
+  CHECK(clock.steps_for(0.004) == 0);
+  CHECK(clock.alpha() == Approx(0.9));
+  CHECK(clock.steps_for(0.001) == 1);  // 0.01 accumulated: exactly one step
+  CHECK(clock.alpha() < 1e-9);
+  // A 1 s hitch asks for 100 steps: 4 run, 96 are dropped, the fraction stays.
+  CHECK(clock.steps_for(1.0032) == 4);
+  CHECK(clock.dropped_steps() == 96);
+  CHECK(clock.alpha() == Approx(0.32).margin(1e-6));
+  CHECK_THROWS_WITH(clock.steps_for(-1), "fixed timestep: a frame's time must be finite and >= 0");
+  CHECK_THROWS_AS(FixedTimestep(0), Error);
+  // Over many frames of uneven length the steps add up to the time given, less what was
+  // dropped, to within the fraction.
+  FixedTimestep steady(1.0 / 60);
+  double wall = 0;
+  std::uint64_t steps = 0;
+  for (int f = 0; f < 10000; ++f) {
+    const double frame = 0.004 + 0.001 * (f % 17);
+    wall += frame;
+    steps += steady.steps_for(frame);
+  }
+  CHECK(steady.dropped_steps() == 0);
+  CHECK(double(steps) / 60 + steady.alpha() / 60 == Approx(wall).epsilon(1e-9));
+}
+
+TEST_CASE("interpolate: positions by lerp, orientations by the short-arc normalized lerp",
+          "[embedding][rigid]") {
+  for (Isa isa : {Isa::scalar, Isa::sse2, Isa::avx2, Isa::avx512}) {
+    if (!isa_available(isa)) continue;
+    INFO(isa_name(isa));
+    ParticleSet<float> a = test::cloud<float>(100), b = a, out;
+    for (std::size_t i = 0; i < b.size(); ++i) b.set_position(i, {float(i), 2, -4});
+    interpolate(a, b, 0.25f, out, isa);
+    REQUIRE(out.size() == 100);
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      for (int d = 0; d < 3; ++d) {
+        CHECK(out.position(i)[d] == std::fma(0.25f, b.position(i)[d] - a.position(i)[d], a.position(i)[d]));
+      }
+      CHECK(out.velocity(i) == b.velocity(i));
+    }
+    // Identity to a quarter turn about z: halfway is an eighth turn. The same rotation
+    // written as -q must not send the lerp through the long way round.
+    RigidBodySet<double> from, to, drawn;
+    const double s = std::sqrt(0.5);
+    from.add({.orientation = {1, 0, 0, 0}});
+    to.add({.position = {2, 0, 0}, .orientation = {-s, 0, 0, -s}});
+    interpolate(from, to, 0.5, drawn, isa);
+    const Quat<double> q = drawn.orientation(0);
+    const double c = std::cos(std::numbers::pi / 8), n = std::sin(std::numbers::pi / 8);
+    CHECK(q[0] == Approx(c));
+    CHECK(q[3] == Approx(n));
+    CHECK(drawn.centers().position(0)[0] == 1);
+  }
+  ParticleSet<float> one = test::cloud<float>(3), two = test::cloud<float>(4), out;
+  CHECK_THROWS_WITH(interpolate(one, two, 0.5f, out), "interpolate: the previous set has 3 bodies, the current one 4");
+}
+
+TEST_CASE("forces change between steps: the fused path stays, the bits match a new stepper",
+          "[embedding]") {
+  ParticleSet<float> a = test::cloud<float>(3000), b = a;
+  ForceModel<float> calm = test::all_local_terms<float>(), windy = calm;
+  windy.add(Gravity{{4, 0, 0}});
+  Stepper<float> one(calm, rk4, test::serial_options());
+  one.advance(a, 0.01f, 3);
+  one.set_forces(windy);
+  CHECK(one.fused());
+  one.advance(a, 0.01f, 3);
+  Stepper<float> first(calm, rk4, test::serial_options()), second(windy, rk4, test::serial_options());
+  first.advance(b, 0.01f, 3);
+  second.advance(b, 0.01f, 3);
+  CHECK(test::state_hash(a) == test::state_hash(b));
+  CHECK(one.time() == Approx(0.06));
+  // A bad model is refused and the stepper keeps the one it had.
+  ForceModel<float> too_strong;
+  too_strong.add(Spring{{0, 0, 0}, 1e39, 0});
+  CHECK_THROWS_WITH(one.set_forces(too_strong), Catch::Contains("overflow float"));
+  CHECK(one.forces().local_terms().size() == windy.local_terms().size());
 }

@@ -211,6 +211,9 @@ class RigidBodySet {
   // The centre-of-mass arrays, as a ParticleSet (px ... vz, inv_mass). Read-only: bodies
   // come through add(), which keeps the rotation arrays as long as these.
   const ParticleSet<T>& centers() const { return centers_; }
+  // The centre arrays for bulk writes (d = 0..2: x, y, z), as q() and l() are; unchecked.
+  T* position_data(int d) { return d == 0 ? centers_.px() : d == 1 ? centers_.py() : centers_.pz(); }
+  T* velocity_data(int d) { return d == 0 ? centers_.vx() : d == 1 ? centers_.vy() : centers_.vz(); }
   T* q(int k) { return q_[k].data(); }  // k = 0..3: w, x, y, z
   const T* q(int k) const { return q_[k].data(); }
   T* l(int d) { return l_[d].data(); }  // world angular momentum

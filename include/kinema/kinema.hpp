@@ -7,6 +7,7 @@
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
 #include "kinema/forces.hpp"
+#include "kinema/frame_loop.hpp"
 #include "kinema/isa.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"

@@ -79,6 +79,10 @@ class Stepper {
   void check_step_size(T h) const;
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);
+  // Replaces the force model between steps (new gravity, wind, anchors, torques): checked
+  // here, before anything changes (kinema::Error, the stepper as it was), with no new job
+  // system. A model of local terms keeps the fused path. The clock goes on.
+  void set_forces(ForceModel<T> forces);
 
   // Simulated time: origin + steps_since_origin * h. Changing h moves the origin.
   double time() const;

@@ -31,6 +31,7 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.add_forces = &add_forces<V>;
   t.nbody = &nbody<V>;
   t.springs = &springs<V>;
+  t.interpolate = &interpolate<V>;
   return t;
 }
 

@@ -237,6 +237,22 @@ struct SpringJob {
 template <class T>
 using SpringFn = void (*)(const SpringJob<T>& job, std::size_t begin, std::size_t end);
 
+// Drawing between two steps: out = previous + alpha (current - previous) for positions, and
+// for orientations (q arrays set) the normalized lerp toward current or -current, whichever
+// is nearer (the short arc).
+template <class T>
+struct InterpolateJob {
+  const T* previous[3];
+  const T* current[3];
+  T* out[3];
+  const T* previous_q[4];  // null for particles
+  const T* current_q[4];
+  T* out_q[4];
+  T alpha;
+};
+template <class T>
+using InterpolateFn = void (*)(const InterpolateJob<T>& job, std::size_t begin, std::size_t end);
+
 inline constexpr std::size_t kBuiltinCount = builtin_methods.size();
 
 template <class T>
@@ -251,6 +267,7 @@ struct KernelTable {
   AddForcesFn<T> add_forces;
   NBodyFn<T> nbody;
   SpringFn<T> springs;
+  InterpolateFn<T> interpolate;
 };
 
 // The table of an available instruction set (`isa` resolved, not automatic). `relaxed`

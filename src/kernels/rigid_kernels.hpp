@@ -221,4 +221,25 @@ constexpr RigidFn<value_t<V>> rigid_kernel() {
   }
 }
 
+template <class V>
+void interpolate(const InterpolateJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const V alpha(job.alpha);
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    const Vec<V> p = load3<V>(job.previous, i), c = load3<V>(job.current, i);
+    Vec<V> out;
+    for (int d = 0; d < 3; ++d) out.c[d] = mul_add(alpha, c.c[d] - p.c[d], p.c[d]);
+    store3(job.out, i, out);
+    if (job.out_q[0] == nullptr) continue;
+    const Quat4<V> a = load_n<4, V>(job.previous_q, i);
+    Quat4<V> b = load_n<4, V>(job.current_q, i);
+    const V dot = mul_add(a.c[0], b.c[0], mul_add(a.c[1], b.c[1], mul_add(a.c[2], b.c[2], a.c[3] * b.c[3])));
+    Quat4<V> q;
+    for (int k = 0; k < 4; ++k) {
+      b.c[k] = pick(dot < V(0), -b.c[k], b.c[k]);  // the short arc
+      q.c[k] = mul_add(alpha, b.c[k] - a.c[k], a.c[k]);
+    }
+    store_n<4, V>(job.out_q, i, normalized(q));
+  }
+}
+
 }  // namespace kinema::kernels::KINEMA_ISA_NS

@@ -25,6 +25,9 @@ KernelTable<T> make_table(Isa isa, std::size_t bytes) {
   for (auto& q : t.stage) for (auto& f : q) f = &no_kernel<StageJob<T>>;
   t.combine = &no_kernel<CombineJob<T>>;
   t.add_forces = &no_kernel<ForceJob<T>>;
+  t.nbody = &no_kernel<NBodyJob<T>>;
+  t.springs = &no_kernel<SpringJob<T>>;
+  t.interpolate = &no_kernel<InterpolateJob<T>>;
   return t;
 }
 

@@ -1,0 +1,81 @@
+#include "kinema/frame_loop.hpp"
+
+#include <cmath>
+#include <string>
+
+#include "kernels/kernels.hpp"
+#include "kinema/error.hpp"
+#include "step_context.hpp"
+
+namespace kinema {
+
+FixedTimestep::FixedTimestep(double h, unsigned max_steps_per_frame) : h_(h), cap_(max_steps_per_frame) {
+  if (!(std::isfinite(h) && h > 0)) throw Error("fixed timestep: h must be positive and finite");
+  if (max_steps_per_frame == 0) throw Error("fixed timestep: at least one step per frame");
+}
+
+unsigned FixedTimestep::steps_for(double frame_seconds) {
+  if (!(std::isfinite(frame_seconds) && frame_seconds >= 0)) {
+    throw Error("fixed timestep: a frame's time must be finite and >= 0");
+  }
+  accumulated_ += frame_seconds;
+  const double due = std::floor(accumulated_ / h_);
+  const unsigned steps = due >= double(cap_) ? cap_ : unsigned(due);
+  if (due > double(cap_)) {
+    dropped_ += std::uint64_t(due - double(cap_));
+    accumulated_ = std::fmod(accumulated_, h_);  // keep the fraction, drop whole steps
+  } else {
+    accumulated_ -= double(steps) * h_;
+  }
+  accumulated_ = std::min(std::max(accumulated_, 0.0), std::nextafter(h_, 0.0));
+  return steps;
+}
+
+namespace {
+
+template <class Set>
+void check_pair(const Set& previous, const Set& current) {
+  if (previous.size() != current.size()) {
+    throw Error("interpolate: the previous set has " + std::to_string(previous.size()) +
+                " bodies, the current one " + std::to_string(current.size()));
+  }
+}
+
+
+}  // namespace
+
+template <class T>
+void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current, T alpha,
+                 ParticleSet<T>& out, Isa isa) {
+  check_pair(previous, current);
+  out = current;
+  kernels::InterpolateJob<T> job{};
+  job.previous[0] = previous.px(), job.previous[1] = previous.py(), job.previous[2] = previous.pz();
+  job.current[0] = current.px(), job.current[1] = current.py(), job.current[2] = current.pz();
+  job.out[0] = out.px(), job.out[1] = out.py(), job.out[2] = out.pz();
+  job.alpha = alpha;
+  kernels::kernel_table<T>(isa).interpolate(job, 0, out.padded_size());
+}
+
+template <class T>
+void interpolate(const RigidBodySet<T>& previous, const RigidBodySet<T>& current, T alpha,
+                 RigidBodySet<T>& out, Isa isa) {
+  check_pair(previous, current);
+  out = current;
+  kernels::InterpolateJob<T> job{};
+  for (int d = 0; d < 3; ++d) job.out[d] = out.position_data(d);
+  const auto& p = previous.centers();
+  const auto& c = current.centers();
+  job.previous[0] = p.px(), job.previous[1] = p.py(), job.previous[2] = p.pz();
+  job.current[0] = c.px(), job.current[1] = c.py(), job.current[2] = c.pz();
+  job.alpha = alpha;
+  for (int k = 0; k < 4; ++k) job.previous_q[k] = previous.q(k), job.current_q[k] = current.q(k), job.out_q[k] = out.q(k);
+  kernels::kernel_table<T>(isa).interpolate(job, 0, out.padded_size());
+}
+
+template void interpolate(const ParticleSet<float>&, const ParticleSet<float>&, float, ParticleSet<float>&, Isa);
+template void interpolate(const ParticleSet<double>&, const ParticleSet<double>&, double, ParticleSet<double>&, Isa);
+template void interpolate(const RigidBodySet<float>&, const RigidBodySet<float>&, float, RigidBodySet<float>&, Isa);
+template void interpolate(const RigidBodySet<double>&, const RigidBodySet<double>&, double, RigidBodySet<double>&, Isa);
+
+}  // namespace kinema
