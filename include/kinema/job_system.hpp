@@ -1,11 +1,23 @@
 #pragma once
 // How blocks of work run: the host engine's job system plugs in here.
 //
-// The library asks for `item_count` items (blocks of bodies) to be processed by range
-// tasks, then waits. A host may split [0, item_count) into any ranges of at least
-// `min_range` items, run them on any workers (or inline, in `enqueue` or `wait`), in any
-// order: every block is computed the same way whoever runs it, so results do not depend
-// on the split or on the number of workers.
+// The contract, as kinema uses it:
+// - A job is `item_count` items; an item is one block of kBlockBodies bodies (the last one
+//   shorter), and `min_range` is 1. The host may split [0, item_count) into any ranges of at
+//   least `min_range` items, run them on any workers or inline (in `enqueue` or `wait`), in
+//   any order: every block is computed the same way whoever runs it, so results do not
+//   depend on the split or on the number of workers. kinema ignores the `worker` argument.
+// - `wait` returns once every range of that job has returned; then kinema reads the
+//   results. Tasks never throw into the host: what user code throws in a block is caught,
+//   later blocks of the job are skipped, and it is rethrown by `wait`'s caller.
+// - kinema may call `enqueue` and `wait` from several host threads at once (one job per
+//   stepper call), and from inside one of the host's own tasks (a step run as a task): a
+//   host whose `wait` helps run queued ranges, as oneTBB's and most engines' do, cannot
+//   deadlock there.
+// - Every job goes to the job system, whatever `worker_count()` says (a host may give kinema
+//   one dedicated physics thread); only sets below StepperOptions::inline_below, and sets of
+//   one block, run inline on the calling thread without a job.
+// - A JobSystem must outlive every stepper that uses it.
 
 #include <cstddef>
 #include <memory>

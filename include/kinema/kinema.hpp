@@ -12,3 +12,4 @@
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/stepper.hpp"
+#include "kinema/version.hpp"
