@@ -192,6 +192,21 @@ class Report {
                 value("cloth/float/" + isa_ + "/threads:2/512/real_time", "ns_per_spring", "%.3f").c_str());
   }
 
+  void frame_table() {
+    const auto copy_f = find(runs_, "frame/copy/float/100000/real_time", "ns_per_body_step");
+    if (!copy_f) return;
+    std::printf("\nA frame at N = 100000, 1 thread, %s (previous = current, one rk4 step, interpolate): "
+                "ns per body-frame (times a plain copy of the set)\n", isa_.c_str());
+    for (const std::string p : {"float", "double"}) {
+      const auto frame = find(runs_, "frame/" + p + "/" + isa_ + "/100000/real_time", "ns_per_body_step");
+      const auto copy = find(runs_, "frame/copy/" + p + "/100000/real_time", "ns_per_body_step");
+      if (!frame) continue;
+      cvs_.push_back(frame->cv);
+      std::printf("%-6s %.3f (%s; the copy alone %s)\n", p.c_str(), frame->median,
+                  cell(ratio(frame, copy), "%.1fx").c_str(), cell(median(copy), "%.3f").c_str());
+    }
+  }
+
   void paired_scaling() {
     bool header = false;
     for (const std::string p : {"float", "double"}) {
@@ -331,6 +346,7 @@ int main(int argc, char** argv) {
   report.rigid_table();
   report.paired_scaling();
   report.coupled_table();
+  report.frame_table();
   report.limits();
   report.noise();
   if (csv != nullptr) std::fclose(csv);
