@@ -142,17 +142,30 @@ class SliceSchedule {
   std::array<Slice, kMaxSlices> slice_;
 };
 
+// Host threads that may run jobs in the arena at once, each on a slot of its own: a host
+// thread that finds no free slot has its job handed to another thread, which costs a
+// hand-off (and, under TSan, looks like a race through uninstrumented libtbb). The arena
+// still has threads - 1 workers.
+constexpr int kHostSlots = 8;
+
 // Runs the slices of the calling worker. The copy TBB keeps in its task publishes the
 // caller's writes (the bodies, the schedule, the task itself) to the worker that runs it.
 class Helper {
  public:
   explicit Helper(SliceSchedule& schedule) : schedule_(&schedule) {}
   Helper(const Helper& other) : schedule_(other.schedule_) { tsan_release(this); }
+
+  // The arena's slots: host threads in [0, kHostSlots), its workers after them. Here: the
+  // calling thread 0, the workers 1 .. threads - 1, as the JobSystem contract says.
+  static unsigned worker_index() {
+    const int slot = std::max(0, tbb::this_task_arena::current_thread_index());
+    return slot < kHostSlots ? 0 : unsigned(slot - kHostSlots + 1);
+  }
   Helper& operator=(const Helper&) = delete;
 
   void operator()() const {
     tsan_acquire(this);
-    schedule_->run(unsigned(std::max(0, tbb::this_task_arena::current_thread_index())));
+    schedule_->run(worker_index());
     tsan_release(schedule_);
   }
 
@@ -163,7 +176,8 @@ class Helper {
 }  // namespace
 
 struct TbbJobSystem::Arena {
-  explicit Arena(unsigned threads) : arena(int(threads)), threads(threads) {}
+  explicit Arena(unsigned threads)
+      : arena(int(threads) - 1 + kHostSlots, kHostSlots), threads(threads) {}
   tbb::task_arena arena;
   unsigned threads;
 };
