@@ -131,7 +131,7 @@ void spring_kernel(benchmark::State& state, Isa isa) {
     benchmark::ClobberMemory();
   }
   double gathered = 0;
-  for (std::int32_t first : net.contiguous) gathered += first < 0;
+  for (std::int32_t code : net.contiguous) gathered += code == -1;
   const double entries = double(net.contiguous.size());
   const double bytes = double(c.bodies.size()) * 12 * sizeof(float) +
                        entries * double(kernels::kSpringSlice) * 3 * sizeof(float) +

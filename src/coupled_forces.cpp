@@ -74,29 +74,40 @@ void fill_slice(const Adjacency& adjacency, std::span<const SpringPair> pairs, s
     for (std::size_t lane = 0; lane < kSpringSlice; ++lane) {
       const std::size_t at = (first_entry + e) * kSpringSlice + lane;
       const std::int64_t slot = layout[e][lane];
-      // An empty slot: the body itself, all parameters zero, so no force.
+      // An empty slot: the body itself (no force), and a rest length of -1 that masks it
+      // where the entry loads consecutive bodies.
       net.neighbor[at] = std::int32_t(slot < 0 ? slice * kSpringSlice + lane : adjacency.other[slot]);
-      if (slot < 0) continue;
+      if (slot < 0) {
+        net.rest[at] = T(-1);
+        continue;
+      }
       const SpringPair& p = pairs[adjacency.pair[slot]];
       net.rest[at] = T(p.rest), net.k[at] = T(p.k), net.damping[at] = T(p.damping);
     }
   }
 }
 
-// An entry is contiguous when every lane holds a spring whose other end is first + lane.
-// (An empty lane is gathered from its own body: loading some unrelated body there would let
-// that body's non-finite state reach this one through zero parameters.)
+// An entry loads its other ends as one vector when every lane with a spring has first +
+// lane there, and the 16 bodies from `first` exist; its empty lanes (if any) are masked then,
+// so a body loaded for them cannot reach this one. Otherwise the entry is gathered.
 template <class T>
 void mark_contiguous(const std::vector<SliceLayout>& layouts, SpringNetwork<T>& net) {
   for (std::size_t slice = 0; slice < layouts.size(); ++slice) {
     for (std::size_t e = 0; e < layouts[slice].size(); ++e) {
       const std::size_t entry = net.slice_offset[slice] + e;
       const std::int32_t* lanes = net.neighbor.data() + entry * kSpringSlice;
-      bool run = true;
+      std::int64_t first = -1;
+      bool run = true, full = true;
       for (std::size_t l = 0; l < kSpringSlice; ++l) {
-        run = run && layouts[slice][e][l] >= 0 && lanes[l] == lanes[0] + std::int32_t(l);
+        if (layouts[slice][e][l] < 0) {
+          full = false;
+          continue;
+        }
+        if (first < 0) first = std::int64_t(lanes[l]) - std::int64_t(l);
+        run = run && std::int64_t(lanes[l]) - std::int64_t(l) == first;
       }
-      net.contiguous[entry] = run ? lanes[0] : -1;
+      run = run && first >= 0 && std::size_t(first) + kSpringSlice <= net.covered;
+      net.contiguous[entry] = !run ? -1 : full ? std::int32_t(first) : -std::int32_t(first) - 2;
     }
   }
 }

@@ -25,8 +25,8 @@ struct StepperOptions {
   // (0: all hardware threads), shared with every other stepper that is given none.
   JobSystem* jobs = nullptr;
   unsigned threads = 0;
-  // Scenes with fewer bodies than this run on the calling thread: below it, task
-  // overhead costs more than a second core gains.
+  // Sets with fewer (real) bodies than this run on the calling thread: below it, task
+  // overhead costs more than a second core gains. Every other job goes to the job system.
   std::size_t inline_below = 8192;
   // Take the staged path even where the fused one applies (cross-checks, benchmarks).
   bool force_staged = false;
@@ -66,7 +66,9 @@ class Stepper {
   void step(ParticleSet<T>& io_bodies, T h);
   // `steps` steps of size h; step k sees t = t_start + k h exactly (no running sum). On the
   // fused path each block of bodies takes all its steps while in cache (same bits as
-  // calling step() `steps` times, far less memory traffic).
+  // calling step() `steps` times, far less memory traffic), so nothing can look at the set
+  // between those steps: call step() for that. What user code throws leaves the set as
+  // before the step that threw; time() counts the steps completed.
   void advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps);
   // Rigid bodies: the same, with orientation and angular momentum. They take the fused
   // path only: a built-in method and local force terms (kinema::Error otherwise). Use one

@@ -92,7 +92,9 @@ void nbody(const NBodyJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
 }
 
 // One spring slot's force on the lanes' bodies: x, v theirs, xj, vj the other ends'.
-template <class V>
+// Masked: lanes whose rest length is negative hold no spring and keep f as it is, whatever
+// state the body loaded for them has.
+template <bool Masked, class V>
 KINEMA_INLINE void add_spring(const Vec<V>& x, const Vec<V>& v, const Vec<V>& xj, const Vec<V>& vj,
                               V rest, V k, V damping, Vec<V>& f) {
   Vec<V> d, dv;
@@ -104,19 +106,34 @@ KINEMA_INLINE void add_spring(const Vec<V>& x, const Vec<V>& v, const Vec<V>& xj
   const V along = mul_add(dv.c[0], u.c[0], mul_add(dv.c[1], u.c[1], dv.c[2] * u.c[2]));
   // Both ends compute the same coefficient and opposite unit vectors: F_j = -F_i exactly.
   const V coefficient = mul_add(k, length - rest, damping * along);
-  for (int c = 0; c < 3; ++c) f.c[c] = mul_add(coefficient, u.c[c], f.c[c]);
+  for (int c = 0; c < 3; ++c) {
+    if constexpr (Masked) {
+      f.c[c] = pick(rest >= V(0), mul_add(coefficient, u.c[c], f.c[c]), f.c[c]);
+    } else {
+      f.c[c] = mul_add(coefficient, u.c[c], f.c[c]);
+    }
+  }
 }
 
+// The other ends of an entry's springs: consecutive bodies from `first` (first >= 0), or
+// gathered through the entry's neighbour indices.
 template <class V>
 KINEMA_INLINE Vec<V> other_ends(const value_t<V>* const p[3], const SpringJob<value_t<V>>& job,
-                                std::size_t entry, std::size_t lane) {
+                                std::size_t entry, std::size_t lane, std::int32_t first) {
   Vec<V> out;
-  const std::int32_t first = job.contiguous[entry];
   for (int c = 0; c < 3; ++c) {
     out.c[c] = first >= 0 ? load_unaligned<V>(p[c] + first + lane)
                           : gather<V>(p[c], job.neighbor + entry * kSpringSlice + lane);
   }
   return out;
+}
+
+template <bool Masked, class V>
+KINEMA_INLINE void add_entry(const SpringJob<value_t<V>>& job, std::size_t e, std::size_t lane,
+                             std::int32_t first, const Vec<V>& x, const Vec<V>& v, Vec<V>& f) {
+  const std::size_t at = e * kSpringSlice + lane;
+  add_spring<Masked>(x, v, other_ends<V>(job.x, job, e, lane, first), other_ends<V>(job.v, job, e, lane, first),
+                     load<V>(job.rest + at), load<V>(job.k + at), load<V>(job.damping + at), f);
 }
 
 inline constexpr std::size_t kPrefetchSlots = 32 * kSpringSlice;
@@ -138,8 +155,12 @@ void springs(const SpringJob<value_t<V>>& job, std::size_t begin, std::size_t en
         // Nine streams at once (state, parameters, forces) outrun the hardware prefetcher:
         // fetch the parameters kPrefetchSlots ahead.
         for (const value_t<V>* p : {job.rest, job.k, job.damping}) __builtin_prefetch(p + at + kPrefetchSlots);
-        add_spring(x, v, other_ends<V>(job.x, job, e, lane), other_ends<V>(job.v, job, e, lane),
-                   load<V>(job.rest + at), load<V>(job.k + at), load<V>(job.damping + at), f);
+        const std::int32_t code = job.contiguous[e];
+        if (code >= -1) {
+          add_entry<false>(job, e, lane, code, x, v, f);
+        } else {
+          add_entry<true>(job, e, lane, -code - 2, x, v, f);
+        }
       }
       for (int c = 0; c < 3; ++c) store(job.force[c] + i, load<V>(job.force[c] + i) + f.c[c]);
     }

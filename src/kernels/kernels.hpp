@@ -217,9 +217,8 @@ inline constexpr std::size_t kMaxNBodyTargets = 1024;
 
 // A spring network in sliced ELLPACK form: bodies in slices of kSpringSlice, each slice a
 // run of entries, one per spring slot, kSpringSlice lanes each (lane l for body slice *
-// kSpringSlice + l). A body's slots hold its springs in model order; empty slots point
-// at the body itself with zero parameters (coincident ends: no force). Calls start on a
-// slice boundary.
+// kSpringSlice + l). Empty slots point at the body itself, with zero parameters and a
+// rest length of -1. Calls start on a slice boundary.
 inline constexpr std::size_t kSpringSlice = 16;
 template <class T>
 struct SpringJob {
@@ -228,7 +227,10 @@ struct SpringJob {
   std::size_t covered;                 // bodies the network reaches (max index + 1)
   const std::uint32_t* slice_offset;   // slices + 1: the first entry of each slice
   const std::int32_t* neighbor;        // [entry][lane]
-  const std::int32_t* contiguous;      // per entry: lane 0's neighbor when lane l's is it + l, else -1
+  // Per entry: first >= 0 when lane l's other end is first + l for every lane; -1 when
+  // gathered; -(first + 2) when that holds for the lanes that have a spring and the others
+  // (rest < 0) must be masked.
+  const std::int32_t* contiguous;
   const T* rest;                       // [entry][lane], likewise k and damping
   const T* k;
   const T* damping;
