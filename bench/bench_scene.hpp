@@ -66,6 +66,15 @@ void restore(ParticleSet<T>& bodies, const ParticleSet<T>& initial) {
 
 inline constexpr std::int64_t kRestoreEvery = 4096;
 
+// The job system a case runs on: the calling thread alone for one thread, else oneTBB.
+struct CaseJobs {
+  explicit CaseJobs(unsigned threads) : tbb(threads), threads(threads) {}
+  JobSystem* get() { return threads == 1 ? static_cast<JobSystem*>(&serial) : &tbb; }
+  TbbJobSystem tbb;
+  SerialJobSystem serial;
+  unsigned threads;
+};
+
 // Fails the run (visible in the output) when a benchmark left a non-finite state behind.
 template <class T>
 void require_finite(benchmark::State& state, const ParticleSet<T>& bodies) {

@@ -42,11 +42,10 @@ void nbody_step(benchmark::State& state, Isa isa, unsigned threads) {
   const auto n = std::size_t(state.range(0));
   const Scene scene = cluster_scene(n);
   ParticleSet<T> bodies = make_particles<T>(scene);
-  TbbJobSystem tbb(threads);
-  SerialJobSystem serial;
+  CaseJobs jobs(threads);
   StepperOptions o;
   o.isa = isa;
-  o.jobs = threads == 1 ? static_cast<JobSystem*>(&serial) : &tbb;
+  o.jobs = jobs.get();
   Stepper<T> stepper(make_forces<T>(scene), euler, o);
   stepper.step(bodies, T(1e-6));
   for (auto _ : state) {
@@ -149,11 +148,10 @@ void spring_kernel(benchmark::State& state, Isa isa) {
 void cloth_step(benchmark::State& state, Isa isa, unsigned threads) {
   const Cloth& c = cloth(std::uint32_t(state.range(0)));
   ParticleSet<float> bodies = c.bodies;
-  TbbJobSystem tbb(threads);
-  SerialJobSystem serial;
+  CaseJobs jobs(threads);
   StepperOptions o;
   o.isa = isa;
-  o.jobs = threads == 1 ? static_cast<JobSystem*>(&serial) : &tbb;
+  o.jobs = jobs.get();
   Stepper<float> stepper(c.forces, euler, o);
   stepper.step(bodies, 1e-5f);
   for (auto _ : state) {

@@ -35,10 +35,9 @@ void rigid_steps(benchmark::State& state, unsigned threads, bool blocked) {
   const auto n = std::size_t(state.range(0));
   const Scene scene = rigid_scene(n);
   RigidBodySet<T> bodies = cached_rigid<T>(n);
-  TbbJobSystem jobs(threads);
-  SerialJobSystem serial;
+  CaseJobs jobs(threads);
   StepperOptions o;
-  o.jobs = threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
+  o.jobs = jobs.get();
   Stepper<T> stepper(make_forces<T>(scene), rk4, o);
   const std::uint64_t steps = blocked ? 64 : 1;
   stepper.advance(bodies, T(kDt), 1);

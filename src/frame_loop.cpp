@@ -41,6 +41,16 @@ void check_pair(const Set& previous, const Set& current) {
   }
 }
 
+template <class T>
+kernels::InterpolateJob<T> position_job(const ParticleSet<T>& previous, const ParticleSet<T>& current,
+                                        T* const out[3], T alpha) {
+  kernels::InterpolateJob<T> job{};
+  job.previous[0] = previous.px(), job.previous[1] = previous.py(), job.previous[2] = previous.pz();
+  job.current[0] = current.px(), job.current[1] = current.py(), job.current[2] = current.pz();
+  for (int d = 0; d < 3; ++d) job.out[d] = out[d];
+  job.alpha = alpha;
+  return job;
+}
 
 }  // namespace
 
@@ -49,12 +59,9 @@ void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current, 
                  ParticleSet<T>& out, Isa isa) {
   check_pair(previous, current);
   out = current;
-  kernels::InterpolateJob<T> job{};
-  job.previous[0] = previous.px(), job.previous[1] = previous.py(), job.previous[2] = previous.pz();
-  job.current[0] = current.px(), job.current[1] = current.py(), job.current[2] = current.pz();
-  job.out[0] = out.px(), job.out[1] = out.py(), job.out[2] = out.pz();
-  job.alpha = alpha;
-  kernels::kernel_table<T>(isa).interpolate(job, 0, out.padded_size());
+  T* const positions[3] = {out.px(), out.py(), out.pz()};
+  kernels::kernel_table<T>(isa).interpolate(position_job(previous, current, positions, alpha), 0,
+                                            out.padded_size());
 }
 
 template <class T>
@@ -62,13 +69,8 @@ void interpolate(const RigidBodySet<T>& previous, const RigidBodySet<T>& current
                  RigidBodySet<T>& out, Isa isa) {
   check_pair(previous, current);
   out = current;
-  kernels::InterpolateJob<T> job{};
-  for (int d = 0; d < 3; ++d) job.out[d] = out.position_data(d);
-  const auto& p = previous.centers();
-  const auto& c = current.centers();
-  job.previous[0] = p.px(), job.previous[1] = p.py(), job.previous[2] = p.pz();
-  job.current[0] = c.px(), job.current[1] = c.py(), job.current[2] = c.pz();
-  job.alpha = alpha;
+  T* const positions[3] = {out.position_data(0), out.position_data(1), out.position_data(2)};
+  kernels::InterpolateJob<T> job = position_job(previous.centers(), current.centers(), positions, alpha);
   for (int k = 0; k < 4; ++k) job.previous_q[k] = previous.q(k), job.current_q[k] = current.q(k), job.out_q[k] = out.q(k);
   kernels::kernel_table<T>(isa).interpolate(job, 0, out.padded_size());
 }

@@ -225,27 +225,14 @@ std::uint64_t cluster_hash(const Method& method, StepperOptions o, std::size_t b
   return test::state_hash(b);
 }
 
-// Instruction sets on two blocks (the scalar path is slow; the kernel's bits on every set
-// are checked above), thread counts and job systems on three, the last one short.
+// Instruction sets on two blocks (the kernel's bits on every set are checked above), thread
+// counts and job systems on three, the last one short.
 template <class T>
 void check_nbody_determinism() {
   for (const Method* m : {&rk4, &velocity_verlet}) {
     INFO(m->name);
-    const std::uint64_t small = cluster_hash<T>(*m, test::serial_options(Isa::scalar), 1100);
-    for (Isa isa : {Isa::sse2, Isa::avx2, Isa::avx512}) {
-      if (isa_available(isa)) CHECK(cluster_hash<T>(*m, test::serial_options(isa), 1100) == small);
-    }
-    const std::uint64_t serial = cluster_hash<T>(*m, test::serial_options(best_isa()), 2100);
-    for (unsigned threads : {2u, 3u}) {
-      TbbJobSystem tbb(threads);
-      test::ThreadPool pool(threads);
-      StepperOptions o;
-      o.inline_below = 0;
-      o.jobs = &tbb;
-      CHECK(cluster_hash<T>(*m, o, 2100) == serial);
-      o.jobs = &pool;
-      CHECK(cluster_hash<T>(*m, o, 2100) == serial);
-    }
+    test::check_same_bits_everywhere(
+        [&](StepperOptions o, std::size_t bodies) { return cluster_hash<T>(*m, o, bodies); }, 1100, 2100);
   }
 }
 

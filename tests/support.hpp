@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "kinema/scenes.hpp"
+#include "thread_pool.hpp"
 
 namespace kinema::test {
 
@@ -101,6 +102,30 @@ ForceModel<T> all_local_terms(bool quadratic = true, bool central = true) {
   if (quadratic) f.add(QuadraticDrag{0.05});
   if (central) f.add(Central{{7, 3, -5}, 4});
   return f;
+}
+
+// hash(options, bodies) of one run is the same on every instruction set (serially, on
+// `isa_bodies` bodies: the scalar path is slow) and on 2 and 3 threads of the TBB job system
+// and of a host's pool (on `thread_bodies`: several blocks) as serially on the best one.
+template <class Hash>
+void check_same_bits_everywhere(Hash&& hash, std::size_t isa_bodies, std::size_t thread_bodies) {
+  const std::uint64_t scalar = hash(serial_options(Isa::scalar), isa_bodies);
+  for (Isa isa : {Isa::sse2, Isa::avx2, Isa::avx512}) {
+    INFO("isa " << isa_name(isa));
+    if (isa_available(isa)) CHECK(hash(serial_options(isa), isa_bodies) == scalar);
+  }
+  const std::uint64_t serial = hash(serial_options(best_isa()), thread_bodies);
+  for (unsigned threads : {2u, 3u}) {
+    INFO(threads << " threads");
+    TbbJobSystem tbb(threads);
+    ThreadPool pool(threads);
+    StepperOptions o;
+    o.inline_below = 0;
+    o.jobs = &tbb;
+    CHECK(hash(o, thread_bodies) == serial);
+    o.jobs = &pool;
+    CHECK(hash(o, thread_bodies) == serial);
+  }
 }
 
 }  // namespace kinema::test
