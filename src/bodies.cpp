@@ -29,9 +29,8 @@ template <class T>
 AlignedArray<T>& AlignedArray<T>::operator=(const AlignedArray& other) {
   if (this == &other) return *this;
   if (size_ < other.size_) {
-    data_.reset();
-    size_ = 0;
-    resize(other.size_);
+    AlignedArray grown(other.size_);  // if this throws, *this is as it was
+    *this = std::move(grown);
   }
   if (other.size_ > 0) std::memcpy(data_.get(), other.data_.get(), other.size_ * sizeof(T));
   std::fill(data_.get() + other.size_, data_.get() + size_, T(0));
@@ -160,6 +159,18 @@ template <class T>
 void ParticleSet<T>::add(std::span<const ParticleDesc<T>> bodies) {
   reserve(size_ + bodies.size());
   for (const auto& b : bodies) add(b);
+}
+
+template <class T>
+ParticleSet<T>& ParticleSet<T>::operator=(const ParticleSet& other) {
+  if (this == &other) return *this;
+  if (capacity() < other.capacity()) return *this = ParticleSet(other);  // all or nothing
+  for (auto [to, from] : {std::pair{&px_, &other.px_}, {&py_, &other.py_}, {&pz_, &other.pz_}, {&vx_, &other.vx_},
+                          {&vy_, &other.vy_}, {&vz_, &other.vz_}, {&inv_mass_, &other.inv_mass_}}) {
+    *to = *from;  // fits: no allocation, no throw
+  }
+  size_ = other.size_;
+  return *this;
 }
 
 template <class T>

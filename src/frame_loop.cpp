@@ -10,7 +10,9 @@
 namespace kinema {
 
 FixedTimestep::FixedTimestep(double h, unsigned max_steps_per_frame) : h_(h), cap_(max_steps_per_frame) {
-  if (!(std::isfinite(h) && h > 0)) throw Error("fixed timestep: h must be positive and finite");
+  if (!(std::isfinite(h) && h > 0 && std::isfinite(1 / h))) {
+    throw Error("fixed timestep: h must be positive and finite, and so must 1 / h");
+  }
   if (max_steps_per_frame == 0) throw Error("fixed timestep: at least one step per frame");
 }
 
@@ -22,8 +24,9 @@ unsigned FixedTimestep::steps_for(double frame_seconds) {
   const double due = std::floor(accumulated_ / h_);
   const unsigned steps = due >= double(cap_) ? cap_ : unsigned(due);
   if (due > double(cap_)) {
-    dropped_ += std::uint64_t(due - double(cap_));
-    accumulated_ = std::fmod(accumulated_, h_);  // keep the fraction, drop whole steps
+    const double dropped = due - double(cap_);  // saturated: 2^64 steps is forever anyway
+    dropped_ += dropped < 0x1p63 ? std::uint64_t(dropped) : std::uint64_t(1) << 63;
+    accumulated_ = std::isfinite(accumulated_) ? std::fmod(accumulated_, h_) : 0.0;  // keep the fraction
   } else {
     accumulated_ -= double(steps) * h_;
   }
@@ -34,7 +37,8 @@ unsigned FixedTimestep::steps_for(double frame_seconds) {
 namespace {
 
 template <class Set>
-void check_pair(const Set& previous, const Set& current) {
+void check_pair(const Set& previous, const Set& current, const Set& out) {
+  if (&out == &previous || &out == &current) throw Error("interpolate: out must be a set of its own");
   if (previous.size() != current.size()) {
     throw Error("interpolate: the previous set has " + std::to_string(previous.size()) +
                 " bodies, the current one " + std::to_string(current.size()));
@@ -55,29 +59,30 @@ kernels::InterpolateJob<T> position_job(const ParticleSet<T>& previous, const Pa
 }  // namespace
 
 template <class T>
-void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current, T alpha,
-                 ParticleSet<T>& out, Isa isa) {
-  check_pair(previous, current);
+void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current,
+                 std::type_identity_t<T> alpha, ParticleSet<T>& out, Isa isa) {
+  check_pair(previous, current, out);
+  const auto& table = kernels::kernel_table<T>(isa);  // may throw: before out changes
   out = current;
   T* const positions[3] = {out.px(), out.py(), out.pz()};
-  kernels::kernel_table<T>(isa).interpolate(position_job(previous, current, positions, alpha), 0,
-                                            out.padded_size());
+  table.interpolate(position_job(previous, current, positions, alpha), 0, out.padded_size());
 }
 
 template <class T>
-void interpolate(const RigidBodySet<T>& previous, const RigidBodySet<T>& current, T alpha,
-                 RigidBodySet<T>& out, Isa isa) {
-  check_pair(previous, current);
+void interpolate(const RigidBodySet<T>& previous, const RigidBodySet<T>& current,
+                 std::type_identity_t<T> alpha, RigidBodySet<T>& out, Isa isa) {
+  check_pair(previous, current, out);
+  const auto& table = kernels::kernel_table<T>(isa);
   out = current;
   T* const positions[3] = {out.position_data(0), out.position_data(1), out.position_data(2)};
   kernels::InterpolateJob<T> job = position_job(previous.centers(), current.centers(), positions, alpha);
   for (int k = 0; k < 4; ++k) job.previous_q[k] = previous.q(k), job.current_q[k] = current.q(k), job.out_q[k] = out.q(k);
-  kernels::kernel_table<T>(isa).interpolate(job, 0, out.padded_size());
+  table.interpolate(job, 0, out.padded_size());
 }
 
-template void interpolate(const ParticleSet<float>&, const ParticleSet<float>&, float, ParticleSet<float>&, Isa);
-template void interpolate(const ParticleSet<double>&, const ParticleSet<double>&, double, ParticleSet<double>&, Isa);
-template void interpolate(const RigidBodySet<float>&, const RigidBodySet<float>&, float, RigidBodySet<float>&, Isa);
-template void interpolate(const RigidBodySet<double>&, const RigidBodySet<double>&, double, RigidBodySet<double>&, Isa);
+template void interpolate<float>(const ParticleSet<float>&, const ParticleSet<float>&, float, ParticleSet<float>&, Isa);
+template void interpolate<double>(const ParticleSet<double>&, const ParticleSet<double>&, double, ParticleSet<double>&, Isa);
+template void interpolate<float>(const RigidBodySet<float>&, const RigidBodySet<float>&, float, RigidBodySet<float>&, Isa);
+template void interpolate<double>(const RigidBodySet<double>&, const RigidBodySet<double>&, double, RigidBodySet<double>&, Isa);
 
 }  // namespace kinema

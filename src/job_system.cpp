@@ -9,6 +9,7 @@
 #include <memory>
 #include <mutex>
 
+#include <tbb/info.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
 
@@ -40,8 +41,10 @@ void tsan_release(const void*) {}
 
 }  // namespace
 
+// The process's, not the current arena's: called from inside one of kinema's arenas (a
+// callback making a stepper), the arena's concurrency counts its host slots.
 unsigned hardware_threads() {
-  return std::max(1, tbb::this_task_arena::max_concurrency());
+  return unsigned(std::max(1, tbb::info::default_concurrency()));
 }
 
 JobSystem& default_job_system(unsigned threads) {

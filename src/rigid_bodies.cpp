@@ -204,6 +204,9 @@ void RigidBodySet<T>::pad_rotation_arrays(std::size_t from) {
 template <class T>
 RigidBodySet<T>& RigidBodySet<T>::operator=(const RigidBodySet& other) {
   if (this == &other) return *this;
+  if (centers_.capacity() < other.centers_.capacity() || q_[0].size() < other.q_[0].size()) {
+    return *this = RigidBodySet(other);  // all or nothing
+  }
   centers_ = other.centers_;
   q_ = other.q_, l_ = other.l_, inv_inertia_ = other.inv_inertia_;
   pad_rotation_arrays(other.q_[0].size());  // past the copied arrays: inert padding

@@ -44,7 +44,7 @@ struct Stepper<T>::Impl {
   StepperOptions options;
   JobSystem* jobs = nullptr;
   const kernels::KernelTable<T>* table = nullptr;
-  LoweredForces<T> lowered;
+  std::unique_ptr<LoweredForces<T>> lowered;  // a fixed address: the staged path keeps references
   kernels::FusedFn<T> fused_fn = nullptr;
   kernels::RigidFn<T> rigid_fn = nullptr;
   std::unique_ptr<StagedPath<T>> staged;  // when the fused path does not apply
@@ -58,30 +58,38 @@ struct Stepper<T>::Impl {
     use(std::move(f));
   }
 
-  // Lowers `f` first: a model that throws leaves everything as it was.
+  // The kernels a model takes: its fused kernels, or a staged path built on `l`.
+  struct Paths {
+    kernels::FusedFn<T> fused = nullptr;
+    kernels::RigidFn<T> rigid = nullptr;
+    std::unique_ptr<StagedPath<T>> staged;
+  };
+
+  // Builds everything the model needs first (lowering, kernels, scratch as large as the last):
+  // whatever throws, bad parameters or no memory, leaves the stepper as it was.
   void use(std::shared_ptr<const ForceModel<T>> f) {
     if (!f) throw Error("stepper: null force model");
-    LoweredForces<T> fresh = lower_forces<T>(f->local_terms());
-    fresh.coupled = lower_coupled<T>(*f);
-    const std::size_t scratch = staged ? staged->capacity() : 0;
+    auto fresh = std::make_unique<LoweredForces<T>>(lower_forces<T>(f->local_terms()));
+    fresh->coupled = lower_coupled<T>(*f);
+    Paths paths = pick_kernels(*f, *fresh);
+    if (paths.staged) paths.staged->reserve(staged ? staged->capacity() : 0);
     forces = std::move(f);
     lowered = std::move(fresh);
-    fused_fn = nullptr, rigid_fn = nullptr;
-    staged.reset();
-    pick_kernels();
-    if (staged) staged->reserve(scratch);  // the next step allocates no more than the last
+    fused_fn = paths.fused, rigid_fn = paths.rigid;
+    staged = std::move(paths.staged);
   }
 
-  void pick_kernels() {
-    const int quad = lowered.particle.has_quadratic(), central = lowered.particle.has_central();
+  Paths pick_kernels(const ForceModel<T>& f, const LoweredForces<T>& l) const {
+    Paths paths;
+    const int quad = l.particle.has_quadratic(), central = l.particle.has_central();
     const int builtin = builtin_index(method);
-    if (builtin >= 0 && forces->fusable()) rigid_fn = table->rigid[builtin][quad][central];
-    if (builtin >= 0 && forces->fusable() && !options.force_staged) {
-      fused_fn = table->fused[builtin][quad][central];
+    if (builtin >= 0 && f.fusable()) paths.rigid = table->rigid[builtin][quad][central];
+    if (builtin >= 0 && f.fusable() && !options.force_staged) {
+      paths.fused = table->fused[builtin][quad][central];
     } else {
-      staged = std::make_unique<StagedPath<T>>(*forces, method, *table, lowered.particle,
-                                               lowered.coupled);
+      paths.staged = std::make_unique<StagedPath<T>>(f, method, *table, l.particle, l.coupled);
     }
+    return paths;
   }
 
   // What the stage accelerations are multiplied by: sigma h for Runge-Kutta methods (see
@@ -99,7 +107,7 @@ struct Stepper<T>::Impl {
                   shortest_text(step_size));
     }
     check_scaled_forces(forces, accel_scale(step_size), step_size);
-    const auto& nbody = lowered.coupled.nbody;
+    const auto& nbody = lowered->coupled.nbody;
     if (nbody && !std::isfinite(accel_scale(step_size) * T(nbody->G))) {
       throw Error("step size h = " + shortest_text(step_size) + " times nbody.G overflows " +
                   type_name<T>() + "; take a smaller step");
@@ -108,7 +116,7 @@ struct Stepper<T>::Impl {
 
   // Springs must not reach past the set.
   void check_reach(const ParticleSet<T>& b) const {
-    const std::size_t covered = lowered.coupled.springs.covered;
+    const std::size_t covered = lowered->coupled.springs.covered;
     if (covered > b.size()) {
       throw Error("springs: a pair joins body " + std::to_string(covered - 1) + ", but the set has " +
                   std::to_string(b.size()) + " bodies");
@@ -132,11 +140,11 @@ struct Stepper<T>::Impl {
       throw Error("rigid bodies need a built-in method and local force terms only (no "
                   "callbacks, no coupled terms)");
     }
-    const StepContext<T> c = start(b.centers_, step_size, lowered.rigid);
+    const StepContext<T> c = start(b.centers_, step_size, lowered->rigid);
     const kernels::RigidJob<T> job{arrays(b.centers_), {b.q(0), b.q(1), b.q(2), b.q(3)},
                                    {b.l(0), b.l(1), b.l(2)},
                                    {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
-                                   lowered.rigid, lowered.rotation, c.h,
+                                   lowered->rigid, lowered->rotation, c.h,
                                    options.renormalize_quaternions};
     for_each_block(b.centers_, [&](Block block) {
       for (std::uint64_t k = 0; k < steps; ++k) rigid_fn(job, block.begin, block.end);
@@ -146,11 +154,11 @@ struct Stepper<T>::Impl {
 
   void advance(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
     check_reach(b);
-    StepContext<T> c = start(b, step_size, lowered.particle);
+    StepContext<T> c = start(b, step_size, lowered->particle);
     if (fused_fn == nullptr) return advance_staged(c, steps);
     // Local, time-independent forces: each block can take all its steps while it sits in
     // cache. Every body sees the same operations as step by step, so the bits agree.
-    const kernels::FusedJob<T> job{arrays(b), lowered.particle, c.h};
+    const kernels::FusedJob<T> job{arrays(b), lowered->particle, c.h};
     for_each_block(b, [&](Block block) {
       for (std::uint64_t k = 0; k < steps; ++k) fused_fn(job, block.begin, block.end);
     });
@@ -205,8 +213,8 @@ void Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps) {
 
 template <class T>
 void Stepper<T>::check_step_size(T h) const {
-  impl_->check_step_size(h, impl_->lowered.particle);
-  impl_->check_step_size(h, impl_->lowered.rigid);
+  impl_->check_step_size(h, impl_->lowered->particle);
+  impl_->check_step_size(h, impl_->lowered->rigid);
 }
 
 template <class T>

@@ -3,6 +3,7 @@
 // thread), and inline_below counting real bodies.
 #include <catch2/catch.hpp>
 
+#include <atomic>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -39,7 +40,32 @@ void check_throw_leaves_state(const Method& method, StepperOptions o) {
   // The stepper stays usable: a step at another time goes through.
   s.set_time(5);
   s.step(b, h);
-  CHECK(test::state_hash(b) != before);
+  CHECK(s.time() == 5 + h);
+  CHECK(all_finite(b));
+}
+
+// A coupled term (every phase a job of its own) that throws in its second call.
+class ThrowingTerm final : public CoupledTerm<double> {
+ public:
+  void accumulate(const ParticleState<double>&, const ParticleBlock<double>& b) const override {
+    if (b.begin == 1024 && ++calls_ > 1) throw std::runtime_error("coupled term failed");
+  }
+  double potential_energy(const ParticleState<double>&) const override { return 0; }
+
+ private:
+  mutable std::atomic<int> calls_{0};
+};
+
+void check_coupled_throw(const Method& method, StepperOptions o) {
+  ParticleSet<double> b = test::cloud<double>(3000);
+  ForceModel<double> f = test::all_local_terms<double>();
+  f.add(NBody{1e-3, 0.1});
+  f.add(std::make_shared<ThrowingTerm>());
+  Stepper<double> s(f, method, o);
+  const std::uint64_t before = test::state_hash(b);
+  CHECK_THROWS_WITH(s.step(b, 0.01), "coupled term failed");
+  CHECK(test::state_hash(b) == before);
+  CHECK(s.time() == 0);
 }
 
 }  // namespace
@@ -51,11 +77,13 @@ TEST_CASE("a callback that throws leaves the set as before the step, on any job 
   for (const Method* m : {&rk4, &velocity_verlet}) {
     INFO(m->name);
     check_throw_leaves_state(*m, test::serial_options());
+    check_coupled_throw(*m, test::serial_options());
     for (JobSystem* jobs : {static_cast<JobSystem*>(&tbb), static_cast<JobSystem*>(&pool)}) {
       StepperOptions o;
       o.jobs = jobs;
       o.inline_below = 0;
       check_throw_leaves_state(*m, o);
+      check_coupled_throw(*m, o);
     }
   }
 }
@@ -239,6 +267,17 @@ TEST_CASE("rigid bodies: setters for every field, kinematic bodies, removal, sna
   const double* memory = snapshot.q(0);
   snapshot = set;
   CHECK(snapshot.q(0) == memory);
+  // Into a larger set: its arrays are kept, and everything past the copy is inert padding.
+  RigidBodySet<double> large = boxes(200);
+  large = set;
+  REQUIRE(large.size() == set.size());
+  for (std::size_t i = large.size(); i < 208; ++i) {
+    CHECK(large.q(0)[i] == 1);
+    CHECK(large.q(3)[i] == 0);
+    CHECK(large.l(1)[i] == 0);
+    CHECK(large.inv_inertia(2)[i] == 0);
+    CHECK(large.centers().inv_mass()[i] == 0);
+  }
   ForceModel<double> f;
   f.add(Gravity{}).add(Torque{{0, 0.5, 0}}).add(AngularDrag{0.1});
   Stepper<double>(f, rk4, test::serial_options()).advance(set, 0.01, 10);
@@ -269,6 +308,11 @@ TEST_CASE("a fixed timestep runs whole steps, caps a slow frame, and leaves the 
   CHECK(clock.alpha() == Approx(0.32).margin(1e-6));
   CHECK_THROWS_WITH(clock.steps_for(-1), "fixed timestep: a frame's time must be finite and >= 0");
   CHECK_THROWS_AS(FixedTimestep(0), Error);
+  CHECK_THROWS_AS(FixedTimestep(1e-320), Error);  // 1 / h is not finite
+  // An absurd frame: the cap, a saturated count, and a fraction still in [0, 1).
+  CHECK(clock.steps_for(1e300) == 4);
+  CHECK(clock.alpha() >= 0);
+  CHECK(clock.alpha() < 1);
   // Over many frames of uneven length the steps add up to the time given, less what was
   // dropped, to within the fraction.
   FixedTimestep steady(1.0 / 60);
@@ -313,6 +357,12 @@ TEST_CASE("interpolate: positions by lerp, orientations by the short-arc normali
   }
   ParticleSet<float> one = test::cloud<float>(3), two = test::cloud<float>(4), out;
   CHECK_THROWS_WITH(interpolate(one, two, 0.5f, out), "interpolate: the previous set has 3 bodies, the current one 4");
+  CHECK_THROWS_WITH(interpolate(one, one, 0.5f, one), "interpolate: out must be a set of its own");
+  // A frame clock's alpha (a double) goes straight in for float sets.
+  FixedTimestep clock(0.01);
+  clock.steps_for(0.005);
+  interpolate(one, one, clock.alpha(), out);
+  CHECK(out.position(2) == one.position(2));
 }
 
 TEST_CASE("forces change between steps: the fused path stays, the bits match a new stepper",

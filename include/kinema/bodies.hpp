@@ -83,7 +83,9 @@ class ParticleSet {
  public:
   ParticleSet() = default;
   ParticleSet(const ParticleSet&) = default;
-  ParticleSet& operator=(const ParticleSet&) = default;
+  // Reuses this set's arrays when they are large enough (no allocation); else copies into new
+  // ones first, so a failed allocation leaves this set as it was.
+  ParticleSet& operator=(const ParticleSet& other);
   // A moved-from set is empty and usable.
   ParticleSet(ParticleSet&& other) noexcept { *this = std::move(other); }
   ParticleSet& operator=(ParticleSet&& other) noexcept;
@@ -135,7 +137,9 @@ class ParticleSet {
   static constexpr std::size_t kNoBody = std::size_t(-1);
   std::size_t remove(std::size_t i);
   // Removes every listed body (distinct indices, any order), each by swap with the last,
-  // from the highest index down; moved(from, to) is told of every body that changed index.
+  // from the highest index down; moved(from, to) is told of each move in the order they
+  // happen, with indices as they are at that moment (a body may move twice: follow the
+  // reports in order, as a handle table does).
   template <class Moved>
   void remove(std::span<const std::size_t> indices, Moved&& moved);
 
@@ -184,7 +188,8 @@ class RigidBodySet {
   void reserve(std::size_t count);
   RigidBodySet() = default;
   RigidBodySet(const RigidBodySet&) = default;
-  // Reuses this set's memory when it is large enough: no allocation for a snapshot.
+  // Reuses this set's memory when it is large enough: no allocation for a snapshot; else
+  // copies into new arrays first (a failed allocation leaves this set as it was).
   RigidBodySet& operator=(const RigidBodySet& other);
   RigidBodySet(RigidBodySet&&) noexcept = default;
   RigidBodySet& operator=(RigidBodySet&&) noexcept = default;
@@ -197,7 +202,8 @@ class RigidBodySet {
   void set_mass(std::size_t i, T mass);
   void set_inertia(std::size_t i, const Vec3<T>& principal_moments);
   // Forces and torques stop moving it: inv_mass and inverse moments 0. It keeps its velocity
-  // and does not turn; set_mass and set_inertia make it dynamic again.
+  // and does not turn. set_mass makes its centre dynamic again and set_inertia its rotation
+  // (torques meanwhile still change L, which then turns it).
   void set_kinematic(std::size_t i);
   // As ParticleSet::remove: the last body moves into i; returns its old index or kNoBody.
   static constexpr std::size_t kNoBody = ParticleSet<T>::kNoBody;

@@ -11,6 +11,7 @@
 //     kinema::interpolate(previous, current, clock.alpha(), drawn);
 
 #include <cstdint>
+#include <type_traits>
 
 #include "kinema/bodies.hpp"
 #include "kinema/isa.hpp"
@@ -19,7 +20,7 @@ namespace kinema {
 
 class FixedTimestep {
  public:
-  // h > 0 and finite; max_steps_per_frame >= 1 (kinema::Error otherwise).
+  // h > 0 with a finite 1 / h; max_steps_per_frame >= 1 (kinema::Error otherwise).
   explicit FixedTimestep(double h, unsigned max_steps_per_frame = 8);
 
   // Adds a frame's wall time (finite, >= 0) and returns how many steps of h to run now. At
@@ -47,11 +48,12 @@ class FixedTimestep {
 // otherwise); `out` is made a copy of `current` first, which reuses its memory when it is
 // large enough, so a frame loop allocates only at its first frame. SIMD over bodies on the
 // best instruction set (or `isa`).
+// `out` may not be `previous` or `current` (kinema::Error).
 template <class T>
-void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current, T alpha,
-                 ParticleSet<T>& out, Isa isa = Isa::automatic);
+void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current,
+                 std::type_identity_t<T> alpha, ParticleSet<T>& out, Isa isa = Isa::automatic);
 template <class T>
-void interpolate(const RigidBodySet<T>& previous, const RigidBodySet<T>& current, T alpha,
-                 RigidBodySet<T>& out, Isa isa = Isa::automatic);
+void interpolate(const RigidBodySet<T>& previous, const RigidBodySet<T>& current,
+                 std::type_identity_t<T> alpha, RigidBodySet<T>& out, Isa isa = Isa::automatic);
 
 }  // namespace kinema

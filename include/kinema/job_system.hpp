@@ -17,6 +17,8 @@
 // - Every job goes to the job system, whatever `worker_count()` says (a host may give kinema
 //   one dedicated physics thread); only sets below StepperOptions::inline_below, and sets of
 //   one block, run inline on the calling thread without a job.
+// - `enqueue` may run ranges before it returns, but must not throw once it has taken any:
+//   they point into the caller's stack frame until `wait` returns.
 // - A JobSystem must outlive every stepper that uses it.
 
 #include <cstddef>

@@ -18,9 +18,9 @@ if(targets MATCHES "LINK_ONLY")
 endif()
 # The package file refuses another minor version (SameMinorVersion).
 execute_process(COMMAND ${CMAKE_COMMAND} -S "${SOURCE_DIR}/tests/install/consumer" -B "${WORK_DIR}/wrong"
-  -DCMAKE_PREFIX_PATH=${prefix} -DKINEMA_WANTED=0.99 RESULT_VARIABLE wrong OUTPUT_QUIET ERROR_QUIET)
-if(wrong EQUAL 0)
-  message(FATAL_ERROR "find_package(kinema 0.99) accepted the installed version")
+  -DCMAKE_PREFIX_PATH=${prefix} -DKINEMA_WANTED=0.99 RESULT_VARIABLE wrong OUTPUT_VARIABLE out ERROR_VARIABLE out)
+if(wrong EQUAL 0 OR NOT out MATCHES "considered but not accepted")
+  message(FATAL_ERROR "find_package(kinema 0.99) was not refused for its version:\n${out}")
 endif()
 run(${CMAKE_COMMAND} -S "${SOURCE_DIR}/tests/install/consumer" -B "${WORK_DIR}/build"
     -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_BUILD_TYPE=Release "-DCMAKE_CXX_FLAGS=${CXX_FLAGS}")

@@ -15,8 +15,9 @@
 
 namespace {
 
-// The engine's job system: a fork-join pool. A job is cut into one range per thread; the
-// calling thread runs the first range itself and waits for the others.
+// The engine's job system: a fork-join pool for one host thread (its frame loop), not
+// called from its own tasks. A job is cut into one range per thread; the calling thread
+// runs the first range itself, then waits for the others.
 class ForkJoinPool final : public kinema::JobSystem {
  public:
   explicit ForkJoinPool(unsigned helpers) {
@@ -36,11 +37,12 @@ class ForkJoinPool final : public kinema::JobSystem {
     std::unique_lock lock(mutex_);
     idle_.wait(lock, [this] { return running_ == 0; });  // one job at a time
     job_ = {task, items, context};
+    const Job mine = job_;  // the helpers read job_ under the lock; this thread its copy
     running_ = threads_.size();
     ++generation_;
     wake_.notify_all();
     lock.unlock();
-    run_share(0);
+    run_share(mine, 0);
     return nullptr;
   }
 
@@ -56,9 +58,9 @@ class ForkJoinPool final : public kinema::JobSystem {
     void* context = nullptr;
   };
 
-  void run_share(unsigned worker) {
-    const std::size_t n = worker_count(), begin = job_.items * worker / n, end = job_.items * (worker + 1) / n;
-    if (begin < end) job_.task(begin, end, worker, job_.context);
+  void run_share(const Job& job, unsigned worker) {
+    const std::size_t n = worker_count(), begin = job.items * worker / n, end = job.items * (worker + 1) / n;
+    if (begin < end) job.task(begin, end, worker, job.context);
   }
 
   void serve(unsigned worker) {
@@ -68,8 +70,9 @@ class ForkJoinPool final : public kinema::JobSystem {
       wake_.wait(lock, [&] { return quit_ || generation_ != seen; });
       if (quit_) return;
       seen = generation_;
+      const Job job = job_;
       lock.unlock();
-      run_share(worker);
+      run_share(job, worker);
       lock.lock();
       if (--running_ == 0) idle_.notify_all();
     }
@@ -143,7 +146,7 @@ int main() {
       stepper.step(current, kH);
     }
     if (previous.size() != current.size()) previous = current;  // nothing stepped yet
-    kinema::interpolate(previous, current, float(clock.alpha()), drawn);
+    kinema::interpolate(previous, current, clock.alpha(), drawn);
     drawn_height = drawn.size() > 0 ? drawn.py()[0] : 0;
   }
   // The replay: the same events at the same step boundaries, advancing directly between them.
