@@ -54,9 +54,9 @@ void check_pair(const SpringPair& p, const std::string& name) {
   check_number(p.damping, name + ".damping");
 }
 
-// The first pair that repeats an earlier one (either order), and a body past the limit of
+// The first pair that repeats an earlier one (either order).
 // springs per body.
-void check_repeats(std::span<const SpringPair> pairs, const std::string& what, std::size_t first) {
+void check_repeats(std::span<const SpringPair> pairs, const std::string& what) {
   struct Key {
     std::uint32_t lo, hi;
     std::size_t index;
@@ -71,8 +71,8 @@ void check_repeats(std::span<const SpringPair> pairs, const std::string& what, s
   std::sort(keys.begin(), keys.end(), order);
   for (std::size_t k = 1; k < keys.size(); ++k) {
     if (keys[k].lo != keys[k - 1].lo || keys[k].hi != keys[k - 1].hi) continue;
-    throw Error(pair_name(what, first + keys[k].index) + ": repeats " +
-                pair_name(what, first + keys[k - 1].index) + " (bodies " +
+    throw Error(pair_name(what, keys[k].index) + ": repeats " +
+                pair_name(what, keys[k - 1].index) + " (bodies " +
                 std::to_string(keys[k].lo) + " and " + std::to_string(keys[k].hi) + ")");
   }
 }
@@ -95,10 +95,10 @@ void check_degrees(std::span<const SpringPair> pairs, const std::string& what) {
 
 }  // namespace
 
-void check_springs(std::span<const SpringPair> pairs, const std::string& what, std::size_t first) {
+void check_springs(std::span<const SpringPair> pairs, const std::string& what) {
   if (pairs.size() >= kMaxSpringPairs) throw Error(what + ": 2^31 pairs or more");
-  for (std::size_t k = 0; k < pairs.size(); ++k) check_pair(pairs[k], pair_name(what, first + k));
-  check_repeats(pairs, what, first);
+  for (std::size_t k = 0; k < pairs.size(); ++k) check_pair(pairs[k], pair_name(what, k));
+  check_repeats(pairs, what);
   check_degrees(pairs, what);
 }
 

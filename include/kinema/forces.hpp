@@ -172,9 +172,8 @@ class ForceModel {
 
 // Throws kinema::Error naming `what`[k] and the field of the first bad pair in `pairs`
 // (an index past kMaxSpringBodies, i == j, a parameter out of range, a pair repeated, a
-// body with more than kMaxSpringsPerBody springs). `first` numbers the first pair.
-void check_springs(std::span<const SpringPair> pairs, const std::string& what,
-                   std::size_t first = 0);
+// body with more than kMaxSpringsPerBody springs).
+void check_springs(std::span<const SpringPair> pairs, const std::string& what);
 // Throws kinema::Error naming `what` when G or the softening is not finite and >= 0.
 void check_nbody(const NBody& term, const std::string& what);
 
