@@ -55,7 +55,6 @@ void check_pair(const SpringPair& p, const std::string& name) {
 }
 
 // The first pair that repeats an earlier one (either order).
-// springs per body.
 void check_repeats(std::span<const SpringPair> pairs, const std::string& what) {
   struct Key {
     std::uint32_t lo, hi;
