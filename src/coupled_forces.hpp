@@ -23,6 +23,11 @@ struct SpringNetwork {
   AlignedArray<T> rest, k, damping;
 
   bool empty() const { return covered == 0; }
+  std::size_t bytes() const {
+    return slice_offset.capacity() * sizeof(std::uint32_t) +
+           (neighbor.capacity() + contiguous.capacity()) * sizeof(std::int32_t) +
+           (rest.size() + k.size() + damping.size()) * sizeof(T);
+  }
   // The kernel's view of it for a stage state; forces go to `force`.
   kernels::SpringJob<T> job(const T* const x[3], const T* const v[3], T* const force[3]) const;
 };

@@ -2,8 +2,18 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <utility>
+
+#include "force_lowering.hpp"
 
 namespace kinema {
+
+NonFiniteError::NonFiniteError(std::uint64_t step_, double time_, std::size_t body_, std::string field_)
+    : Error("the state stops being finite at step " + std::to_string(step_) + " of the call (from t = " +
+            shortest_text(time_) + "): body " + std::to_string(body_) + ", " + field_ +
+            "; the bodies hold the state before that step"),
+      step(step_), time(time_), body(body_), field(std::move(field_)) {}
+
 namespace {
 
 // Length of the valid UTF-8 sequence starting at text[i] (2 to 4), or 0.

@@ -39,6 +39,18 @@ void StagedPath<T>::plan() {
 }
 
 template <class T>
+std::size_t StagedPath<T>::bytes() const {
+  std::size_t n = 0;
+  const auto add = [&](const auto& arrays) {
+    for (const AlignedArray<T>& a : arrays) n += a.size() * sizeof(T);
+  };
+  for (int s = 0; s < kMaxStages; ++s) add(stage_x_[s]), add(stage_v_[s]), add(stage_a_[s]);
+  add(force_);
+  for (const auto& kept : saved_) add(kept);
+  return n;
+}
+
+template <class T>
 void StagedPath<T>::reserve(std::size_t padded) {
   if (padded <= capacity_) return;
   const int stages = method_.kind == MethodKind::runge_kutta ? method_.tableau.stages : 1;

@@ -29,6 +29,7 @@ class StagedPath {
   // Scratch for `padded` bodies (a padded count); allocates only when it grows.
   void reserve(std::size_t padded);
   std::size_t capacity() const { return capacity_; }
+  std::size_t bytes() const;  // of the scratch arrays
   // One step. Sets of fewer than inline_below bodies run on the calling thread. When user
   // code (a callback or a CoupledTerm) throws, the bodies are put back as they were and the
   // exception is rethrown here, on the calling thread.

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "blocks.hpp"
+#include "finite_guard.hpp"
 #include "force_lowering.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/error.hpp"
@@ -49,10 +50,12 @@ struct Stepper<T>::Impl {
   kernels::RigidFn<T> rigid_fn = nullptr;
   std::unique_ptr<StagedPath<T>> staged;  // when the fused path does not apply
   Clock<T> clock;
+  Checkpoint<T> checkpoint;  // the finiteness guard's copy of the state
 
   Impl(std::shared_ptr<const ForceModel<T>> f, const Method& m, StepperOptions o)
       : method(m), options(o) {
     validate(method);
+    check_guard(options);
     table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
     jobs = options.jobs != nullptr ? options.jobs : &default_job_system(options.threads);
     use(std::move(f));
@@ -135,7 +138,63 @@ struct Stepper<T>::Impl {
     kinema::for_each_block(*jobs, b.size() >= options.inline_below, b.padded_size(), fn);
   }
 
-  void advance(RigidBodySet<T>& b, T step_size, std::uint64_t steps) {
+  // Speed limits the clamp can hold in T.
+  static void check_guard(const StepperOptions& o) {
+    if (o.guard != FiniteGuard::clamp) return;
+    for (const auto& [name, value] : {std::pair{"max_speed", o.max_speed},
+                                      std::pair{"max_angular_speed", o.max_angular_speed}}) {
+      if (!(value > 0 && std::isfinite(T(value)))) {
+        throw Error(std::string("stepper options: ") + name + " must be > 0 and finite in " +
+                    type_name<T>() + ", got " + shortest_text(value));
+      }
+    }
+  }
+
+  // advance() under the guard: one call, then the scan; if the scan finds a value that is
+  // not finite, the saved state again step by step to find the step that made it.
+  template <class Set>
+  void advance_guarded(Set& b, T step_size, std::uint64_t steps) {
+    const StateArrays<T> state = state_arrays(b);
+    const GuardJobs where{*jobs, b.size() >= options.inline_below};
+    checkpoint.save(where, state);
+    advance_clamped(b, step_size, steps, where);
+    if (!scan_non_finite(where, state)) return;
+    checkpoint.restore(where, state);
+    clock.steps -= steps;
+    for (std::uint64_t k = 1; k <= steps; ++k) {
+      checkpoint.save(where, state);
+      advance_clamped(b, step_size, 1, where);
+      if (const auto bad = scan_non_finite(where, state)) {
+        checkpoint.restore(where, state);
+        --clock.steps;
+        throw NonFiniteError(k, clock.time(), bad->body, bad->field);
+      }
+    }
+  }
+
+  template <class Set>
+  void advance_clamped(Set& b, T step_size, std::uint64_t steps, GuardJobs where) {
+    if (options.guard != FiniteGuard::clamp) return advance_unguarded(b, step_size, steps);
+    for (std::uint64_t k = 0; k < steps; ++k) {
+      advance_unguarded(b, step_size, 1);
+      clamp(b, where);
+    }
+  }
+  void clamp(ParticleSet<T>& b, GuardJobs where) const { clamp_speeds(where, b, options.max_speed); }
+  void clamp(RigidBodySet<T>& b, GuardJobs where) const {
+    clamp_speeds(where, b, options.max_speed, options.max_angular_speed);
+  }
+
+  template <class Set>
+  void advance(Set& b, T step_size, std::uint64_t steps) {
+    if (options.guard == FiniteGuard::off) return advance_unguarded(b, step_size, steps);
+    check_step_size(step_size, b);  // a bad h throws before the copy
+    advance_guarded(b, step_size, steps);
+  }
+  void check_step_size(T step_size, const ParticleSet<T>&) const { check_step_size(step_size, lowered->particle); }
+  void check_step_size(T step_size, const RigidBodySet<T>&) const { check_step_size(step_size, lowered->rigid); }
+
+  void advance_unguarded(RigidBodySet<T>& b, T step_size, std::uint64_t steps) {
     if (rigid_fn == nullptr) {
       throw Error("rigid bodies need a built-in method and local force terms only (no "
                   "callbacks, no coupled terms)");
@@ -152,7 +211,7 @@ struct Stepper<T>::Impl {
     clock.steps += steps;
   }
 
-  void advance(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
+  void advance_unguarded(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
     check_reach(b);
     StepContext<T> c = start(b, step_size, lowered->particle);
     if (fused_fn == nullptr) return advance_staged(c, steps);
@@ -220,6 +279,12 @@ void Stepper<T>::check_step_size(T h) const {
 template <class T>
 void Stepper<T>::reserve(std::size_t bodies) {
   if (impl_->staged) impl_->staged->reserve(padded_count<T>(bodies));
+}
+
+template <class T>
+std::size_t Stepper<T>::scratch_bytes() const {
+  const Impl& i = *impl_;
+  return (i.staged ? i.staged->bytes() : 0) + i.lowered->coupled.springs.bytes() + i.checkpoint.bytes();
 }
 
 template <class T>

@@ -52,12 +52,13 @@ namespace {
 
 template <class T>
 long allocations_in_steps(const Method& method, ForceModel<T> forces, bool staged, bool tbb,
-                          std::size_t count = 30000) {
+                          std::size_t count = 30000, FiniteGuard guard = FiniteGuard::off) {
   ParticleSet<T> bodies = test::cloud<T>(count);
   TbbJobSystem jobs(2);
   StepperOptions o = tbb ? StepperOptions{} : test::serial_options();
   if (tbb) o.jobs = &jobs, o.inline_below = 0;
   o.force_staged = staged;
+  o.guard = guard;
   Stepper<T> stepper(std::move(forces), method, o);
   stepper.step(bodies, T(0.01));  // first use: scratch and TBB's own lazy set-up
   const long before = g_allocations.load();
@@ -104,6 +105,17 @@ TEST_CASE("step and advance allocate nothing", "[allocation]") {
       CHECK(allocations_in_steps<double>(*m, test::all_local_terms<double>(), true, tbb) == 0);
       CHECK(allocations_in_steps<float>(*m, with_callback(test::all_local_terms<float>()), false,
                                         tbb) == 0);
+    }
+  }
+}
+
+TEST_CASE("guarded steps allocate nothing after the first", "[allocation]") {
+  for (bool tbb : {false, true}) {
+    for (FiniteGuard guard : {FiniteGuard::check, FiniteGuard::clamp}) {
+      INFO((guard == FiniteGuard::check ? "check" : "clamp") << (tbb ? " on tbb" : " serial"));
+      CHECK(allocations_in_steps<float>(rk4, test::all_local_terms<float>(), false, tbb, 30000, guard) == 0);
+      CHECK(allocations_in_steps<double>(euler, with_callback(test::all_local_terms<double>()), true,
+                                         tbb, 30000, guard) == 0);
     }
   }
 }

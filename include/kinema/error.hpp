@@ -1,6 +1,8 @@
 #pragma once
-// The one exception type of kinema: thrown at set-up, never from inside a step's kernels.
+// The exception type of kinema: thrown at set-up, never from inside a step's kernels.
 
+#include <cstddef>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -10,6 +12,17 @@ namespace kinema {
 class Error : public std::runtime_error {
  public:
   explicit Error(const std::string& message) : std::runtime_error(message) {}
+};
+
+// Thrown by a step under a finiteness guard (StepperOptions::guard) when its result is not
+// finite. The bodies and the stepper's clock hold the state before that step.
+class NonFiniteError : public Error {
+ public:
+  NonFiniteError(std::uint64_t step, double time, std::size_t body, std::string field);
+  std::uint64_t step;  // of the advance call that threw, from 1
+  double time;         // of the state kept (the start of that step)
+  std::size_t body;    // the lowest-numbered body with a value that is not finite
+  std::string field;   // its first such field: "px" .. "vz", rigid bodies also "qw" .. "lz"
 };
 
 // `text` made safe for one line of a terminal or of a script's string literal: control

@@ -5,7 +5,8 @@
 // in registers) when the model is local and the method built in, else the staged path
 // (one parallel pass per stage). All scratch is allocated at construction or at the first
 // step that sees a larger body count (see reserve); a step allocates nothing, starts no
-// thread and throws only on a bad argument, before any body moves.
+// thread and throws only on a bad argument, before any body moves, or, under a finiteness
+// guard, a NonFiniteError with the bodies put back to the last finite state.
 
 #include <cstddef>
 #include <cstdint>
@@ -18,6 +19,21 @@
 #include "kinema/methods.hpp"
 
 namespace kinema {
+
+// What a stepper does about state that stops being finite (a step past the stability
+// limit, a force that returns NaN).
+enum class FiniteGuard {
+  off,    // nothing: the caller checks (all_finite, first_non_finite) if it wants to
+  // Each advance call keeps a copy of the state it starts from (the set's state arrays once
+  // more in memory, two more passes over them per call). When a step leaves a value that is
+  // not finite, the bodies and the clock are put back to the step before it and a
+  // NonFiniteError names the step, the body and the field.
+  check,
+  // check, and after every step each velocity longer than max_speed, and each rigid body's
+  // angular velocity above max_angular_speed, is scaled down to that length. This changes
+  // the physics (energy is lost) to keep a run going; steps then run one at a time.
+  clamp,
+};
 
 struct StepperOptions {
   Isa isa = Isa::automatic;
@@ -37,6 +53,9 @@ struct StepperOptions {
   // Rigid bodies: renormalize orientation quaternions after each step. Off only to test
   // how a method lets |q| drift.
   bool renormalize_quaternions = true;
+  FiniteGuard guard = FiniteGuard::off;
+  double max_speed = 500;          // clamp: length units per second, finite and > 0
+  double max_angular_speed = 50;   // clamp, rigid bodies: radians per second, finite and > 0
 };
 
 // `options` with every step run on the calling thread: no worker thread is involved.
@@ -81,6 +100,9 @@ class Stepper {
   void check_step_size(T h) const;
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);
+  // Bytes the stepper holds for stepping: the staged path's stage state, the lowered spring
+  // network, the finiteness guard's copy of the state.
+  std::size_t scratch_bytes() const;
   // Replaces the force model between steps (new gravity, wind, anchors, torques): checked
   // here, before anything changes (kinema::Error, the stepper as it was), with no new job
   // system. A model of local terms keeps the fused path. The clock goes on.

@@ -1,0 +1,62 @@
+#pragma once
+// The finiteness guard (StepperOptions::guard): a copy of the state an advance call starts
+// from, a scan for the first value that is not finite, and the speed clamp.
+
+#include <array>
+#include <cstddef>
+#include <optional>
+
+#include "kinema/bodies.hpp"
+#include "kinema/diagnostics.hpp"
+#include "kinema/job_system.hpp"
+
+namespace kinema {
+
+// The arrays of a set that a step changes, in the order (and with the names) errors use:
+// px .. vz, then for rigid bodies qw .. qz and lx .. lz.
+template <class T>
+struct StateArrays {
+  static constexpr int kMax = 13;
+  std::size_t size = 0;    // real bodies
+  std::size_t padded = 0;  // elements per array
+  int count = 0;
+  std::array<T*, kMax> data{};
+  std::array<const char*, kMax> names{};
+};
+template <class T>
+StateArrays<T> state_arrays(ParticleSet<T>& bodies);
+template <class T>
+StateArrays<T> state_arrays(RigidBodySet<T>& bodies);
+
+// Where blocks run: on `jobs` when `parallel`, else on the calling thread.
+struct GuardJobs {
+  JobSystem& jobs;
+  bool parallel;
+};
+
+template <class T>
+class Checkpoint {
+ public:
+  // Grows its arrays when the state is larger than any saved before.
+  void save(GuardJobs where, const StateArrays<T>& state);
+  void restore(GuardJobs where, const StateArrays<T>& state) const;
+  std::size_t bytes() const;
+
+ private:
+  std::array<AlignedArray<T>, StateArrays<T>::kMax> copy_;
+};
+
+// The lowest-numbered body with a value that is not finite, and its first such field.
+template <class T>
+std::optional<NonFinite> scan_non_finite(GuardJobs where, const StateArrays<T>& state);
+
+// Scales every velocity longer than max_speed down to it (and every angular momentum whose
+// angular velocity exceeds max_angular_speed). An infinite component points the way; NaN is
+// left for the scan to find.
+template <class T>
+void clamp_speeds(GuardJobs where, ParticleSet<T>& bodies, double max_speed);
+template <class T>
+void clamp_speeds(GuardJobs where, RigidBodySet<T>& bodies, double max_speed,
+                  double max_angular_speed);
+
+}  // namespace kinema
