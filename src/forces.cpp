@@ -153,6 +153,14 @@ ForceModel<T>& ForceModel<T>::add(const Springs& term) {
   return *this;
 }
 
+template <class T>
+ForceModel<T>& ForceModel<T>::add(Springs&& term) {
+  if (!springs_.empty()) return add(static_cast<const Springs&>(term));
+  check_springs(term.pairs, "springs.pairs");
+  springs_ = std::move(term.pairs);
+  return *this;
+}
+
 template class ForceModel<float>;
 template class ForceModel<double>;
 

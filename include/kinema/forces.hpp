@@ -151,6 +151,7 @@ class ForceModel {
   // Joins the model's network; a pair that repeats one already there (either order) is
   // refused, naming both.
   ForceModel& add(const Springs& term);
+  ForceModel& add(Springs&& term);  // the first network's pairs move in, uncopied
 
   std::span<const LocalTerm> local_terms() const { return local_; }
   std::span<const ForceCallback<T>> callbacks() const { return callbacks_; }

@@ -124,6 +124,46 @@ void add_stability_command(CLI::App& app, StabilityOptions& o) {
   s->add_option("--dt", o.dt, "Step size (default: the scene's)")->transform(positive_finite);
 }
 
+void add_stress_command(CLI::App& app, StressOptions& o, std::string& isa, std::string& precision,
+                        std::string& guard) {
+  CLI::App* s = app.add_subcommand(
+      "stress", "A large randomized scene (or --scene) run long: throughput, drift, memory, finiteness");
+  s->add_option("--bodies", o.bodies, "Bodies of the built-in scene (default 100000)")
+      ->transform(decimal(1, std::uint64_t(1) << 30));
+  auto* steps = s->add_option("--steps", o.steps, "Steps to run (default 1000, or the scene file's)")
+                    ->transform(decimal(1, kMaxCount));
+  s->add_option("--seconds", o.seconds, "Run for this long (wall clock) instead of a step count")
+      ->transform(positive_finite)
+      ->excludes(steps);
+  s->add_option("--threads", o.threads, "Worker threads (0: all cores)")->transform(decimal(0, 1024));
+  s->add_option("--method", o.method, "Method (default rk4, or the scene file's)");
+  s->add_option("--precision", precision, "float (default) or double")
+      ->check(CLI::IsMember({"float", "double"}));
+  s->add_option("--dt", o.dt, "Step size (default 0.001, or the scene file's)")->transform(positive_finite);
+  auto* scene = s->add_option("--scene", o.scene_path, "Stress a scene file instead of the built-in scene")
+                    ->check(not_empty);
+  s->add_option("--seed", o.seed, "Seed of the built-in scene (default 1)")
+      ->transform(decimal(0, kMaxCount))
+      ->excludes(scene);
+  s->get_option("--bodies")->excludes(scene);
+  s->add_option("--report", o.report_path, "Write the report as JSON")->check(not_empty);
+  s->add_option("--guard", guard,
+                "Finiteness guard: check (default: stop at the step that made a value not finite, "
+                "keep the state before it), clamp (also hold speeds to --max-speed and "
+                "--max-angular-speed: changes the physics), off")
+      ->check(CLI::IsMember({"off", "check", "clamp"}));
+  s->add_option("--max-speed", o.max_speed, "With --guard clamp: the largest speed (default 500)")
+      ->transform(positive_finite);
+  s->add_option("--max-angular-speed", o.max_angular_speed,
+                "With --guard clamp: the largest angular speed, rad/s (default 50)")
+      ->transform(positive_finite);
+  s->add_option("--interval", o.interval, "Seconds per throughput interval (default 1)")
+      ->transform(positive_finite);
+  s->add_option("--isa", isa, "Instruction set: auto, scalar, sse2, avx2, avx512")
+      ->check(CLI::IsMember({"auto", "scalar", "sse2", "avx2", "avx512"}));
+  s->add_flag("--quiet,-q", o.quiet, "Print nothing but errors");
+}
+
 }  // namespace
 
 std::unique_ptr<CLI::App> make_app(CommandLine& out) {
@@ -134,19 +174,21 @@ std::unique_ptr<CLI::App> make_app(CommandLine& out) {
   add_run_command(*app, out.run, out.isa, out.precision);
   add_chart_command(*app, out.chart);
   add_stability_command(*app, out.stability);
+  add_stress_command(*app, out.stress, out.isa, out.precision, out.guard);
   return app;
 }
 
 void parse_command_line(CLI::App& app, CommandLine& out, int argc, const char* const* argv) {
   app.parse(argc, argv);
-  for (const char* name : {"run", "chart", "stability"}) {
+  for (const char* name : {"run", "chart", "stability", "stress"}) {
     if (app.got_subcommand(name)) out.command = name;
   }
   // Both were checked against their lists while parsing.
-  out.run.isa = isa_by_name(out.isa);
+  out.run.isa = out.stress.isa = isa_by_name(out.isa);
   if (!out.precision.empty()) {
-    out.run.precision = out.precision == "float" ? Precision::single : Precision::dual;
+    out.run.precision = out.stress.precision = out.precision == "float" ? Precision::single : Precision::dual;
   }
+  out.stress.guard = guard_by_name(out.guard);
 }
 
 }  // namespace kinema::cli

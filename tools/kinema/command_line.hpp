@@ -7,6 +7,7 @@
 
 #include "chart_command.hpp"
 #include "run_command.hpp"
+#include "stress_command.hpp"
 
 namespace CLI {
 class App;
@@ -15,11 +16,13 @@ class App;
 namespace kinema::cli {
 
 struct CommandLine {
-  std::string command;  // "run", "chart" or "stability"
+  std::string command;  // "run", "chart", "stability" or "stress"
   RunOptions run;
   ChartOptions chart;
   StabilityOptions stability;
-  std::string isa = "auto", precision;  // as typed; parse_command_line sets run.isa, run.precision
+  StressOptions stress;
+  // As typed; parse_command_line sets them in run or stress.
+  std::string isa = "auto", precision, guard = "check";
 };
 
 // An App that fills `out` when it parses (its options point into `out`).

@@ -23,6 +23,7 @@ int run(const kinema::cli::CommandLine& line) {
   try {
     if (line.command == "chart") return chart_scene(line.chart);
     if (line.command == "stability") return stability_scene(line.stability);
+    if (line.command == "stress") return stress(line.stress);
     return run_scene(line.run);
   } catch (const Interrupted& e) {
     std::fprintf(stderr, "kinema: stopped by %s; the outputs written so far are incomplete\n",

@@ -13,6 +13,7 @@
 #include "interrupt.hpp"
 #include "kinema/scenes.hpp"
 #include "progress.hpp"
+#include "report_file.hpp"
 #include "trajectory.hpp"
 
 namespace kinema::cli {
@@ -56,39 +57,6 @@ void print_summary(const nlohmann::ordered_json& summary) {
                 printable(value.is_string() ? value.get<std::string>() : value.dump()).c_str());
   }
 }
-
-// The summary file, opened before the run so that a path that cannot be written is
-// refused before any work, and checked when it is closed (a full disk shows only there).
-class SummaryFile {
- public:
-  explicit SummaryFile(const std::string& path) : path_(path) {
-    if (path.empty()) return;
-    file_ = std::fopen(path.c_str(), "w");
-    if (file_ == nullptr) fail();
-  }
-  ~SummaryFile() {
-    if (file_ != nullptr) std::fclose(file_);
-  }
-  SummaryFile(const SummaryFile&) = delete;
-  SummaryFile& operator=(const SummaryFile&) = delete;
-  void write(const nlohmann::ordered_json& summary) {
-    if (file_ == nullptr) return;
-    const std::string text = summary.dump(2) + "\n";
-    const bool written = std::fwrite(text.data(), 1, text.size(), file_) == text.size() &&
-                         std::fflush(file_) == 0;
-    const int error = errno;
-    const bool closed = std::fclose(file_) == 0;
-    file_ = nullptr;
-    if (!written || !closed) fail(written ? errno : error);
-  }
-
- private:
-  [[noreturn]] void fail(int error = errno) const {
-    throw Error(printable(path_) + ": cannot write the summary: " + std::strerror(error));
-  }
-  std::string path_;
-  std::FILE* file_ = nullptr;
-};
 
 // Where the state first stopped being finite: at step `last` (and `first` == `last`) when
 // found exactly, else somewhere in [first, last].
@@ -155,7 +123,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     }
   }();
   // Opened once the world stands (a scene that fails leaves no file behind), before the run.
-  SummaryFile summary_file(o.summary_path);
+  ReportFile summary_file(o.summary_path, "summary");
   std::optional<TrajectoryWriter> trajectory;
   if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
   const T h = T(scene.dt);
