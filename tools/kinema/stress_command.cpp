@@ -281,7 +281,7 @@ class StressRun {
     j["threads"] = s.threads();
     j["guard"] = guard_name(o_.guard);
     j["dt"] = dt_;
-    j["steps"] = done_;
+    j["steps"] = done_;  // completed by every group
     j["wall_seconds"] = stepping_seconds_;
     j["body_steps_per_second"] = stepping_seconds_ > 0 ? double(bodies_) * double(done_) / stepping_seconds_ : 0.0;
     j["throughput"] = throughput_report(intervals_);
@@ -380,7 +380,7 @@ std::optional<Scene> stress_scene(const StressOptions& o) {
   if (o.dt) scene.dt = *o.dt;
   if (o.method) scene.method = *o.method;
   try {
-    if (scene.method == "auto") throw Error("stress runs a fixed method; give one with --method");
+    if (scene.method == "auto") throw Error("stress runs a fixed method: give one with --method");
     method_by_name(scene.method);
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {
@@ -409,6 +409,7 @@ FiniteGuard guard_by_name(const std::string& name) {
 }
 
 int stress(const StressOptions& o) {
+  if (o.method == "auto") throw Error("stress runs a fixed method; auto is for kinema run");
   if (o.method) method_by_name(*o.method);  // a bad name fails before any work
   const std::optional<Scene> scene = stress_scene(o);
   const Precision precision = scene ? scene->precision : o.precision.value_or(Precision::single);
