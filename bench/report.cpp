@@ -207,6 +207,31 @@ class Report {
     }
   }
 
+  void guard_table() {
+    if (!find(runs_, "guard/float/off/" + isa_ + "/100000/real_time", "ns_per_body_step")) return;
+    std::printf("\nThe finiteness guard, one rk4 step per call, 1 thread, %s: ns per body-step (times the "
+                "guard off); the guard's own traffic (a copy of 6 arrays, a scan of 6) at this size's in-place stream speed\n", isa_.c_str());
+    for (const std::string p : {"float", "double"}) {
+      for (long n : {100000L, 1L << 20}) {
+        const std::string at = "/" + isa_ + "/" + std::to_string(n) + "/real_time";
+        const auto off = find(runs_, "guard/" + p + "/off" + at, "ns_per_body_step");
+        if (!off) continue;
+        const auto check = find(runs_, "guard/" + p + "/check" + at, "ns_per_body_step");
+        const auto clamp = find(runs_, "guard/" + p + "/clamp" + at, "ns_per_body_step");
+        // Bytes per body the guard moves (12 arrays read, 6 written) over bytes per ns.
+        const auto s = find(runs_, stream(n, 1), "GB_per_s");
+        const double pass_ns = s ? 18.0 * (p == "float" ? 4 : 8) / s->median : 0;
+        for (const auto& r : {off, check, clamp}) {
+          if (r) cvs_.push_back(r->cv);
+        }
+        std::printf("%-6s %8ld | off %.3f | check %s (%s) | clamp %s (%s) | guard traffic %s\n", p.c_str(), n,
+                    off->median, cell(median(check), "%.3f").c_str(), cell(ratio(check, off), "%.2fx").c_str(),
+                    cell(median(clamp), "%.3f").c_str(), cell(ratio(clamp, off), "%.2fx").c_str(),
+                    pass_ns > 0 ? cell(pass_ns, "%.3f").c_str() : "-");
+      }
+    }
+  }
+
   void paired_scaling() {
     bool header = false;
     for (const std::string p : {"float", "double"}) {
@@ -347,6 +372,7 @@ int main(int argc, char** argv) {
   report.paired_scaling();
   report.coupled_table();
   report.frame_table();
+  report.guard_table();
   report.limits();
   report.noise();
   if (csv != nullptr) std::fclose(csv);

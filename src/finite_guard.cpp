@@ -2,9 +2,13 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
+#include <cstdint>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 #include "blocks.hpp"
 
@@ -22,17 +26,47 @@ void keep_lowest(std::atomic<std::size_t>& lowest, std::size_t k) {
   }
 }
 
-// The first index in [begin, end) whose value is not finite, or end. The loop without an
-// early exit vectorizes; the exact index is looked up only in a block that has one.
+// The first index in [begin, end) whose value is not finite, or end. A value is not finite
+// when its exponent bits are all ones; adding the exponent's lowest bit then carries into
+// the sign bit, which an OR over the block collects in a loop that vectorizes. The exact
+// index is looked up only in a block that has one.
 template <class T>
 std::size_t first_bad(const T* a, std::size_t begin, std::size_t end) {
-  bool any = false;
-  for (std::size_t i = begin; i < end; ++i) any |= !(std::abs(a[i]) <= std::numeric_limits<T>::max());
-  if (!any) return end;
+  using Bits = std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>;
+  constexpr Bits kExponent = std::bit_cast<Bits>(std::numeric_limits<T>::infinity());
+  constexpr Bits kLowestExponentBit = kExponent & ~(kExponent << 1);
+  constexpr Bits kSign = ~(std::numeric_limits<Bits>::max() >> 1);
+  Bits carries = 0;
+  for (std::size_t i = begin; i < end; ++i) carries |= (std::bit_cast<Bits>(a[i]) & kExponent) + kLowestExponentBit;
+  if ((carries & kSign) == 0) return end;
   for (std::size_t i = begin; i < end; ++i) {
     if (!std::isfinite(a[i])) return i;
   }
   return end;
+}
+
+// Bodies in [begin, end) whose |(x, y, z)| may exceed `limit` (NaN aside; a square that
+// overflows counts), in a loop that vectorizes, so that blocks within the limit skip the
+// exact clamp. The test in T errs on the side of counting: it compares with 0.999 limit^2.
+template <class T>
+int count_over(const T* x, const T* y, const T* z, std::nullptr_t, T limit, std::size_t begin, std::size_t end) {
+  const T limit2 = T(0.999) * limit * limit;
+  int over = 0;
+  for (std::size_t i = begin; i < end; ++i) over += x[i] * x[i] + y[i] * y[i] + z[i] * z[i] > limit2;
+  return over;
+}
+
+// The same for angular speed, by the bound |omega| <= |L| max(1 / I).
+template <class T>
+int count_over_angular(const T* lx, const T* ly, const T* lz, const T* ix, const T* iy, const T* iz, T limit,
+                       std::size_t begin, std::size_t end) {
+  const T limit2 = T(0.999) * limit * limit;
+  int over = 0;
+  for (std::size_t i = begin; i < end; ++i) {
+    const T inv = std::max(ix[i], std::max(iy[i], iz[i]));
+    over += (lx[i] * lx[i] + ly[i] * ly[i] + lz[i] * lz[i]) * (inv * inv) > limit2;
+  }
+  return over;
 }
 
 // The length of (x, y, z) without overflow; infinite components make it +inf.
@@ -55,6 +89,20 @@ void clamp(T& x, T& y, T& z, double limit) {
   }
   const double scale = limit / length(v[0], v[1], v[2]);
   x = T(v[0] * scale), y = T(v[1] * scale), z = T(v[2] * scale);
+}
+
+// Body i's angular momentum scaled so that its angular velocity is at most `limit`.
+template <class T>
+void clamp_angular(RigidBodySet<T>& b, std::size_t i, double limit) {
+  T *lx = b.l(0), *ly = b.l(1), *lz = b.l(2);
+  // omega is linear in L: first give an infinite L a direction, then scale it.
+  clamp(lx[i], ly[i], lz[i], double(std::numeric_limits<T>::max()));
+  const Vec3<double> w = b.angular_velocity(i);
+  const double speed = length(w[0], w[1], w[2]);
+  if (speed > limit) {
+    const double scale = limit / speed;
+    lx[i] = T(lx[i] * scale), ly[i] = T(ly[i] * scale), lz[i] = T(lz[i] * scale);
+  }
 }
 
 }  // namespace
@@ -122,6 +170,7 @@ void clamp_speeds(GuardJobs where, ParticleSet<T>& b, double max_speed) {
   T *vx = b.vx(), *vy = b.vy(), *vz = b.vz();
   const T* inv_mass = b.inv_mass();
   for_each_block(where.jobs, where.parallel, b.size(), [&](Block block) {
+    if (count_over<T>(vx, vy, vz, nullptr, T(max_speed), block.begin, block.end) == 0) return;
     for (std::size_t i = block.begin; i < block.end; ++i) {
       if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
     }
@@ -133,18 +182,16 @@ void clamp_speeds(GuardJobs where, RigidBodySet<T>& b, double max_speed, double 
   T *vx = b.velocity_data(0), *vy = b.velocity_data(1), *vz = b.velocity_data(2);
   T *lx = b.l(0), *ly = b.l(1), *lz = b.l(2);
   const T* inv_mass = b.centers().inv_mass();
+  const T *ix = b.inv_inertia(0), *iy = b.inv_inertia(1), *iz = b.inv_inertia(2);
   for_each_block(where.jobs, where.parallel, b.size(), [&](Block block) {
-    for (std::size_t i = block.begin; i < block.end; ++i) {
-      if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
-      // omega is linear in L: first give an infinite L a direction, then scale it.
-      clamp(lx[i], ly[i], lz[i], double(std::numeric_limits<T>::max()));
-      const Vec3<double> w = b.angular_velocity(i);
-      const double speed = length(w[0], w[1], w[2]);
-      if (speed > max_angular_speed) {
-        const double scale = max_angular_speed / speed;
-        lx[i] = T(lx[i] * scale), ly[i] = T(ly[i] * scale), lz[i] = T(lz[i] * scale);
+    if (count_over<T>(vx, vy, vz, nullptr, T(max_speed), block.begin, block.end) > 0) {
+      for (std::size_t i = block.begin; i < block.end; ++i) {
+        if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
       }
     }
+    // |omega| <= |L| max(1 / I): bodies under the limit by that bound are left alone.
+    if (count_over_angular(lx, ly, lz, ix, iy, iz, T(max_angular_speed), block.begin, block.end) == 0) return;
+    for (std::size_t i = block.begin; i < block.end; ++i) clamp_angular(b, i, max_angular_speed);
   });
 }
 
