@@ -2,13 +2,11 @@
 
 #include <algorithm>
 #include <atomic>
-#include <bit>
 #include <cstdint>
 #include <cmath>
 #include <cstddef>
 #include <cstring>
 #include <limits>
-#include <type_traits>
 
 #include "blocks.hpp"
 
@@ -26,19 +24,31 @@ void keep_lowest(std::atomic<std::size_t>& lowest, std::size_t k) {
   }
 }
 
-// The first index in [begin, end) whose value is not finite, or end. A value is not finite
-// when its exponent bits are all ones; adding the exponent's lowest bit then carries into
-// the sign bit, which an OR over the block collects in a loop that vectorizes. The exact
-// index is looked up only in a block that has one.
+// A value is not finite when its exponent bits are all ones; adding the exponent's lowest
+// bit then carries into the sign bit. The OR of those sums over an array says whether any
+// value is not finite, in a loop that vectorizes: cloned per instruction set (the answer is
+// the same on each), since the scan runs after every call of a guarded stepper. The bits are
+// read through types allowed to alias float and double.
+using FloatBits [[gnu::may_alias]] = std::uint32_t;
+using DoubleBits [[gnu::may_alias]] = std::uint64_t;
+
+[[gnu::target_clones("avx512f", "avx2", "default")]] bool any_not_finite(const float* values, std::size_t n) {
+  const auto* a = reinterpret_cast<const FloatBits*>(values);
+  std::uint32_t carries = 0;
+  for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7F800000u) + 0x00800000u;
+  return (carries >> 31) != 0;
+}
+[[gnu::target_clones("avx512f", "avx2", "default")]] bool any_not_finite(const double* values, std::size_t n) {
+  const auto* a = reinterpret_cast<const DoubleBits*>(values);
+  std::uint64_t carries = 0;
+  for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7FF0000000000000ull) + 0x0010000000000000ull;
+  return (carries >> 63) != 0;
+}
+
+// The first index in [begin, end) whose value is not finite, or end.
 template <class T>
 std::size_t first_bad(const T* a, std::size_t begin, std::size_t end) {
-  using Bits = std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>;
-  constexpr Bits kExponent = std::bit_cast<Bits>(std::numeric_limits<T>::infinity());
-  constexpr Bits kLowestExponentBit = kExponent & ~(kExponent << 1);
-  constexpr Bits kSign = ~(std::numeric_limits<Bits>::max() >> 1);
-  Bits carries = 0;
-  for (std::size_t i = begin; i < end; ++i) carries |= (std::bit_cast<Bits>(a[i]) & kExponent) + kLowestExponentBit;
-  if ((carries & kSign) == 0) return end;
+  if (!any_not_finite(a + begin, end - begin)) return end;
   for (std::size_t i = begin; i < end; ++i) {
     if (!std::isfinite(a[i])) return i;
   }
@@ -124,15 +134,17 @@ StateArrays<T> state_arrays(RigidBodySet<T>& b) {
 }
 
 template <class T>
-void Checkpoint<T>::save(GuardJobs where, const StateArrays<T>& s) {
+void Checkpoint<T>::reserve(const StateArrays<T>& s) {
   for (int a = 0; a < s.count; ++a) {
     if (copy_[a].size() < s.padded) copy_[a] = AlignedArray<T>(s.padded);
   }
-  for_each_block(where.jobs, where.parallel, s.padded, [&](Block b) {
-    for (int a = 0; a < s.count; ++a) {
-      std::memcpy(copy_[a].data() + b.begin, s.data[a] + b.begin, (b.end - b.begin) * sizeof(T));
-    }
-  });
+}
+
+template <class T>
+void Checkpoint<T>::save(const StateArrays<T>& s, Block b) {
+  for (int a = 0; a < s.count; ++a) {
+    std::memcpy(copy_[a].data() + b.begin, s.data[a] + b.begin, (b.end - b.begin) * sizeof(T));
+  }
 }
 
 template <class T>
@@ -152,56 +164,56 @@ std::size_t Checkpoint<T>::bytes() const {
 }
 
 template <class T>
-std::optional<NonFinite> scan_non_finite(GuardJobs where, const StateArrays<T>& s) {
-  std::atomic<std::size_t> lowest{kNoKey};
-  for_each_block(where.jobs, where.parallel, s.size, [&](Block b) {
-    for (int a = 0; a < s.count; ++a) {
-      const std::size_t i = first_bad(s.data[a], b.begin, b.end);
-      if (i < b.end) keep_lowest(lowest, key(i, a));
-    }
-  });
-  const std::size_t k = lowest.load();
-  if (k == kNoKey) return std::nullopt;
-  return NonFinite{k / StateArrays<T>::kMax, s.names[k % StateArrays<T>::kMax]};
+void FiniteScan<T>::scan(Block b) {
+  const std::size_t end = std::min(b.end, state_.size);  // padding is always finite
+  for (int a = 0; a < state_.count; ++a) {
+    const std::size_t i = first_bad(state_.data[a], b.begin, end);
+    if (i < end) keep_lowest(lowest_, key(i, a));
+  }
 }
 
 template <class T>
-void clamp_speeds(GuardJobs where, ParticleSet<T>& b, double max_speed) {
+std::optional<NonFinite> FiniteScan<T>::found() const {
+  const std::size_t k = lowest_.load();
+  if (k == kNoKey) return std::nullopt;
+  return NonFinite{k / StateArrays<T>::kMax, state_.names[k % StateArrays<T>::kMax]};
+}
+
+template <class T>
+void clamp_speeds(ParticleSet<T>& b, Block block, double max_speed) {
   T *vx = b.vx(), *vy = b.vy(), *vz = b.vz();
   const T* inv_mass = b.inv_mass();
-  for_each_block(where.jobs, where.parallel, b.size(), [&](Block block) {
-    if (count_over<T>(vx, vy, vz, nullptr, T(max_speed), block.begin, block.end) == 0) return;
-    for (std::size_t i = block.begin; i < block.end; ++i) {
-      if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
-    }
-  });
+  const std::size_t end = std::min(block.end, b.size());
+  if (count_over<T>(vx, vy, vz, nullptr, T(max_speed), block.begin, end) == 0) return;
+  for (std::size_t i = block.begin; i < end; ++i) {
+    if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
+  }
 }
 
 template <class T>
-void clamp_speeds(GuardJobs where, RigidBodySet<T>& b, double max_speed, double max_angular_speed) {
+void clamp_speeds(RigidBodySet<T>& b, Block block, double max_speed, double max_angular_speed) {
   T *vx = b.velocity_data(0), *vy = b.velocity_data(1), *vz = b.velocity_data(2);
-  T *lx = b.l(0), *ly = b.l(1), *lz = b.l(2);
+  const T *lx = b.l(0), *ly = b.l(1), *lz = b.l(2);
   const T* inv_mass = b.centers().inv_mass();
   const T *ix = b.inv_inertia(0), *iy = b.inv_inertia(1), *iz = b.inv_inertia(2);
-  for_each_block(where.jobs, where.parallel, b.size(), [&](Block block) {
-    if (count_over<T>(vx, vy, vz, nullptr, T(max_speed), block.begin, block.end) > 0) {
-      for (std::size_t i = block.begin; i < block.end; ++i) {
-        if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
-      }
+  const std::size_t end = std::min(block.end, b.size());
+  if (count_over<T>(vx, vy, vz, nullptr, T(max_speed), block.begin, end) > 0) {
+    for (std::size_t i = block.begin; i < end; ++i) {
+      if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
     }
-    // |omega| <= |L| max(1 / I): bodies under the limit by that bound are left alone.
-    if (count_over_angular(lx, ly, lz, ix, iy, iz, T(max_angular_speed), block.begin, block.end) == 0) return;
-    for (std::size_t i = block.begin; i < block.end; ++i) clamp_angular(b, i, max_angular_speed);
-  });
+  }
+  // |omega| <= |L| max(1 / I): bodies under the limit by that bound are left alone.
+  if (count_over_angular(lx, ly, lz, ix, iy, iz, T(max_angular_speed), block.begin, end) == 0) return;
+  for (std::size_t i = block.begin; i < end; ++i) clamp_angular(b, i, max_angular_speed);
 }
 
 #define KINEMA_GUARD(T)                                                                        \
   template StateArrays<T> state_arrays(ParticleSet<T>&);                                       \
   template StateArrays<T> state_arrays(RigidBodySet<T>&);                                      \
   template class Checkpoint<T>;                                                                \
-  template std::optional<NonFinite> scan_non_finite(GuardJobs, const StateArrays<T>&);         \
-  template void clamp_speeds(GuardJobs, ParticleSet<T>&, double);                              \
-  template void clamp_speeds(GuardJobs, RigidBodySet<T>&, double, double);
+  template class FiniteScan<T>;                                                                \
+  template void clamp_speeds(ParticleSet<T>&, Block, double);                                  \
+  template void clamp_speeds(RigidBodySet<T>&, Block, double, double);
 KINEMA_GUARD(float)
 KINEMA_GUARD(double)
 #undef KINEMA_GUARD

@@ -3,9 +3,12 @@
 // from, a scan for the first value that is not finite, and the speed clamp.
 
 #include <array>
+#include <atomic>
+#include <limits>
 #include <cstddef>
 #include <optional>
 
+#include "blocks.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/diagnostics.hpp"
 #include "kinema/job_system.hpp"
@@ -34,11 +37,15 @@ struct GuardJobs {
   bool parallel;
 };
 
+// The state an advance call starts from, saved block by block.
 template <class T>
 class Checkpoint {
  public:
-  // Grows its arrays when the state is larger than any saved before.
-  void save(GuardJobs where, const StateArrays<T>& state);
+  // Grows the copy when the state is larger than any saved before (not thread-safe: call
+  // before the blocks run).
+  void reserve(const StateArrays<T>& state);
+  // Blocks may be saved concurrently; restore puts every block back.
+  void save(const StateArrays<T>& state, Block block);
   void restore(GuardJobs where, const StateArrays<T>& state) const;
   std::size_t bytes() const;
 
@@ -46,17 +53,26 @@ class Checkpoint {
   std::array<AlignedArray<T>, StateArrays<T>::kMax> copy_;
 };
 
-// The lowest-numbered body with a value that is not finite, and its first such field.
+// Finds the lowest-numbered body with a value that is not finite, and its first such field,
+// over blocks scanned in any order on any thread.
 template <class T>
-std::optional<NonFinite> scan_non_finite(GuardJobs where, const StateArrays<T>& state);
+class FiniteScan {
+ public:
+  explicit FiniteScan(const StateArrays<T>& state) : state_(state) {}
+  void scan(Block block);
+  std::optional<NonFinite> found() const;
 
-// Scales every velocity longer than max_speed down to it (and every angular momentum whose
-// angular velocity exceeds max_angular_speed). An infinite component points the way; NaN is
-// left for the scan to find.
+ private:
+  const StateArrays<T>& state_;
+  std::atomic<std::size_t> lowest_{std::numeric_limits<std::size_t>::max()};
+};
+
+// Scales every velocity of the block longer than max_speed down to it (and every angular
+// momentum whose angular velocity exceeds max_angular_speed). An infinite component points
+// the way; NaN is left for the scan to find.
 template <class T>
-void clamp_speeds(GuardJobs where, ParticleSet<T>& bodies, double max_speed);
+void clamp_speeds(ParticleSet<T>& bodies, Block block, double max_speed);
 template <class T>
-void clamp_speeds(GuardJobs where, RigidBodySet<T>& bodies, double max_speed,
-                  double max_angular_speed);
+void clamp_speeds(RigidBodySet<T>& bodies, Block block, double max_speed, double max_angular_speed);
 
 }  // namespace kinema

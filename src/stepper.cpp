@@ -150,21 +150,28 @@ struct Stepper<T>::Impl {
     }
   }
 
-  // advance() under the guard: one call, then the scan; if the scan finds a value that is
-  // not finite, the saved state again step by step to find the step that made it.
+  // What the finiteness guard does inside a call: save each block before its steps, clamp
+  // after every step, scan each block after its last (on the fused path while the block is
+  // still in cache).
+  struct Guard {
+    const StateArrays<T>& state;
+    Checkpoint<T>& checkpoint;
+    FiniteScan<T> scan;
+    bool clamp;
+  };
+
   template <class Set>
-  void advance_guarded(Set& b, T step_size, std::uint64_t steps) {
+  void advance(Set& b, T step_size, std::uint64_t steps) {
+    if (options.guard == FiniteGuard::off) return run(b, step_size, steps, nullptr);
     const StateArrays<T> state = state_arrays(b);
+    checkpoint.reserve(state);
+    if (!guarded_run(b, step_size, steps, state)) return;
+    // Back to the start, then step by step to the step that made the value.
     const GuardJobs where{*jobs, b.size() >= options.inline_below};
-    checkpoint.save(where, state);
-    advance_clamped(b, step_size, steps, where);
-    if (!scan_non_finite(where, state)) return;
     checkpoint.restore(where, state);
     clock.steps -= steps;
     for (std::uint64_t k = 1; k <= steps; ++k) {
-      checkpoint.save(where, state);
-      advance_clamped(b, step_size, 1, where);
-      if (const auto bad = scan_non_finite(where, state)) {
+      if (const auto bad = guarded_run(b, step_size, 1, state)) {
         checkpoint.restore(where, state);
         --clock.steps;
         throw NonFiniteError(k, clock.time(), bad->body, bad->field);
@@ -173,28 +180,30 @@ struct Stepper<T>::Impl {
   }
 
   template <class Set>
-  void advance_clamped(Set& b, T step_size, std::uint64_t steps, GuardJobs where) {
-    if (options.guard != FiniteGuard::clamp) return advance_unguarded(b, step_size, steps);
+  std::optional<NonFinite> guarded_run(Set& b, T step_size, std::uint64_t steps, const StateArrays<T>& state) {
+    Guard guard{state, checkpoint, FiniteScan<T>(state), options.guard == FiniteGuard::clamp};
+    run(b, step_size, steps, &guard);
+    return guard.scan.found();
+  }
+
+  void clamp(ParticleSet<T>& b, Block block) const { clamp_speeds(b, block, options.max_speed); }
+  void clamp(RigidBodySet<T>& b, Block block) const {
+    clamp_speeds(b, block, options.max_speed, options.max_angular_speed);
+  }
+
+  // A block's steps with the guard's work around them. Each body's steps are the same
+  // operations whether its block takes them in one go or one at a time.
+  template <class Set, class Step>
+  void run_block(Set& b, Block block, std::uint64_t steps, Guard* guard, Step&& step) {
+    if (guard) guard->checkpoint.save(guard->state, block);
     for (std::uint64_t k = 0; k < steps; ++k) {
-      advance_unguarded(b, step_size, 1);
-      clamp(b, where);
+      step(block);
+      if (guard && guard->clamp) clamp(b, block);
     }
-  }
-  void clamp(ParticleSet<T>& b, GuardJobs where) const { clamp_speeds(where, b, options.max_speed); }
-  void clamp(RigidBodySet<T>& b, GuardJobs where) const {
-    clamp_speeds(where, b, options.max_speed, options.max_angular_speed);
+    if (guard) guard->scan.scan(block);
   }
 
-  template <class Set>
-  void advance(Set& b, T step_size, std::uint64_t steps) {
-    if (options.guard == FiniteGuard::off) return advance_unguarded(b, step_size, steps);
-    check_step_size(step_size, b);  // a bad h throws before the copy
-    advance_guarded(b, step_size, steps);
-  }
-  void check_step_size(T step_size, const ParticleSet<T>&) const { check_step_size(step_size, lowered->particle); }
-  void check_step_size(T step_size, const RigidBodySet<T>&) const { check_step_size(step_size, lowered->rigid); }
-
-  void advance_unguarded(RigidBodySet<T>& b, T step_size, std::uint64_t steps) {
+  void run(RigidBodySet<T>& b, T step_size, std::uint64_t steps, Guard* guard) {
     if (rigid_fn == nullptr) {
       throw Error("rigid bodies need a built-in method and local force terms only (no "
                   "callbacks, no coupled terms)");
@@ -206,31 +215,35 @@ struct Stepper<T>::Impl {
                                    lowered->rigid, lowered->rotation, c.h,
                                    options.renormalize_quaternions};
     for_each_block(b.centers_, [&](Block block) {
-      for (std::uint64_t k = 0; k < steps; ++k) rigid_fn(job, block.begin, block.end);
+      run_block(b, block, steps, guard, [&](Block k) { rigid_fn(job, k.begin, k.end); });
     });
     clock.steps += steps;
   }
 
-  void advance_unguarded(ParticleSet<T>& b, T step_size, std::uint64_t steps) {
+  void run(ParticleSet<T>& b, T step_size, std::uint64_t steps, Guard* guard) {
     check_reach(b);
     StepContext<T> c = start(b, step_size, lowered->particle);
-    if (fused_fn == nullptr) return advance_staged(c, steps);
+    if (fused_fn == nullptr) return run_staged(c, steps, guard);
     // Local, time-independent forces: each block can take all its steps while it sits in
     // cache. Every body sees the same operations as step by step, so the bits agree.
     const kernels::FusedJob<T> job{arrays(b), lowered->particle, c.h};
     for_each_block(b, [&](Block block) {
-      for (std::uint64_t k = 0; k < steps; ++k) fused_fn(job, block.begin, block.end);
+      run_block(b, block, steps, guard, [&](Block k) { fused_fn(job, k.begin, k.end); });
     });
     clock.steps += steps;
   }
 
-  void advance_staged(StepContext<T>& c, std::uint64_t steps) {
+  // One pass per stage: the guard's save, clamp and scan are passes of their own.
+  void run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
     staged->reserve(c.bodies.padded_size());
+    if (guard) for_each_block(c.bodies, [&](Block b) { guard->checkpoint.save(guard->state, b); });
     for (std::uint64_t k = 0; k < steps; ++k) {
       c.t0 = clock.time();
       staged->step(c, *jobs, options.inline_below);
       ++clock.steps;
+      if (guard && guard->clamp) for_each_block(c.bodies, [&](Block b) { clamp(c.bodies, b); });
     }
+    if (guard) for_each_block(c.bodies, [&](Block b) { guard->scan.scan(b); });
   }
 };
 
