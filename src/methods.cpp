@@ -1,6 +1,7 @@
 #include "kinema/methods.hpp"
 
 #include <cmath>
+#include <span>
 #include <string>
 
 #include "kinema/error.hpp"
@@ -9,9 +10,11 @@ namespace kinema {
 
 const Method& method_by_name(std::string_view name) {
   std::string known;
-  for (const Method* m : builtin_methods) {
-    if (m->name == name) return *m;
-    known += (known.empty() ? "" : ", ") + std::string(m->name);
+  for (const auto& list : {std::span<const Method* const>(builtin_methods), std::span<const Method* const>(staged_methods)}) {
+    for (const Method* m : list) {
+      if (m->name == name) return *m;
+      known += (known.empty() ? "" : ", ") + std::string(m->name);
+    }
   }
   throw Error("unknown method '" + std::string(name) + "' (known: " + known + ")");
 }
@@ -22,7 +25,7 @@ bool same_coefficients(const Method& a, const Method& b) {
   if (a.kind != b.kind) return false;
   if (a.kind == MethodKind::runge_kutta) {
     return a.tableau.stages == b.tableau.stages && a.tableau.a == b.tableau.a &&
-           a.tableau.b == b.tableau.b && a.tableau.c == b.tableau.c;
+           a.tableau.b == b.tableau.b && a.tableau.c == b.tableau.c && a.tableau.b_hat == b.tableau.b_hat;
   }
   if (a.scheme.count != b.scheme.count) return false;
   for (int i = 0; i < a.scheme.count; ++i) {
@@ -48,19 +51,26 @@ int builtin_index(const Method& method) {
 void validate(const Method& m) {
   if (m.kind == MethodKind::runge_kutta) {
     const auto& t = m.tableau;
-    check(t.stages >= 1 && t.stages <= kMaxStages, m, "stages must be 1..4");
+    check(t.stages >= 1 && t.stages <= kMaxStages, m, "stages must be 1.." + std::to_string(kMaxStages));
+    bool any_b_hat = false;
     for (int i = 0; i < kMaxStages; ++i) {
-      check(std::isfinite(t.b[i]) && std::isfinite(t.c[i]), m, "non-finite coefficient");
+      check(std::isfinite(t.b[i]) && std::isfinite(t.c[i]) && std::isfinite(t.b_hat[i]), m,
+            "non-finite coefficient");
+      any_b_hat |= t.b_hat[i] != 0;
+      check(i < t.stages || t.b_hat[i] == 0, m, "coefficients beyond the last stage");
       for (int j = 0; j < kMaxStages; ++j) {
         check(std::isfinite(t.a[i][j]), m, "non-finite coefficient");
         check(j < i || t.a[i][j] == 0, m, "tableau a must be strictly lower triangular");
       }
       check(i < t.stages || (t.b[i] == 0 && t.c[i] == 0), m, "coefficients beyond the last stage");
     }
+    check(any_b_hat == (m.embedded_order > 0), m, "embedded weights b_hat and embedded_order go together");
+    check(m.embedded_order >= 0 && m.embedded_order < m.order + 1, m, "embedded_order out of range");
     return;
   }
   const auto& s = m.scheme;
-  check(s.count >= 1 && s.count <= kMaxStages, m, "a scheme has 1..4 operations");
+  check(s.count >= 1 && s.count <= kMaxStages, m, "a scheme has 1.." + std::to_string(kMaxStages) + " operations");
+  check(m.embedded_order == 0, m, "a kick-drift scheme has no embedded pair");
   for (int i = 0; i < s.count; ++i) {
     check(std::isfinite(s.ops[i].weight) && std::isfinite(s.ops[i].time), m,
           "non-finite coefficient");

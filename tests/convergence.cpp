@@ -110,3 +110,45 @@ TEST_CASE("a user tableau with an all-zero row reads the bodies' own state there
   CHECK(test::distance(a.x, b.x) < 1e-15);
   CHECK(test::distance(a.v, b.v) < 1e-15);
 }
+
+namespace {
+
+// The e = 0.6 Kepler orbit over 4 s (a nonlinear force: every order condition counts), in
+// double, against Kepler's equation.
+std::vector<double> kepler_errors(const Method& method, std::uint64_t steps) {
+  const Scene scene = load_scene(KINEMA_SCENES "/kepler_eccentric.json");
+  const double duration = scene.dt * double(scene.steps);
+  const BodyStates exact = *analytic_states(scene, duration);
+  std::vector<double> errors;
+  for (std::uint64_t k : {1, 2, 4}) errors.push_back(state_error(simulate(scene, method, steps * k, duration), exact));
+  return errors;
+}
+
+double kepler_order(const Method& method, std::uint64_t steps) {
+  const std::vector<double> err = kepler_errors(method, steps);
+  INFO(method.name << " errors " << err[0] << " " << err[1] << " " << err[2]);
+  CHECK(std::log2(err[0] / err[1]) == Approx(std::log2(err[1] / err[2])).margin(0.25));
+  return test::fitted_order({4.0 / double(steps), 2.0 / double(steps), 1.0 / double(steps)}, err);
+}
+
+// A pair's embedded solution as a method of its own: the weights b_hat in place of b.
+Method embedded_solution(const Method& pair) {
+  Method m = pair;
+  m.name = "embedded";
+  m.order = pair.embedded_order;
+  m.tableau.b = pair.tableau.b_hat;
+  m.tableau.b_hat = {};
+  m.embedded_order = 0;
+  return m;
+}
+
+}  // namespace
+
+TEST_CASE("the embedded pairs and rk6 converge at orders 3 and 2, 5 and 4, and 6 on an orbit",
+          "[convergence]") {
+  CHECK(kepler_order(bs3, 400) == Approx(3).margin(0.1));
+  CHECK(kepler_order(embedded_solution(bs3), 400) == Approx(2).margin(0.1));
+  CHECK(kepler_order(dopri5, 200) == Approx(5).margin(0.25));
+  CHECK(kepler_order(embedded_solution(dopri5), 1000) == Approx(4).margin(0.25));
+  CHECK(kepler_order(rk6, 100) == Approx(6).margin(0.2));
+}

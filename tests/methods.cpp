@@ -1,13 +1,17 @@
 // Methods as data: the tableaus satisfy their order conditions; lookups and validation.
 #include <catch2/catch.hpp>
 
+#include <vector>
+
 #include "kinema/error.hpp"
 #include "kinema/methods.hpp"
 
 using namespace kinema;
 
 TEST_CASE("every tableau is consistent: sum b = 1 and c_i = sum_j a_ij", "[methods]") {
-  for (const Method* m : builtin_methods) {
+  std::vector<const Method*> all(builtin_methods.begin(), builtin_methods.end());
+  all.insert(all.end(), staged_methods.begin(), staged_methods.end());
+  for (const Method* m : all) {
     if (m->kind != MethodKind::runge_kutta) continue;
     const auto& t = m->tableau;
     double sum_b = 0;
@@ -19,7 +23,17 @@ TEST_CASE("every tableau is consistent: sum b = 1 and c_i = sum_j a_ij", "[metho
       CHECK(row == Approx(t.c[i]));
     }
     CHECK(sum_b == Approx(1.0));
+    if (m->embedded_order > 0) {
+      double sum_b_hat = 0;
+      for (int i = 0; i < t.stages; ++i) sum_b_hat += t.b_hat[i];
+      CHECK(sum_b_hat == Approx(1.0));
+    }
   }
+  // The embedded pairs reuse their last stage as the next step's first.
+  CHECK(bs3.tableau.first_same_as_last());
+  CHECK(dopri5.tableau.first_same_as_last());
+  CHECK_FALSE(rk4.tableau.first_same_as_last());
+  CHECK_FALSE(rk6.tableau.first_same_as_last());
 }
 
 TEST_CASE("rk4's tableau meets the fourth-order conditions", "[methods]") {
@@ -50,9 +64,14 @@ TEST_CASE("methods are found by name, and unknown names list the known ones", "[
     CHECK(&method_by_name(m->name) == m);
     CHECK(builtin_index(*m) >= 0);
   }
+  for (const Method* m : staged_methods) {
+    CHECK(&method_by_name(m->name) == m);
+    CHECK(builtin_index(*m) == -1);
+    CHECK_NOTHROW(validate(*m));
+  }
   CHECK_THROWS_WITH(method_by_name("rk5"),
                     "unknown method 'rk5' (known: euler, midpoint, heun, rk4, "
-                    "symplectic_euler, velocity_verlet)");
+                    "symplectic_euler, velocity_verlet, bs3, dopri5, rk6)");
 }
 
 TEST_CASE("invalid user methods are refused", "[methods][errors]") {
@@ -62,8 +81,12 @@ TEST_CASE("invalid user methods are refused", "[methods][errors]") {
   CHECK_THROWS_WITH(validate(upper), Catch::Contains("strictly lower triangular"));
   Method big = rk4;
   big.name = "big";
-  big.tableau.stages = 5;
-  CHECK_THROWS_WITH(validate(big), Catch::Contains("method 'big': stages must be 1..4"));
+  big.tableau.stages = 8;
+  CHECK_THROWS_WITH(validate(big), Catch::Contains("method 'big': stages must be 1..7"));
+  Method half_pair = rk4;
+  half_pair.name = "half_pair";
+  half_pair.tableau.b_hat = {0.5, 0.5};
+  CHECK_THROWS_WITH(validate(half_pair), Catch::Contains("b_hat and embedded_order go together"));
   Method empty = symplectic_euler;
   empty.name = "empty";
   empty.scheme.count = 0;

@@ -4,7 +4,8 @@
 // An explicit Runge-Kutta method is its Butcher tableau (a, b, c). A symplectic method is a
 // sequence of kicks (v += w h a(x, v, t0 + c h)) and drifts (x += w h v). Adding a method
 // means adding a constant here (and listing it in `builtin_methods` to get the fused
-// kernel); no kernel is written for it.
+// kernel, or in `staged_methods`); no kernel is written for it. An embedded pair also gives
+// the weights of a second, lower-order solution: their difference estimates the error.
 
 #include <array>
 #include <span>
@@ -12,13 +13,20 @@
 
 namespace kinema {
 
-inline constexpr int kMaxStages = 4;
+inline constexpr int kMaxStages = 7;
 
 struct ButcherTableau {
   int stages = 0;
   std::array<std::array<double, kMaxStages>, kMaxStages> a{};  // strictly lower triangular
   std::array<double, kMaxStages> b{};
   std::array<double, kMaxStages> c{};
+  std::array<double, kMaxStages> b_hat{};  // embedded weights; all zero without a pair
+
+  // The last stage is evaluated at the new solution (last row of a = b, c = 1): an accepted
+  // step's last acceleration is the next step's first.
+  constexpr bool first_same_as_last() const {
+    return stages > 1 && c[stages - 1] == 1 && a[stages - 1] == b;
+  }
 };
 
 enum class OpKind { kick, drift };
@@ -42,6 +50,7 @@ struct Method {
   int order = 0;  // global order of accuracy for smooth, velocity-independent forces
   ButcherTableau tableau{};
   KickDriftScheme scheme{};
+  int embedded_order = 0;  // order of the b_hat solution; 0: no embedded pair
 
   // Force evaluations per step.
   constexpr int evaluations() const {
@@ -87,11 +96,60 @@ inline constexpr Method velocity_verlet{
     {},
     {3, {{{OpKind::kick, 0.5, 0}, {OpKind::drift, 1, 0}, {OpKind::kick, 0.5, 1}}}}};
 
+// Bogacki-Shampine 3(2): third order, with a second-order embedded solution; FSAL.
+inline constexpr Method bs3{"bs3",
+                            MethodKind::runge_kutta,
+                            3,
+                            {4,
+                             {{{}, {0.5}, {0, 0.75}, {2.0 / 9, 1.0 / 3, 4.0 / 9}}},
+                             {2.0 / 9, 1.0 / 3, 4.0 / 9, 0},
+                             {0, 0.5, 0.75, 1},
+                             {7.0 / 24, 0.25, 1.0 / 3, 0.125}},
+                            {},
+                            2};
+
+// Dormand-Prince 5(4): fifth order, with a fourth-order embedded solution; FSAL.
+inline constexpr Method dopri5{
+    "dopri5",
+    MethodKind::runge_kutta,
+    5,
+    {7,
+     {{{},
+       {1.0 / 5},
+       {3.0 / 40, 9.0 / 40},
+       {44.0 / 45, -56.0 / 15, 32.0 / 9},
+       {19372.0 / 6561, -25360.0 / 2187, 64448.0 / 6561, -212.0 / 729},
+       {9017.0 / 3168, -355.0 / 33, 46732.0 / 5247, 49.0 / 176, -5103.0 / 18656},
+       {35.0 / 384, 0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84}}},
+     {35.0 / 384, 0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84, 0},
+     {0, 1.0 / 5, 3.0 / 10, 4.0 / 5, 8.0 / 9, 1, 1},
+     {5179.0 / 57600, 0, 7571.0 / 16695, 393.0 / 640, -92097.0 / 339200, 187.0 / 2100, 1.0 / 40}},
+    {},
+    4};
+
+// Butcher's sixth-order method in seven stages (rational coefficients), fixed step.
+inline constexpr Method rk6{"rk6",
+                            MethodKind::runge_kutta,
+                            6,
+                            {7,
+                             {{{},
+                               {1.0 / 3},
+                               {0, 2.0 / 3},
+                               {1.0 / 12, 1.0 / 3, -1.0 / 12},
+                               {-1.0 / 16, 9.0 / 8, -3.0 / 16, -3.0 / 8},
+                               {0, 9.0 / 8, -3.0 / 8, -3.0 / 4, 0.5},
+                               {9.0 / 44, -9.0 / 11, 63.0 / 44, 18.0 / 11, 0, -16.0 / 11}}},
+                             {11.0 / 120, 0, 27.0 / 40, 27.0 / 40, -4.0 / 15, -4.0 / 15, 11.0 / 120},
+                             {0, 1.0 / 3, 2.0 / 3, 1.0 / 3, 0.5, 0.5, 1}},
+                            {}};
+
 // The methods with a compiled fused kernel, in a fixed order (their index is stable).
 inline constexpr std::array<const Method*, 6> builtin_methods = {
     &euler, &midpoint, &heun, &rk4, &symplectic_euler, &velocity_verlet};
+// Named methods without one: they take the staged path.
+inline constexpr std::array<const Method*, 3> staged_methods = {&bs3, &dopri5, &rk6};
 
-// The built-in method of that name; throws kinema::Error listing the known names.
+// The built-in or staged method of that name; throws kinema::Error listing the known names.
 const Method& method_by_name(std::string_view name);
 
 // Index of `method` in builtin_methods when its coefficients equal a built-in's, else -1.
