@@ -1,6 +1,7 @@
 #include "staged_path.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 namespace kinema {
 
@@ -63,11 +64,12 @@ void StagedPath<T>::reserve(std::size_t padded) {
   if (needs_force_scratch()) {
     for (auto& f : force_) f.resize(padded);
   }
-  if (may_throw()) {
+  if (keeps_state()) {
     for (auto& kept : saved_) {
       for (auto& a : kept) a.resize(padded);
     }
   }
+  if (method_.embedded_order > 0) block_error_.resize(block_count(padded));
   capacity_ = padded;
 }
 
@@ -85,6 +87,50 @@ void StagedPath<T>::step(const StepContext<T>& c, JobSystem& jobs, std::size_t i
     }
     throw;
   }
+}
+
+template <class T>
+double StagedPath<T>::attempt(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below, const Attempt& a) {
+  attempt_ = &a;
+  std::fill(block_error_.begin(), block_error_.end(), 0.0);
+  if (!saves_in_block()) {
+    for_each_block(jobs, c.bodies.size() >= inline_below, c.bodies.padded_size(),
+                   [&](Block b) { copy_state(c, b, true); });
+  }
+  try {
+    run_phases(c, jobs, inline_below);
+  } catch (...) {
+    attempt_ = nullptr;
+    take_back(c, jobs, inline_below);
+    throw;
+  }
+  attempt_ = nullptr;
+  double sum = 0;
+  for (std::size_t i = 0; i < block_count(c.bodies.padded_size()); ++i) sum += block_error_[i];
+  return std::sqrt(sum / (6.0 * double(std::max<std::size_t>(c.bodies.size(), 1))));
+}
+
+template <class T>
+void StagedPath<T>::take_back(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
+  for_each_block(jobs, c.bodies.size() >= inline_below, c.bodies.padded_size(),
+                 [&](Block b) { copy_state(c, b, false); });
+}
+
+template <class T>
+void StagedPath<T>::keep_last_stage() {
+  std::swap(stage_a_[0], stage_a_[method_.tableau.stages - 1]);
+}
+
+template <class T>
+void StagedPath<T>::evaluate_first_stage(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
+  first_stage_only_ = true;
+  try {
+    run_phases(c, jobs, inline_below);
+  } catch (...) {
+    first_stage_only_ = false;
+    throw;
+  }
+  first_stage_only_ = false;
 }
 
 template <class T>
@@ -107,15 +153,40 @@ void StagedPath<T>::run_phases(const StepContext<T>& c, JobSystem& jobs, std::si
   const bool parallel = c.bodies.size() >= inline_below;
   if (coupled()) {
     for (int p = 0; p < phase_count_; ++p) {
+      if (skipped(phases_[p])) continue;
       // Gravity costs a block n interactions per body: worth the threads at any n.
       const bool quadratic = phases_[p].kind == PhaseKind::coupled && coupled_.nbody;
       for_each_block(jobs, parallel || quadratic, n, [&](Block b) { run(c, phases_[p], b); });
     }
     return;
   }
-  for_each_block(jobs, parallel, n, [&](Block b) {
-    for (int p = 0; p < phase_count_; ++p) run(c, phases_[p], b);
-  });
+  for_each_block(jobs, parallel, n, [&](Block b) { run_block(c, b); });
+}
+
+// Every phase of one block while it is in cache (no coupled terms).
+template <class T>
+void StagedPath<T>::run_block(const StepContext<T>& c, Block b) {
+  if (attempt_ != nullptr && saves_in_block()) copy_state(c, b, true);
+  for (int p = 0; p < phase_count_; ++p) {
+    if (!skipped(phases_[p])) run(c, phases_[p], b);
+  }
+}
+
+// An attempt that reuses stage 0 evaluates nothing there; evaluate_first_stage runs stage 0
+// alone.
+template <class T>
+bool StagedPath<T>::skipped(const Phase& p) const {
+  const bool first = (p.kind == PhaseKind::stage || p.kind == PhaseKind::coupled) && p.index == 0;
+  if (first_stage_only_) return !first;
+  return first && p.kind == PhaseKind::coupled && attempt_ != nullptr && attempt_->reuse_scale > 0;
+}
+
+template <class T>
+void StagedPath<T>::scale_first_stage(Block b) {
+  const T scale = attempt_->reuse_scale;
+  for (auto& a : stage_a_[0]) {
+    for (std::size_t i = b.begin; i < b.end; ++i) a[i] *= scale;
+  }
 }
 
 // Stage s's state is the bodies' own for stage 0, for a stage whose tableau row is all
@@ -176,6 +247,7 @@ void StagedPath<T>::run(const StepContext<T>& c, const Phase& p, Block b) {
 template <class T>
 void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) {
   const int s = accel_slot(p);
+  if (s == 0 && attempt_ != nullptr && attempt_->reuse_scale > 0) return scale_first_stage(b);
   kernels::StageJob<T> job{};
   job.accel_scale = c.accel_scale;
   job.inv_mass = c.bodies.inv_mass();
@@ -279,6 +351,39 @@ void StagedPath<T>::run_finish(const StepContext<T>& c, Block b) {
   // Positions first: they read the stage-0 velocities, which are the bodies' own.
   table_.combine(x, b.begin, b.end);
   table_.combine(v, b.begin, b.end);
+  if (attempt_ != nullptr) block_error_[b.begin / kBlockBodies] = block_error(c, b);
+}
+
+// sum over the block's components of (e / (atol + rtol max(|y0|, |y1|)))^2, in double, with
+// e = h sum_s (b_s - b_hat_s) k_s (velocity stages for positions, accelerations, kept times
+// sigma h, for velocities). y0 is the state kept by the attempt.
+template <class T>
+double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
+  const auto& t = method_.tableau;
+  const double sigma = kernels::acceleration_scale(t);
+  const auto body = arrays(c.bodies);
+  double sum = 0;
+  for (int field = 0; field < 2; ++field) {
+    for (int d = 0; d < 3; ++d) {
+      const T* y0 = saved_[field][d].data();
+      const T* y1 = field == 0 ? body.x[d] : body.v[d];
+      std::array<const T*, kMaxStages> k{};
+      std::array<double, kMaxStages> w{};
+      for (int s = 0; s < t.stages; ++s) {
+        // A stage that reads the bodies' own velocities reads them as they were: the finish
+        // has moved them on.
+        k[s] = field == 1 ? accelerations(s)[d] : own_state(s) ? saved_[1][d].data() : velocities(c, s)[d];
+        w[s] = (t.b[s] - t.b_hat[s]) * (field == 0 ? double(c.h) : 1 / sigma);
+      }
+      for (std::size_t i = b.begin; i < b.end; ++i) {
+        double e = 0;
+        for (int s = 0; s < t.stages; ++s) e += w[s] * double(k[s][i]);
+        const double scale = attempt_->atol + attempt_->rtol * std::max(std::abs(double(y0[i])), std::abs(double(y1[i])));
+        sum += (e / scale) * (e / scale);
+      }
+    }
+  }
+  return sum;
 }
 
 template <class T>

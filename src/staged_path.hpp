@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstddef>
+#include <vector>
 
 #include "blocks.hpp"
 #include "coupled_forces.hpp"
@@ -35,6 +36,30 @@ class StagedPath {
   // exception is rethrown here, on the calling thread.
   void step(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
 
+  // Error control, for a method with an embedded pair: one step that can be taken back.
+  struct Attempt {
+    double rtol = 0, atol = 0;
+    // > 0: stage 0's accelerations are the ones kept (see keep_last_stage) times this, the
+    // ratio of this step's acceleration scale to theirs; 0: they are evaluated.
+    T reuse_scale = 0;
+  };
+  // Runs one step as step() does, keeping the state it started from, and returns the error
+  // estimate's weighted RMS norm: sqrt(mean over every body's position and velocity
+  // components of (e / (atol + rtol max(|y0|, |y1|)))^2), e the difference of the two
+  // solutions. Blocks' sums are added in block order, so the norm does not depend on threads.
+  double attempt(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below, const Attempt& a);
+  // Puts back the state the last attempt started from.
+  void take_back(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
+  // After an accepted step of a method whose last stage is evaluated at the new state: that
+  // stage's accelerations become the ones kept for the next attempt's stage 0.
+  void keep_last_stage();
+  // Evaluates stage 0 alone (the accelerations at the bodies' state, times the context's
+  // acceleration scale) and keeps them as an attempt's reuse_scale expects.
+  void evaluate_first_stage(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
+  // Stage 0's accelerations (times the scale they were evaluated with), for the driver's
+  // first step size.
+  std::array<const T*, 3> first_stage() const { return accelerations(0); }
+
  private:
   enum class PhaseKind { stage, coupled, finish, kick, drift };
   struct Phase {
@@ -60,7 +85,11 @@ class StagedPath {
   double phase_time(const StepContext<T>& c, const Phase& p) const;
   ParticleBlock<T> block_view(const StepContext<T>& c, int s, Block b, double t);
 
+  void run_block(const StepContext<T>& c, Block b);
   void run(const StepContext<T>& c, const Phase& p, Block b);
+  bool skipped(const Phase& p) const;
+  void scale_first_stage(Block b);
+  double block_error(const StepContext<T>& c, Block b) const;
   void run_stage(const StepContext<T>& c, const Phase& p, Block b);
   void run_coupled(const StepContext<T>& c, const Phase& p, Block b);
   void add_gravity(const StepContext<T>& c, int s, Block b);
@@ -85,6 +114,15 @@ class StagedPath {
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> stage_x_, stage_v_, stage_a_;
   std::array<AlignedArray<T>, 3> force_;
   std::array<std::array<AlignedArray<T>, 3>, 2> saved_;  // x and v before a step that may throw
+  // The attempt in progress (error control), and each block's sum of squared weighted errors.
+  const Attempt* attempt_ = nullptr;
+  bool first_stage_only_ = false;
+  std::vector<double> block_error_;
+  bool keeps_state() const { return may_throw() || method_.embedded_order > 0; }
+  // An attempt saves each block as it starts on it, unless a block may throw (then every
+  // block must be saved before any runs, to put them all back) or phases run as jobs of
+  // their own.
+  bool saves_in_block() const { return !may_throw() && !coupled(); }
 };
 
 extern template class StagedPath<float>;

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "blocks.hpp"
+#include "error_control.hpp"
 #include "finite_guard.hpp"
 #include "force_lowering.hpp"
 #include "kernels/kernels.hpp"
@@ -233,6 +234,96 @@ struct Stepper<T>::Impl {
     clock.steps += steps;
   }
 
+  AdaptiveStats advance_to(ParticleSet<T>& b, double t_end, const Tolerances& tol) {
+    check_adaptive(t_end, tol);
+    check_reach(b);
+    staged->reserve(b.padded_size());
+    AdaptiveStats stats;
+    double t = clock.time();
+    if (t_end == t) return stats;
+    StepController controller(std::min(method.order, method.embedded_order));
+    T kept_scale = 0;  // the acceleration scale stage 0's kept accelerations carry; 0: none
+    double h = tol.initial_step > 0 ? tol.initial_step : first_step(b, t_end - t, tol, kept_scale, stats);
+    while (t < t_end) {
+      h = std::min(h, tol.max_step);
+      const bool last = t + 1.01 * h >= t_end;  // no sliver of a last step
+      const T size = T(last ? t_end - t : h);
+      if (!(size > 0) || t + double(size) == t) {
+        throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
+                    "; the tolerances cannot be met in " + type_name<T>());
+      }
+      StepContext<T> c = start(b, size, lowered->particle);
+      c.t0 = clock.time();
+      const typename StagedPath<T>::Attempt attempt{tol.rtol, tol.atol, kept_scale > 0 ? c.accel_scale / kept_scale : T(0)};
+      const double err = staged->attempt(c, *jobs, options.inline_below, attempt);
+      stats.evaluations += std::uint64_t(method.tableau.stages - (kept_scale > 0 ? 1 : 0));
+      const bool accepted = err <= 1;
+      if (accepted) {
+        ++clock.steps;
+        if (last) clock.set(t_end);
+        t = clock.time();
+        ++stats.accepted;
+        stats.smallest_step = stats.accepted == 1 ? double(size) : std::min(stats.smallest_step, double(size));
+        stats.largest_step = std::max(stats.largest_step, double(size));
+        if (method.tableau.first_same_as_last()) staged->keep_last_stage();
+        kept_scale = method.tableau.first_same_as_last() ? c.accel_scale : T(0);
+      } else {
+        staged->take_back(c, *jobs, options.inline_below);
+        ++stats.rejected;
+        kept_scale = c.accel_scale;  // stage 0 was evaluated at the state kept
+      }
+      h = controller.next(double(size), err, accepted);
+    }
+    return stats;
+  }
+
+  void check_adaptive(double t_end, const Tolerances& tol) const {
+    if (method.embedded_order == 0) {
+      throw Error("advance_to needs a method with an embedded pair (bs3, dopri5); " +
+                  std::string(method.name) + " has none");
+    }
+    const auto nonnegative = [](double x) { return std::isfinite(x) && x >= 0; };
+    if (!nonnegative(tol.rtol) || !nonnegative(tol.atol) || (tol.rtol == 0 && tol.atol == 0)) {
+      throw Error("tolerances: rtol and atol must be finite and >= 0, not both 0; got rtol " +
+                  shortest_text(tol.rtol) + ", atol " + shortest_text(tol.atol));
+    }
+    if (!nonnegative(tol.initial_step) || !(tol.max_step > 0)) {
+      throw Error("tolerances: initial_step must be finite and >= 0, max_step > 0");
+    }
+    if (!std::isfinite(t_end) || t_end < clock.time()) {
+      throw Error("advance_to: t_end " + shortest_text(t_end) + " must be finite and not before time() = " +
+                  shortest_text(clock.time()));
+    }
+  }
+
+  // 0.01 |y| / |f(y)| in the error norm's weights (Hairer and Wanner's first guess), from
+  // stage 0's accelerations, which the first attempt then reuses.
+  double first_step(ParticleSet<T>& b, double span, const Tolerances& tol, T& kept_scale, AdaptiveStats& stats) {
+    const T probe = T(std::min(span, 1.0));
+    check_step_size(probe, lowered->particle);
+    StepContext<T> c{b, probe, accel_scale(probe)};
+    c.t0 = clock.time();
+    staged->evaluate_first_stage(c, *jobs, options.inline_below);
+    ++stats.evaluations;
+    kept_scale = c.accel_scale;
+    const auto acc = staged->first_stage();
+    const T* x[3] = {b.px(), b.py(), b.pz()};
+    const T* v[3] = {b.vx(), b.vy(), b.vz()};
+    double y2 = 0, f2 = 0;
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t i = 0; i < b.size(); ++i) {
+        const double wx = tol.atol + tol.rtol * std::abs(double(x[d][i]));
+        const double wv = tol.atol + tol.rtol * std::abs(double(v[d][i]));
+        const double a = double(acc[d][i]) / double(c.accel_scale);
+        y2 += (x[d][i] / wx) * (x[d][i] / wx) + (v[d][i] / wv) * (v[d][i] / wv);
+        f2 += (v[d][i] / wx) * (v[d][i] / wx) + (a / wv) * (a / wv);
+      }
+    }
+    const double d0 = std::sqrt(y2), d1 = std::sqrt(f2);  // the common 1 / 6N cancels
+    const double h = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
+    return std::min(h, span);
+  }
+
   // One pass per stage: the guard's save, clamp and scan are passes of their own.
   void run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
     staged->reserve(c.bodies.padded_size());
@@ -271,6 +362,11 @@ void Stepper<T>::step(ParticleSet<T>& io_bodies, T h) {
 template <class T>
 void Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps) {
   impl_->advance(io_bodies, h, steps);
+}
+
+template <class T>
+AdaptiveStats Stepper<T>::advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances) {
+  return impl_->advance_to(io_bodies, t_end, tolerances);
 }
 
 template <class T>

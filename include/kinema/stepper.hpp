@@ -10,6 +10,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 
 #include "kinema/bodies.hpp"
@@ -64,6 +65,23 @@ inline StepperOptions on_calling_thread(StepperOptions options = {}) {
   return options;
 }
 
+// Error control for Stepper::advance_to. A step is accepted when the weighted RMS norm of
+// its error estimate is at most 1: the mean over every body's position and velocity
+// components of (e / (atol + rtol max(|y_old|, |y_new|)))^2, square-rooted, as SUNDIALS
+// defines it (e the difference of the pair's two solutions).
+struct Tolerances {
+  double rtol = 1e-6;          // finite, >= 0
+  double atol = 1e-6;          // finite, >= 0 (length and velocity units); not both 0
+  double initial_step = 0;     // 0: 0.01 |y| / |f(y)| in the same norm, at most t_end - t
+  double max_step = std::numeric_limits<double>::infinity();
+};
+
+struct AdaptiveStats {
+  std::uint64_t accepted = 0, rejected = 0;
+  std::uint64_t evaluations = 0;  // force evaluations (stages; a reused one is not counted)
+  double smallest_step = 0, largest_step = 0;  // of the accepted steps
+};
+
 // Bodies per block: the unit of work handed to the job system. Fixed, so the partition
 // (and every result) is the same for any number of threads. 1024 bodies is 4 KiB per
 // float array, 8 KiB per double array: a block's stage state stays in L1/L2.
@@ -89,6 +107,15 @@ class Stepper {
   // between those steps: call step() for that. What user code throws leaves the set as
   // before the step that threw; time() counts the steps completed.
   void advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps);
+  // With an embedded pair (bs3, dopri5): steps from time() to t_end choosing each step's
+  // size, and returns what it took. A step whose error is too large is taken back (the bodies
+  // as they were) and tried shorter; the next size comes from a PI controller (see
+  // error_control.hpp); the last step lands on t_end. A pair whose last stage is evaluated at
+  // the new state (FSAL) reuses it as the next step's first. The accepted steps depend only
+  // on the bodies and the tolerances: the same on every thread count and instruction set.
+  // Throws kinema::Error for a method without a pair, bad tolerances, t_end before time(),
+  // or a step that would underflow.
+  AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances);
   // Rigid bodies: the same, with orientation and angular momentum. They take the fused
   // path only: a built-in method and local force terms (kinema::Error otherwise). Use one
   // stepper per body set: each keeps its own clock.

@@ -1,0 +1,193 @@
+// The error-controlled driver: tolerances met against Kepler's equation at e = 0.9, cheaper
+// than fixed-step rk4 there, the same steps as Boost.Odeint's controlled dopri5, the same
+// steps on every thread count and ISA, rejected steps that leave nothing behind.
+#include <catch2/catch.hpp>
+
+#include <array>
+#include <bit>
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include <boost/numeric/odeint.hpp>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+namespace {
+
+// The e = 0.9 orbit (a = 1, mu = 1) from periapsis r = 0.1, speed sqrt(19): after one
+// period it is back where it started.
+constexpr double kE = 0.9, kPeriapsis = 1 - kE;
+const double kSpeed = std::sqrt((1 + kE) / kPeriapsis);
+constexpr double kPeriod = 2 * std::numbers::pi;
+
+ForceModel<double> attractor() {
+  ForceModel<double> f;
+  f.add(Central{{0, 0, 0}, 1});
+  return f;
+}
+
+ParticleSet<double> at_periapsis() {
+  ParticleSet<double> b;
+  b.add({kPeriapsis, 0, 0}, {0, kSpeed, 0}, 1);
+  return b;
+}
+
+double error_after_one_period(const ParticleSet<double>& b) {
+  const auto x = b.position(0), v = b.velocity(0);
+  return std::hypot(x[0] - kPeriapsis, x[1], x[2]) + std::hypot(v[0], v[1] - kSpeed, v[2]);
+}
+
+struct AdaptiveRun {
+  AdaptiveStats stats;
+  double error;
+};
+
+AdaptiveRun adaptive_orbit(const Method& m, double tol, StepperOptions o = test::serial_options()) {
+  ParticleSet<double> b = at_periapsis();
+  Stepper<double> stepper(attractor(), m, o);
+  const AdaptiveStats stats = stepper.advance_to(b, kPeriod, {tol, tol});
+  CHECK(stepper.time() == kPeriod);
+  return {stats, error_after_one_period(b)};
+}
+
+double rk4_orbit_error(std::uint64_t steps) {
+  ParticleSet<double> b = at_periapsis();
+  Stepper<double>(attractor(), rk4, test::serial_options()).advance(b, kPeriod / double(steps), steps);
+  return error_after_one_period(b);
+}
+
+}  // namespace
+
+TEST_CASE("dopri5 and bs3: the final error on the e = 0.9 orbit is proportional to the tolerance",
+          "[adaptive]") {
+  // Local error control: each step's error estimate is held under the tolerance, and the
+  // error at the end is a fixed multiple of it (large here: a timing error at the fast
+  // periapsis pass is a large error in position), so a hundred times tighter tolerance
+  // gives a hundred times less error.
+  for (const Method* m : {&dopri5, &bs3}) {
+    const double loose = m == &dopri5 ? 1e-6 : 1e-5;
+    std::vector<AdaptiveRun> runs;
+    for (double tol : {loose, loose / 100, loose / 10000}) runs.push_back(adaptive_orbit(*m, tol));
+    for (std::size_t k = 0; k + 1 < runs.size(); ++k) {
+      INFO(m->name << ": errors " << runs[k].error << " then " << runs[k + 1].error << ", steps "
+                   << runs[k].stats.accepted << " then " << runs[k + 1].stats.accepted);
+      CHECK(runs[k].error / runs[k + 1].error > 30);
+      CHECK(runs[k].error / runs[k + 1].error < 300);
+      CHECK(runs[k + 1].stats.accepted > runs[k].stats.accepted);
+    }
+    // The close pass at periapsis takes steps far shorter than the slow arc at apoapsis.
+    CHECK(runs.back().stats.largest_step > 20 * runs.back().stats.smallest_step);
+  }
+}
+
+TEST_CASE("dopri5's steps cost fewer force evaluations than fixed-step rk4 at the same error", "[adaptive]") {
+  const AdaptiveRun a = adaptive_orbit(dopri5, 1e-10);
+  // The fewest rk4 steps that reach the adaptive run's error (found by doubling, then bisection).
+  std::uint64_t lo = 1, hi = 2;
+  while (rk4_orbit_error(hi) > a.error) lo = hi, hi *= 2;
+  while (hi - lo > 1) {
+    const std::uint64_t mid = (lo + hi) / 2;
+    (rk4_orbit_error(mid) > a.error ? lo : hi) = mid;
+  }
+  INFO("dopri5: error " << a.error << " with " << a.stats.evaluations << " evaluations; rk4 needs " << hi
+                        << " steps = " << 4 * hi << " evaluations");
+  CHECK(a.stats.evaluations * 3 < 4 * hi);
+}
+
+TEST_CASE("dopri5 counts six evaluations per attempt (first same as last) and bs3 three", "[adaptive]") {
+  for (const Method* m : {&dopri5, &bs3}) {
+    const AdaptiveRun a = adaptive_orbit(*m, 1e-9);
+    INFO(m->name << ": " << a.stats.accepted << " accepted, " << a.stats.rejected << " rejected");
+    // One evaluation for the first guess, which the first attempt reuses.
+    const std::uint64_t per_attempt = std::uint64_t(m->tableau.stages - 1);
+    CHECK(a.stats.evaluations == 1 + per_attempt * (a.stats.accepted + a.stats.rejected));
+  }
+}
+
+TEST_CASE("the driver takes about the steps Boost.Odeint's controlled dopri5 takes, to an error of the same order",
+          "[adaptive][odeint]") {
+  namespace odeint = boost::numeric::odeint;
+  using State = std::array<double, 4>;  // x, y, vx, vy
+  const auto kepler = [](const State& s, State& ds, double) {
+    const double r = std::hypot(s[0], s[1]), r3 = r * r * r;
+    ds = {s[2], s[3], -s[0] / r3, -s[1] / r3};
+  };
+  for (double tol : {1e-6, 1e-9, 1e-12}) {
+    INFO("tolerance " << tol);
+    State s{kPeriapsis, 0, 0, kSpeed};
+    std::uint64_t odeint_steps = 0;
+    odeint::integrate_adaptive(odeint::make_controlled<odeint::runge_kutta_dopri5<State>>(tol, tol), kepler, s, 0.0,
+                               kPeriod, 1e-4, [&](const State&, double) { ++odeint_steps; });
+    --odeint_steps;  // the observer also sees the start
+    const double odeint_error = std::hypot(s[0] - kPeriapsis, s[1]) + std::hypot(s[2], s[3] - kSpeed);
+    ParticleSet<double> b = at_periapsis();
+    Stepper<double> stepper(attractor(), dopri5, test::serial_options());
+    Tolerances t{tol, tol};
+    t.initial_step = 1e-4;
+    const AdaptiveStats stats = stepper.advance_to(b, kPeriod, t);
+    const double error = error_after_one_period(b);
+    INFO("kinema: " << stats.accepted << " steps, error " << error << "; odeint: " << odeint_steps << " steps, error "
+                    << odeint_error);
+    CHECK(double(stats.accepted) < 2.0 * double(odeint_steps));
+    CHECK(double(odeint_steps) < 2.0 * double(stats.accepted));
+    CHECK(error < 10 * odeint_error);
+    CHECK(odeint_error < 10 * error);
+  }
+}
+
+TEST_CASE("the accepted steps are the same on every thread count, job system and ISA", "[adaptive][determinism]") {
+  // Every local term and a chain of springs (so stages are jobs of their own too): the hash
+  // covers the final state and the step statistics.
+  const auto run = [](const StepperOptions& o, std::size_t n) {
+    for (const bool coupled : {false, true}) {
+      ForceModel<float> f = test::all_local_terms<float>();
+      if (coupled) {
+        Springs chain;
+        for (std::uint32_t i = 1; i < std::uint32_t(n); ++i) chain.pairs.push_back({i - 1, i, 0.5, 20, 0.1});
+        f.add(chain);
+      }
+      ParticleSet<float> b = test::cloud<float>(n);
+      Stepper<float> stepper(f, dopri5, o);
+      const AdaptiveStats s = stepper.advance_to(b, 0.5, {1e-4, 1e-4});
+      REQUIRE(s.accepted > 3);
+      return test::state_hash(b) ^ (s.accepted * 1000003 + s.rejected * 10007 + s.evaluations) ^
+             std::uint64_t(std::bit_cast<std::uint64_t>(s.smallest_step));
+    }
+    return std::uint64_t(0);
+  };
+  test::check_same_bits_everywhere(run, 300, 5000);
+}
+
+TEST_CASE("a step too long for the tolerance is taken back and leaves nothing behind", "[adaptive]") {
+  // Undamped oscillator w = 2 from x = 1: exact x = cos 2t. A first step of 5 s is absurd.
+  ForceModel<double> f;
+  f.add(Spring{{0, 0, 0}, 4, 0});
+  ParticleSet<double> b;
+  b.add({1, 0, 0}, {0, 0, 0}, 1);
+  Stepper<double> stepper(f, dopri5, test::serial_options());
+  Tolerances t{1e-10, 1e-10};
+  t.initial_step = 5;
+  const AdaptiveStats s = stepper.advance_to(b, 3, t);
+  CHECK(s.rejected >= 3);
+  // Seven for the first attempt; every later one, after a rejection too, starts from an
+  // evaluation it already has.
+  CHECK(s.evaluations == 7 + 6 * (s.accepted + s.rejected - 1));
+  CHECK(std::abs(b.position(0)[0] - std::cos(6.0)) < 1e-8);
+  CHECK(std::abs(b.velocity(0)[0] + 2 * std::sin(6.0)) < 1e-8);
+}
+
+TEST_CASE("advance_to refuses methods without a pair, bad tolerances and times in the past", "[adaptive][errors]") {
+  ParticleSet<double> b = at_periapsis();
+  Stepper<double> fixed(attractor(), rk4, test::serial_options());
+  CHECK_THROWS_WITH(fixed.advance_to(b, 1, {}), Catch::Contains("needs a method with an embedded pair"));
+  Stepper<double> s(attractor(), dopri5, test::serial_options());
+  CHECK_THROWS_WITH(s.advance_to(b, 1, {0, 0}), Catch::Contains("not both 0"));
+  CHECK_THROWS_WITH(s.advance_to(b, 1, {-1, 1e-6}), Catch::Contains("rtol and atol"));
+  CHECK_THROWS_WITH(s.advance_to(b, std::nan(""), {}), Catch::Contains("t_end"));
+  s.advance_to(b, 1, {});
+  CHECK_THROWS_WITH(s.advance_to(b, 0.5, {}), Catch::Contains("not before time()"));
+  CHECK(s.advance_to(b, 1, {}).accepted == 0);  // already there
+}
