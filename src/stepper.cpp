@@ -274,6 +274,7 @@ struct Stepper<T>::Impl {
       }
       h = controller.next(double(size), err, accepted);
     }
+    stats.next_step = h;
     return stats;
   }
 

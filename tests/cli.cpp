@@ -146,6 +146,33 @@ TEST_CASE("options override the scene", "[cli]") {
   CHECK(j["threads"] == 1);
 }
 
+TEST_CASE("run --rtol: dopri5 chooses its steps over the scene's duration and reports them", "[cli][adaptive]") {
+  const fs::path summary = work_dir() / "adaptive.json";
+  const Result r = kinema_cli("run " + scene("kepler_eccentric.json") + " --method dopri5 --rtol 1e-10 --atol 1e-10 -q --summary " +
+                              summary.string());
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(read(summary));
+  CHECK(j["t_final"] == 4.0);  // the last step lands on dt x steps
+  CHECK(j["rtol"] == 1e-10);
+  const auto accepted = j["accepted_steps"].get<std::uint64_t>(), rejected = j["rejected_steps"].get<std::uint64_t>();
+  CHECK(accepted > 50);
+  CHECK(accepted < 1000);  // far fewer than the scene's 4000 fixed steps
+  // Six evaluations per attempt (the seventh is the next step's first), plus one for the
+  // first step's size (one body: the run is one call).
+  CHECK(j["force_evaluations"] == 6 * (accepted + rejected) + 1);
+  CHECK(j["smallest_step"].get<double>() < j["largest_step"].get<double>());
+  CHECK(std::abs(j["energy_final"].get<double>() - j["energy_initial"].get<double>()) < 1e-9);
+
+  const Result fixed = kinema_cli("run " + scene("kepler_eccentric.json") + " -q --summary " + summary.string());
+  REQUIRE(fixed.code == 0);
+  CHECK(nlohmann::json::parse(read(summary))["force_evaluations"] == 4 * 4000);  // rk4, every run reports it
+  CHECK_FALSE(nlohmann::json::parse(read(summary)).contains("accepted_steps"));
+
+  const Result refused = kinema_cli("run " + scene("kepler_eccentric.json") + " --method rk4 --rtol 1e-6");
+  CHECK(refused.code == 1);
+  CHECK(refused.err.find("rtol and atol control the steps of a method with an embedded pair") != std::string::npos);
+}
+
 TEST_CASE("a state that blows up is reported, not hidden", "[cli]") {
   const fs::path p = write("blowup.json", R"({"particles": [{"position": [0,0,0]}],
       "forces": [{"type": "central", "mu": 1}], "steps": 3})");

@@ -65,6 +65,9 @@ struct Scene {
   Precision precision = Precision::single;
   std::string method = "rk4";  // or "auto", with a tolerance (see choose_method)
   std::optional<double> tolerance;
+  // Error control (methods with an embedded pair): the run then chooses its steps over the
+  // duration dt x steps; with one given the other defaults to it.
+  std::optional<double> rtol, atol;
   double dt = 0.01;
   std::uint64_t steps = 100;
   std::vector<BodySpec> particles;

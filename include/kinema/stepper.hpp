@@ -80,6 +80,7 @@ struct AdaptiveStats {
   std::uint64_t accepted = 0, rejected = 0;
   std::uint64_t evaluations = 0;  // force evaluations (stages; a reused one is not counted)
   double smallest_step = 0, largest_step = 0;  // of the accepted steps
+  double next_step = 0;  // the controller's proposal: a good initial_step for a next call
 };
 
 // Bodies per block: the unit of work handed to the job system. Fixed, so the partition

@@ -24,6 +24,9 @@ class World {
   World(World&&) noexcept = default;
 
   void advance(T h, std::uint64_t steps);
+  // Error-controlled steps to t_end (Stepper::advance_to); particles only (kinema::Error
+  // when the world has rigid bodies).
+  AdaptiveStats advance_to(double t_end, const Tolerances& tolerances);
   double time() const;
   double total_energy() const;  // kinetic (with rotation) + potential, both sets
   bool finite() const;

@@ -340,7 +340,7 @@ json parse_json(std::string_view text, std::string_view origin) {
 Scene parse_scene(std::string_view text, std::string_view origin) {
   const json doc = parse_json(text, origin);
   const Node root{doc, "", origin};
-  root.expect_object({"name", "precision", "method", "tolerance", "dt", "steps", "particles",
+  root.expect_object({"name", "precision", "method", "tolerance", "rtol", "atol", "dt", "steps", "particles",
                       "rigid_bodies", "generate", "forces"});
   Scene s;
   if (root.has("name")) s.name = root.child("name").string();
@@ -367,6 +367,8 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
   if (root.has("dt")) s.dt = root.child("dt").positive();
   if (root.has("steps")) s.steps = root.child("steps").count(true);
   if (root.has("tolerance")) s.tolerance = root.child("tolerance").positive();
+  if (root.has("rtol")) s.rtol = root.child("rtol").positive();
+  if (root.has("atol")) s.atol = root.child("atol").positive();
   if (root.has("particles")) {
     const Node list = root.child("particles");
     if (!list.value.is_array()) list.fail("expected an array");

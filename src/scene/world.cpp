@@ -1,6 +1,7 @@
 #include "kinema/world.hpp"
 
 #include "kinema/diagnostics.hpp"
+#include "kinema/error.hpp"
 
 namespace kinema {
 
@@ -27,6 +28,12 @@ template <class T>
 double World<T>::total_energy() const {
   return (particles.size() > 0 ? energy(particles, *forces_).total() : 0) +
          (rigid.size() > 0 ? energy(rigid, *forces_).total() : 0);
+}
+
+template <class T>
+AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances) {
+  if (rigid.size() > 0) throw Error("error-controlled steps are for particles; the scene has rigid bodies");
+  return particle_stepper_.advance_to(particles, t_end, tolerances);
 }
 
 template <class T>

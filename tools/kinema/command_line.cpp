@@ -67,12 +67,19 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
       ->check(not_empty);
   run->add_option("--method", o.method,
                   "Override the scene's method: euler, midpoint, heun, rk4, symplectic_euler, "
-                  "velocity_verlet, or auto (the cheapest method and step for --tolerance)");
+                  "velocity_verlet, bs3, dopri5, rk6, or auto (the cheapest method and step for "
+                  "--tolerance)");
   run->add_option("--tolerance", o.tolerance,
                   "With auto: the largest error allowed at the end (length units; radians for "
                   "rigid orientations)")
       ->transform(positive_finite);
   run->add_option("--dt", o.dt, "Override the step size (seconds, > 0)")->transform(positive_finite);
+  run->add_option("--rtol", o.rtol,
+                  "With bs3 or dopri5: control each step's error, relative part (the run then "
+                  "chooses its steps over the scene's duration, dt x steps)")
+      ->transform(positive_finite);
+  run->add_option("--atol", o.atol, "With bs3 or dopri5: control each step's error, absolute part")
+      ->transform(positive_finite);
   run->add_option("--steps", o.steps, "Override the number of steps")->transform(decimal(0, kMaxCount));
   run->add_option("--precision", precision, "Override the scene's precision: float or double")
       ->check(CLI::IsMember({"float", "double"}));

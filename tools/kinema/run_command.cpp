@@ -35,10 +35,16 @@ Scene scene_with_overrides(const RunOptions& o) {
   if (o.dt) scene.dt = *o.dt;
   if (o.steps) scene.steps = *o.steps;
   if (o.precision) scene.precision = *o.precision;
+  if (o.rtol) scene.rtol = *o.rtol;
+  if (o.atol) scene.atol = *o.atol;
   if (scene.method != "auto") method_by_name(scene.method);
   try {
     if (scene.method == "auto" && !scene.tolerance) {
       throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
+    }
+    if ((scene.rtol || scene.atol) && (scene.method == "auto" || method_by_name(scene.method).embedded_order == 0)) {
+      throw Error("rtol and atol control the steps of a method with an embedded pair (bs3, dopri5), not " +
+                  scene.method);
     }
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {
@@ -103,6 +109,28 @@ BlowUp find_blow_up(const Scene& scene, const StepperOptions& options, const Wor
   return range;
 }
 
+// The scene's error control, if any: with one of rtol and atol given, the other is the same.
+std::optional<Tolerances> tolerances_of(const Scene& scene) {
+  if (!scene.rtol && !scene.atol) return std::nullopt;
+  Tolerances t;
+  t.rtol = scene.rtol.value_or(*scene.atol);
+  t.atol = scene.atol.value_or(*scene.rtol);
+  return t;
+}
+
+// Error-controlled steps to t, each call starting from the size the last one proposed.
+template <class T>
+void advance_adaptive(World<T>& world, double t, Tolerances tolerances, AdaptiveStats& total) {
+  tolerances.initial_step = total.next_step;
+  const AdaptiveStats s = world.advance_to(t, tolerances);
+  total.smallest_step = total.accepted == 0 ? s.smallest_step
+                        : s.accepted == 0   ? total.smallest_step
+                                            : std::min(total.smallest_step, s.smallest_step);
+  total.largest_step = std::max(total.largest_step, s.largest_step);
+  total.accepted += s.accepted, total.rejected += s.rejected, total.evaluations += s.evaluations;
+  if (s.next_step > 0) total.next_step = s.next_step;
+}
+
 // What happened before stepping that the summary reports.
 struct RunContext {
   std::optional<nlohmann::ordered_json> auto_choice;
@@ -131,19 +159,27 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   const std::size_t bodies = world.particles.size() + world.rigid.size();
 
   // In chunks, for the progress bar, the trajectory and signals: the same bits as one call.
-  const std::uint64_t chunk = std::min<std::uint64_t>(
-      std::max<std::uint64_t>(1, scene.steps / 100),
-      std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1)))));
+  // Error-controlled steps land on each chunk's end, so their chunks are longer: a sixteenth
+  // of the run or more.
+  const std::uint64_t per_chunk = std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1))));
+  const std::optional<Tolerances> tolerances = tolerances_of(scene);
+  const std::uint64_t chunk = tolerances ? std::max<std::uint64_t>({1, scene.steps / 16, per_chunk})
+                                         : std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), per_chunk);
   double wall_seconds = 0;  // stepping only: loading, checking and writing are not timed
   Progress progress("kinema run", o.quiet);
   std::uint64_t done = 0;
   if (trajectory) trajectory->write(0, world.time(), world.particles, world.rigid);
   std::optional<BlowUp> blow_up;
+  AdaptiveStats adaptive;
   while (done < scene.steps && interrupting_signal() == 0) {
     std::uint64_t n = std::min(chunk, scene.steps - done);
     if (trajectory) n = std::min(n, o.every - done % o.every);  // stop at each K-th step
     const auto start = Clock::now();
-    world.advance(h, n);
+    if (tolerances) {
+      advance_adaptive(world, double(done + n) * scene.dt, *tolerances, adaptive);
+    } else {
+      world.advance(h, n);
+    }
     wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
     const bool finite = world.finite();
     if (!finite) blow_up = find_blow_up<T>(scene, options, world, done, n);
@@ -172,6 +208,16 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   summary["isa"] = std::string(isa_name(stepper.isa()));
   summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
+  if (tolerances) {
+    summary["rtol"] = tolerances->rtol;
+    summary["atol"] = tolerances->atol;
+    summary["accepted_steps"] = adaptive.accepted;
+    summary["rejected_steps"] = adaptive.rejected;
+    summary["smallest_step"] = adaptive.smallest_step;
+    summary["largest_step"] = adaptive.largest_step;
+  }
+  summary["force_evaluations"] = tolerances ? adaptive.evaluations
+                                            : done * std::uint64_t(stepper.method().evaluations());
   summary["wall_seconds"] = wall_seconds;
   summary["body_steps_per_second"] = wall_seconds > 0 ? double(bodies) * double(done) / wall_seconds : 0.0;
   summary["energy_initial"] = initial_energy;

@@ -16,6 +16,7 @@ struct RunOptions {
   std::optional<double> dt;
   std::optional<std::uint64_t> steps;
   std::optional<double> tolerance;
+  std::optional<double> rtol, atol;  // error control (embedded pairs)
   std::optional<Precision> precision;
   std::string trajectory_path;  // empty: no trajectory
   std::uint64_t every = 1;
