@@ -50,6 +50,7 @@ struct Stepper<T>::Impl {
   kernels::FusedFn<T> fused_fn = nullptr;
   kernels::RigidFn<T> rigid_fn = nullptr;
   std::unique_ptr<StagedPath<T>> staged;  // when the fused path does not apply
+  std::unique_ptr<StagedPath<T>> probe;   // evaluates accelerations alone (made on demand)
   Clock<T> clock;
   Checkpoint<T> checkpoint;  // the finiteness guard's copy of the state
 
@@ -77,6 +78,7 @@ struct Stepper<T>::Impl {
     fresh->coupled = lower_coupled<T>(*f);
     Paths paths = pick_kernels(*f, *fresh);
     if (paths.staged) paths.staged->reserve(staged ? staged->capacity() : 0);
+    probe.reset();  // it refers to the lowering being replaced
     forces = std::move(f);
     lowered = std::move(fresh);
     fused_fn = paths.fused, rigid_fn = paths.rigid;
@@ -278,6 +280,19 @@ struct Stepper<T>::Impl {
     return stats;
   }
 
+  void accelerations(const ParticleSet<T>& b, double t, T* const out[3]) {
+    check_reach(b);
+    if (!probe) probe = std::make_unique<StagedPath<T>>(*forces, euler, *table, lowered->particle, lowered->coupled);
+    probe->reserve(b.padded_size());
+    // Euler's stage 0 carries accelerations times h; with h = 1 they are the accelerations.
+    // The stage reads the bodies and writes scratch only.
+    StepContext<T> c{const_cast<ParticleSet<T>&>(b), T(1), T(1)};
+    c.t0 = t;
+    probe->evaluate_first_stage(c, *jobs, options.inline_below);
+    const auto acc = probe->first_stage();
+    for (int d = 0; d < 3; ++d) std::copy(acc[d], acc[d] + b.padded_size(), out[d]);
+  }
+
   void check_adaptive(double t_end, const Tolerances& tol) const {
     if (method.embedded_order == 0) {
       throw Error("advance_to needs a method with an embedded pair (bs3, dopri5); " +
@@ -384,6 +399,11 @@ template <class T>
 void Stepper<T>::check_step_size(T h) const {
   impl_->check_step_size(h, impl_->lowered->particle);
   impl_->check_step_size(h, impl_->lowered->rigid);
+}
+
+template <class T>
+void Stepper<T>::accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]) {
+  impl_->accelerations(bodies, t, out);
 }
 
 template <class T>

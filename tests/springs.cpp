@@ -11,6 +11,7 @@
 
 #include "coupled_forces.hpp"
 #include "kernels/kernels.hpp"
+#include "kinema/stability.hpp"
 #include "support.hpp"
 #include "thread_pool.hpp"
 
@@ -170,6 +171,10 @@ TEST_CASE("springs: symplectic Euler on a stiff chain holds below h = 2 / omega_
   const Chain c = chain(n, 1, k, 0, m, 0.01);
   CHECK(displacement_after(c, symplectic_euler, 0.97 * limit, 4000) < 0.5);
   CHECK(displacement_after(c, symplectic_euler, 1.03 * limit, 4000) > 1e3);
+  // Known before a single step: the stiffness estimate finds omega_max, and the limit.
+  const StiffnessEstimate e = estimate_stiffness(c.bodies, c.forces);
+  CHECK(e.magnitude == Approx(omega_max).epsilon(0.01));
+  CHECK(largest_stable_step(symplectic_euler, e) == Approx(limit).epsilon(0.02));
 }
 
 TEST_CASE("springs: explicit Euler on a damped stiff chain diverges past the limit of its "
@@ -190,6 +195,7 @@ TEST_CASE("springs: explicit Euler on a damped stiff chain diverges past the lim
   const Chain chained = chain(n, 1, k, c, m, 0.01);
   CHECK(displacement_after(chained, euler, 0.97 * limit, 3000) < 0.05);
   CHECK(displacement_after(chained, euler, 1.03 * limit, 3000) > 1e3);
+  CHECK(largest_stable_step(euler, estimate_stiffness(chained.bodies, chained.forces)) == Approx(limit).epsilon(0.02));
   // Undamped, Euler has no stable step at all: its factor exceeds 1 on the imaginary axis.
   const Chain undamped = chain(n, 1, k, 0, m, 0.01);
   CHECK(displacement_after(undamped, euler, 0.1 * limit, 20000) > 0.05);

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "kinema/stability.hpp"
 #include "support.hpp"
 
 using namespace kinema;
@@ -114,4 +115,104 @@ TEST_CASE("velocity verlet's orbit energy error stays bounded over 1000 orbits",
   // rk4 at the same step drifts steadily instead (dissipative, not symplectic).
   const OrbitRun r = circular_orbit(rk4, 1000);
   CHECK(r.last_energy_error > 5 * r.first_energy_error);
+}
+
+namespace {
+
+// The largest stable h found by running: `force` on one unit-mass body started at x = 1,
+// v = 1, 4000 steps; stable while |x| stays under 10 (an unstable velocity drags x along).
+double bisected_limit(const Method& method, const ForceModel<double>& forces, double guess) {
+  const auto holds = [&](double h) {
+    const auto s = test::run_one<double>(method, forces, {1, 0, 0}, {1, 0, 0}, 1, h, 4000);
+    return std::isfinite(s.x[0]) && std::isfinite(s.v[0]) && std::abs(s.x[0]) < 10;
+  };
+  double lo = guess * 0.5, hi = guess * 1.5;
+  REQUIRE(holds(lo));
+  REQUIRE_FALSE(holds(hi));
+  while (hi - lo > 1e-5 * guess) {
+    const double mid = 0.5 * (lo + hi);
+    (holds(mid) ? lo : hi) = mid;
+  }
+  return lo;
+}
+
+StiffnessEstimate estimate_of(const ForceModel<double>& forces) {
+  ParticleSet<double> b;
+  b.add({1, 0, 0}, {1, 0, 0}, 1);
+  return estimate_stiffness(b, forces);
+}
+
+}  // namespace
+
+TEST_CASE("stability limits on the real and imaginary axes, from each method's coefficients", "[stability]") {
+  const auto limits = [](const Method& m) { return stability_limits(m); };
+  CHECK(limits(euler).real_axis == Approx(2).epsilon(1e-6));
+  CHECK(limits(euler).imaginary_axis < 1e-3);  // no stable step on an undamped oscillation
+  CHECK(limits(midpoint).real_axis == Approx(2).epsilon(1e-6));
+  CHECK(limits(rk4).real_axis == Approx(2.78529).epsilon(1e-4));
+  CHECK(limits(rk4).imaginary_axis == Approx(2 * std::sqrt(2.0)).epsilon(1e-6));
+  CHECK(limits(bs3).real_axis == Approx(2.5127).epsilon(1e-3));
+  CHECK(limits(bs3).imaginary_axis == Approx(std::sqrt(3.0)).epsilon(1e-6));
+  CHECK(limits(dopri5).real_axis == Approx(3.3059).epsilon(1e-3));
+  CHECK(limits(symplectic_euler).imaginary_axis == Approx(2).epsilon(1e-6));
+  CHECK(limits(velocity_verlet).imaginary_axis == Approx(2).epsilon(1e-6));
+  // A kick at the half-step velocity: drag is damped twice per step, (1 - h k / 2)^2.
+  CHECK(limits(velocity_verlet).real_axis == Approx(4).epsilon(1e-6));
+}
+
+TEST_CASE("the stiffness estimate of an undamped spring is its angular frequency, an oscillation", "[stability]") {
+  // Two bodies on a spring (omega^2 = k (m1 + m2) / (m1 m2)), with other bodies on a softer
+  // anchor spring: the estimate finds the fastest mode.
+  ParticleSet<double> b;
+  b.add({0, 0, 0}, {0.1, 0, 0}, 2);
+  b.add({1, 0.2, 0}, {0, 0, 0}, 3);
+  for (int i = 0; i < 50; ++i) b.add({double(i), 2, 0}, {0, 0.1, 0}, 1);
+  ForceModel<double> f;
+  f.add(Spring{{0, 0, 0}, 1, 0});
+  f.add(Springs{{{0, 1, 1, 600, 0}}});
+  const StiffnessEstimate e = estimate_stiffness(b, f);
+  const double omega = std::sqrt(1 + 600.0 * 5 / 6);  // the anchor adds k = 1 to each end
+  CHECK(e.magnitude == Approx(omega).epsilon(0.01));
+  CHECK(e.angle == Approx(std::numbers::pi / 2).margin(0.02));
+  ParticleSet<float> bf;
+  bf.add({0, 0, 0}, {0.1f, 0, 0}, 2);
+  bf.add({1, 0.2f, 0}, {0, 0, 0}, 3);
+  ForceModel<float> ff;
+  ff.add(Spring{{0, 0, 0}, 1, 0});
+  ff.add(Springs{{{0, 1, 1, 600, 0}}});
+  CHECK(estimate_stiffness(bf, ff).magnitude == Approx(omega).epsilon(0.01));  // in float too
+}
+
+TEST_CASE("predicted stable steps match bisected blow-ups within 2%", "[stability]") {
+  // An undamped oscillator (omega = 20): imaginary-axis limits.
+  ForceModel<double> spring;
+  spring.add(Spring{{0, 0, 0}, 400, 0});
+  const StiffnessEstimate oscillation = estimate_of(spring);
+  for (const Method* m : {&rk4, &bs3, &symplectic_euler, &velocity_verlet}) {
+    INFO(m->name << " on an oscillation");
+    const double predicted = largest_stable_step(*m, oscillation);
+    CHECK(bisected_limit(*m, spring, predicted) == Approx(predicted).epsilon(0.02));
+  }
+  CHECK(largest_stable_step(euler, oscillation) < 1e-3 / 20);
+  // Drag at rate 50: real-axis limits.
+  ForceModel<double> drag;
+  drag.add(LinearDrag{50});
+  const StiffnessEstimate damping = estimate_of(drag);
+  CHECK(damping.magnitude == Approx(50).epsilon(0.01));
+  CHECK(damping.angle < 1e-3);
+  for (const Method* m : {&euler, &midpoint, &heun, &rk4, &bs3, &dopri5, &rk6, &symplectic_euler, &velocity_verlet}) {
+    INFO(m->name << " on damping");
+    const double predicted = largest_stable_step(*m, damping);
+    CHECK(bisected_limit(*m, drag, predicted) == Approx(predicted).epsilon(0.02));
+  }
+  // A damped oscillator (omega = 20, damping ratio 0.3): off both axes.
+  ForceModel<double> damped;
+  damped.add(Spring{{0, 0, 0}, 400, 12});
+  const StiffnessEstimate mixed = estimate_of(damped);
+  CHECK(mixed.magnitude == Approx(20).epsilon(0.01));
+  for (const Method* m : {&euler, &rk4, &dopri5, &symplectic_euler}) {
+    INFO(m->name << " on a damped oscillation");
+    const double predicted = largest_stable_step(*m, mixed);
+    CHECK(bisected_limit(*m, damped, predicted) == Approx(predicted).epsilon(0.02));
+  }
 }

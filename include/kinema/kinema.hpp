@@ -11,5 +11,6 @@
 #include "kinema/isa.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
+#include "kinema/stability.hpp"
 #include "kinema/stepper.hpp"
 #include "kinema/version.hpp"

@@ -126,6 +126,10 @@ class Stepper {
   // or h times the force parameters, a rigid body's point forces included, overflowing T),
   // without touching any body.
   void check_step_size(T h) const;
+  // The accelerations (force / mass; 0 for bodies with inv_mass 0) the model gives the
+  // bodies at time t, into out[0..2] (padded_size() each). Not for the inside of a frame:
+  // the first call allocates what it needs.
+  void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]);
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);
   // Bytes the stepper holds for stepping: the staged path's stage state, the lowered spring

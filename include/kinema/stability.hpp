@@ -1,0 +1,58 @@
+#pragma once
+// Where explicit methods stay stable, and how stiff a scene is: the largest step a method
+// can take on a scene, known before a single step.
+//
+// A method is judged on one linear mode, x' = v, v' = a x + b v, whose eigenvalues are the
+// pair lambda, conj(lambda): a step of size h is stable when the spectral radius of the
+// step's 2 x 2 matrix is at most 1 (to rounding). For a Runge-Kutta method that is
+// |R(h lambda)| <= 1; kick-drift methods are judged on the same mode. A real dominant
+// eigenvalue -r is taken as damping (a = 0, b = -r: eigenvalues 0 and -r), any other as a
+// damped oscillation (a = -|lambda|^2, b = 2 Re lambda).
+
+#include <complex>
+#include <limits>
+
+#include "kinema/bodies.hpp"
+#include "kinema/forces.hpp"
+#include "kinema/methods.hpp"
+#include "kinema/stepper.hpp"
+
+namespace kinema {
+
+// The dominant eigenvalue (pair) of the force model's Jacobian d(v, a)/d(x, v) at a state.
+struct StiffnessEstimate {
+  double magnitude = 0;  // |lambda| (1/s); 0 when the forces do not depend on the state
+  double angle = 0;      // from the negative real axis: 0 decay, pi/2 undamped oscillation
+  int evaluations = 0;   // force evaluations it took
+};
+
+// Power iteration with Jacobian-vector products by finite differences of the model's
+// accelerations (Stepper::accelerations): no matrix is formed. Each iteration takes u, J u
+// and J^2 u and fits J^2 u = p J u + q u: the roots of x^2 - p x - q are the dominant
+// eigenvalue or pair, real or complex (an oscillation's +-i omega, which plain power
+// iteration on J cannot converge to). Costs 2 `iterations` + 1 evaluations of the forces, in T.
+template <class T>
+StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces,
+                                     double t = 0, int iterations = 100,
+                                     StepperOptions options = on_calling_thread());
+
+// The largest h > 0 up to which every step is stable for the estimate's mode (0: none, as
+// for Euler on an undamped oscillation; infinity when the estimate's magnitude is 0).
+double largest_stable_step(const Method& method, const StiffnessEstimate& estimate);
+
+// h |lambda| at the edge of the stability region on the negative real axis (damping at the
+// rate |lambda|) and on the imaginary axis (an undamped oscillation at |lambda|): 2 and 0
+// for euler, about 2.785 and 2.828 for rk4, 2 on the imaginary axis for the symplectic
+// methods. Methods unstable on the imaginary axis near 0 report 0 there, or the tiny
+// interval where their growth stays within rounding.
+struct StabilityLimits {
+  double real_axis = 0, imaginary_axis = 0;
+};
+StabilityLimits stability_limits(const Method& method);
+
+extern template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double,
+                                                     int, StepperOptions);
+extern template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double,
+                                                     int, StepperOptions);
+
+}  // namespace kinema

@@ -1,0 +1,207 @@
+#include "kinema/stability.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <complex>
+#include <cstdint>
+#include <numbers>
+#include <vector>
+
+#include "kinema/error.hpp"
+
+namespace kinema {
+namespace {
+
+using Matrix = std::array<std::array<double, 2>, 2>;
+
+// One step of size h of `m` on x' = v, v' = a x + b v, from (x, v).
+std::array<double, 2> one_step(const Method& m, double h, double a, double b, std::array<double, 2> y) {
+  const auto f = [&](const std::array<double, 2>& s) { return std::array<double, 2>{s[1], a * s[0] + b * s[1]}; };
+  if (m.kind == MethodKind::kick_drift) {
+    for (int i = 0; i < m.scheme.count; ++i) {
+      const KickDriftOp& op = m.scheme.ops[i];
+      if (op.kind == OpKind::kick) y[1] += op.weight * h * f(y)[1];
+      else y[0] += op.weight * h * y[1];
+    }
+    return y;
+  }
+  const ButcherTableau& t = m.tableau;
+  std::array<std::array<double, 2>, kMaxStages> k{};
+  for (int s = 0; s < t.stages; ++s) {
+    std::array<double, 2> stage = y;
+    for (int j = 0; j < s; ++j) {
+      for (int d = 0; d < 2; ++d) stage[d] += h * t.a[s][j] * k[j][d];
+    }
+    k[s] = f(stage);
+  }
+  for (int s = 0; s < t.stages; ++s) {
+    for (int d = 0; d < 2; ++d) y[d] += h * t.b[s] * k[s][d];
+  }
+  return y;
+}
+
+double spectral_radius(const Matrix& m) {
+  // Triangular (the damping mode: v does not see x): the diagonal, without the cancellation
+  // the discriminant would suffer next to an eigenvalue of exactly 1.
+  if (m[1][0] == 0 || m[0][1] == 0) return std::max(std::abs(m[0][0]), std::abs(m[1][1]));
+  const double trace = m[0][0] + m[1][1], det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+  const double disc = trace * trace - 4 * det;
+  if (disc < 0) return std::sqrt(std::abs(det));
+  const double root = std::sqrt(disc);
+  return std::max(std::abs(trace + root), std::abs(trace - root)) / 2;
+}
+
+// Is a step of h stable on the mode (a, b)? Rounding may lift a radius of exactly 1.
+bool stable(const Method& m, double h, double a, double b) {
+  const auto c0 = one_step(m, h, a, b, {1, 0}), c1 = one_step(m, h, a, b, {0, 1});
+  return spectral_radius({{{c0[0], c1[0]}, {c0[1], c1[1]}}}) <= 1 + 1e-13;
+}
+
+// The largest h up to which every step is stable on the mode (a, b) whose rate is `rate`:
+// a scan of h rate from 1e-4 to 100 in steps of 0.2%, then bisection at the first failure.
+double stable_edge(const Method& m, double rate, double a, double b) {
+  double good = 0, z = 1e-4;
+  while (z < 100 && stable(m, z / rate, a, b)) good = z, z *= 1.002;
+  if (z >= 100) return std::numeric_limits<double>::infinity();
+  double bad = z;
+  for (int i = 0; i < 60 && good > 0; ++i) {
+    const double mid = (good + bad) / 2;
+    (stable(m, mid / rate, a, b) ? good : bad) = mid;
+  }
+  return good / rate;
+}
+
+// A reproducible start vector with every component nonzero.
+double start_component(std::size_t i) {
+  std::uint64_t z = (i + 1) * 0x9E3779B97F4A7C15ull;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return 0.5 + double((z ^ (z >> 31)) >> 11) * 0x1p-53;
+}
+
+double norm(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x * x;
+  return std::sqrt(s);
+}
+
+double dot(const std::vector<double>& a, const std::vector<double>& b) {
+  double s = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) s += a[i] * b[i];
+  return s;
+}
+
+// With u, J u and J^2 u: once u lies in the dominant invariant subspace of J (one real
+// eigenvalue, or a pair of them, real or complex conjugate), J^2 u = p J u + q u, and the
+// roots of x^2 - p x - q are those eigenvalues. p and q by least squares; the root of the
+// larger modulus.
+std::complex<double> dominant_root(const std::vector<double>& u, const std::vector<double>& w1,
+                                   const std::vector<double>& w2) {
+  const double a11 = dot(w1, w1), a12 = dot(w1, u), a22 = dot(u, u);
+  const double r1 = dot(w1, w2), r2 = dot(u, w2);
+  const double det = a11 * a22 - a12 * a12;
+  // J u parallel to u (to the finite differences' accuracy): one real eigenvalue.
+  if (!(det > 1e-8 * a11 * a22)) return a22 > 0 ? a12 / a22 : 0.0;
+  const double p = (r1 * a22 - r2 * a12) / det, q = (a11 * r2 - a12 * r1) / det;
+  const std::complex<double> root = std::sqrt(std::complex<double>(p * p + 4 * q, 0));
+  const std::complex<double> x1 = (p + root) / 2.0, x2 = (p - root) / 2.0;
+  return std::abs(x1) >= std::abs(x2) ? x1 : x2;
+}
+
+// f(y) = (v, a(x, v, t)) of a set, y = (x, v) in six component blocks of `n` each.
+template <class T>
+class Derivative {
+ public:
+  Derivative(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t, StepperOptions options)
+      : work_(bodies), stepper_(forces, euler, options), t_(t), n_(bodies.size()) {
+    for (auto& a : acc_) a.resize(work_.padded_size());
+  }
+
+  std::size_t size() const { return 6 * n_; }
+  std::vector<double> state() const {
+    std::vector<double> y(size());
+    const T* arrays[6] = {work_.px(), work_.py(), work_.pz(), work_.vx(), work_.vy(), work_.vz()};
+    for (int c = 0; c < 6; ++c) std::copy(arrays[c], arrays[c] + n_, y.begin() + std::ptrdiff_t(c * n_));
+    return y;
+  }
+  std::vector<double> operator()(const std::vector<double>& y) {
+    T* arrays[6] = {work_.px(), work_.py(), work_.pz(), work_.vx(), work_.vy(), work_.vz()};
+    for (int c = 0; c < 6; ++c) {
+      for (std::size_t i = 0; i < n_; ++i) arrays[c][i] = T(y[c * n_ + i]);
+    }
+    T* out[3] = {acc_[0].data(), acc_[1].data(), acc_[2].data()};
+    stepper_.accelerations(work_, t_, out);
+    ++evaluations;
+    std::vector<double> f(size());
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t i = 0; i < n_; ++i) f[d * n_ + i] = double(arrays[3 + d][i]), f[(3 + d) * n_ + i] = acc_[d][i];
+    }
+    return f;
+  }
+  int evaluations = 0;
+
+ private:
+  ParticleSet<T> work_;
+  Stepper<T> stepper_;
+  double t_;
+  std::size_t n_;
+  std::array<std::vector<T>, 3> acc_;
+};
+
+}  // namespace
+
+template <class T>
+StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t,
+                                     int iterations, StepperOptions options) {
+  if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
+  Derivative<T> f(bodies, forces, t, options);
+  StiffnessEstimate e;
+  if (f.size() == 0) return e;
+  const std::vector<double> y = f.state(), f0 = f(y);
+  double y_scale = 1;
+  for (double c : y) y_scale = std::max(y_scale, std::abs(c));
+  // J u ~ (f(y + eps u) - f(y)) / eps, eps scaled so that eps u moves y by about
+  // sqrt(machine epsilon) of its size: the usual balance of truncation and rounding.
+  const auto jacobian_times = [&](const std::vector<double>& u) {
+    const double eps = std::sqrt(double(std::numeric_limits<T>::epsilon())) * y_scale / std::max(norm(u), 1e-300);
+    std::vector<double> shifted = y;
+    for (std::size_t i = 0; i < y.size(); ++i) shifted[i] += eps * u[i];
+    std::vector<double> ju = f(shifted);
+    for (std::size_t i = 0; i < y.size(); ++i) ju[i] = (ju[i] - f0[i]) / eps;
+    return ju;
+  };
+  std::vector<double> u(y.size());
+  for (std::size_t i = 0; i < u.size(); ++i) u[i] = start_component(i);
+  std::complex<double> dominant = 0;
+  for (int k = 0; k < iterations; ++k) {
+    const double un = norm(u);
+    if (!(un > 0) || !std::isfinite(un)) break;
+    for (double& c : u) c /= un;
+    const std::vector<double> w1 = jacobian_times(u), w2 = jacobian_times(w1);
+    dominant = dominant_root(u, w1, w2);
+    u = w2;
+  }
+  e.evaluations = f.evaluations;
+  e.magnitude = std::abs(dominant);
+  e.angle = std::atan2(std::abs(dominant.imag()), -dominant.real());
+  return e;
+}
+
+double largest_stable_step(const Method& method, const StiffnessEstimate& e) {
+  if (!(e.magnitude > 0)) return std::numeric_limits<double>::infinity();
+  const double r = e.magnitude;
+  if (e.angle < 1e-3) return stable_edge(method, r, 0, -r);
+  return stable_edge(method, r, -r * r, -2 * r * std::cos(e.angle));
+}
+
+StabilityLimits stability_limits(const Method& method) {
+  return {stable_edge(method, 1, 0, -1), stable_edge(method, 1, -1, 0)};
+}
+
+template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double, int,
+                                              StepperOptions);
+template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double, int,
+                                              StepperOptions);
+
+}  // namespace kinema
