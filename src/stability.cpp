@@ -6,6 +6,7 @@
 #include <complex>
 #include <cstdint>
 #include <numbers>
+#include <utility>
 #include <vector>
 
 #include "kinema/error.hpp"
@@ -109,6 +110,35 @@ std::complex<double> dominant_root(const std::vector<double>& u, const std::vect
   return std::abs(x1) >= std::abs(x2) ? x1 : x2;
 }
 
+// The dominant eigenvalue of a small dense n x n matrix (row-major), and a real vector in
+// its dominant invariant subspace: power iteration with the pair fit, run long (it is cheap
+// at this size) so that close eigenvalues at the top separate.
+std::pair<std::complex<double>, std::vector<double>> dominant_of(const std::vector<double>& h, std::size_t n) {
+  const auto times = [&](const std::vector<double>& x) {
+    std::vector<double> out(n, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (std::size_t j = 0; j < n; ++j) out[i] += h[i * n + j] * x[j];
+    }
+    return out;
+  };
+  std::vector<double> u(n);
+  for (std::size_t i = 0; i < n; ++i) u[i] = start_component(i);
+  std::complex<double> root = 0;
+  for (int k = 0; k < 4000; ++k) {
+    const double un = norm(u);
+    if (!(un > 0) || !std::isfinite(un)) break;
+    for (double& c : u) c /= un;
+    const std::vector<double> w1 = times(u), w2 = times(w1);
+    root = dominant_root(u, w1, w2);
+    u = w2;
+  }
+  const double un = norm(u);
+  if (un > 0 && std::isfinite(un)) {
+    for (double& c : u) c /= un;
+  }
+  return {root, u};
+}
+
 // f(y) = (v, a(x, v, t)) of a set, y = (x, v) in six component blocks of `n` each.
 template <class T>
 class Derivative {
@@ -161,30 +191,95 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
   const std::vector<double> y = f.state(), f0 = f(y);
   double y_scale = 1;
   for (double c : y) y_scale = std::max(y_scale, std::abs(c));
-  // J u ~ (f(y + eps u) - f(y)) / eps, eps scaled so that eps u moves y by about
-  // sqrt(machine epsilon) of its size: the usual balance of truncation and rounding.
+  // J u ~ (f(y + eps u) - f(y)) / eps, eps scaled so that the largest component of eps u
+  // moves y by about sqrt(machine epsilon) of its size: the usual balance of truncation
+  // and rounding, for every component that matters.
   const auto jacobian_times = [&](const std::vector<double>& u) {
-    const double eps = std::sqrt(double(std::numeric_limits<T>::epsilon())) * y_scale / std::max(norm(u), 1e-300);
+    double largest = 0;
+    for (double c : u) largest = std::max(largest, std::abs(c));
+    const double eps = std::sqrt(double(std::numeric_limits<T>::epsilon())) * y_scale / std::max(largest, 1e-300);
     std::vector<double> shifted = y;
     for (std::size_t i = 0; i < y.size(); ++i) shifted[i] += eps * u[i];
     std::vector<double> ju = f(shifted);
     for (std::size_t i = 0; i < y.size(); ++i) ju[i] = (ju[i] - f0[i]) / eps;
     return ju;
   };
-  std::vector<double> u(y.size());
-  for (std::size_t i = 0; i < u.size(); ++i) u[i] = start_component(i);
+  // Positions and velocities differ in scale by the frequencies themselves, which makes J
+  // far from normal ([0 I; -w^2 0]) and Krylov estimates erratic. Scaling positions by a
+  // first guess s of |lambda| (a few power steps) balances it: D J D^-1 with D = diag(s, 1)
+  // has J's eigenvalues and, for an oscillation, is nearly skew-symmetric.
+  const std::size_t positions = y.size() / 2;
+  double s_scale = 1;
+  {
+    std::vector<double> u(y.size());
+    for (std::size_t i = 0; i < u.size(); ++i) u[i] = start_component(i);
+    for (int k = 0; k < 8; ++k) {
+      const double un = norm(u);
+      if (!(un > 0) || !std::isfinite(un)) break;
+      for (double& c : u) c /= un;
+      const std::vector<double> w1 = jacobian_times(u), w2 = jacobian_times(w1);
+      const double guess = std::abs(dominant_root(u, w1, w2));
+      if (guess > 0 && std::isfinite(guess)) s_scale = guess;
+      u = w2;
+    }
+  }
+  const auto balanced_times = [&](std::vector<double> u) {
+    for (std::size_t i = 0; i < positions; ++i) u[i] /= s_scale;
+    std::vector<double> w = jacobian_times(u);
+    for (std::size_t i = 0; i < positions; ++i) w[i] *= s_scale;
+    return w;
+  };
+  // Restarted Arnoldi: m Jacobian products build an orthonormal Krylov basis V and the
+  // projection H = V^T J V, whose dominant eigenvalue approaches J's far faster than plain
+  // power iteration does where the top of the spectrum is dense (a cloth's modes); each
+  // cycle restarts from the basis combination in H's dominant subspace.
+  const std::size_t memory_cap = std::size_t(512) << 20;
+  const int m = int(std::clamp<std::size_t>(memory_cap / (8 * y.size()), 2, std::size_t(std::min(iterations, 20))));
+  std::vector<double> v(y.size());
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = start_component(i);
   std::complex<double> dominant = 0;
-  for (int k = 0; k < iterations; ++k) {
-    const double un = norm(u);
-    if (!(un > 0) || !std::isfinite(un)) break;
-    for (double& c : u) c /= un;
-    const std::vector<double> w1 = jacobian_times(u), w2 = jacobian_times(w1);
-    dominant = dominant_root(u, w1, w2);
-    u = w2;
+  for (int done = 0; done < iterations;) {
+    const double vn = norm(v);
+    if (!(vn > 0) || !std::isfinite(vn)) break;
+    for (double& c : v) c /= vn;
+    std::vector<std::vector<double>> basis{v};
+    std::vector<double> h(std::size_t(m * m), 0.0);
+    int k = 0;
+    while (k < m && done < iterations) {
+      std::vector<double> w = balanced_times(basis[std::size_t(k)]);
+      ++done;
+      const double before = norm(w);
+      for (int pass = 0; pass < 2; ++pass) {  // Gram-Schmidt twice: orthogonal to rounding
+        for (int i = 0; i <= k; ++i) {
+          const double c = dot(basis[std::size_t(i)], w);
+          h[std::size_t(i * m + k)] += c;
+          for (std::size_t j = 0; j < w.size(); ++j) w[j] -= c * basis[std::size_t(i)][j];
+        }
+      }
+      const double beta = norm(w);
+      ++k;
+      if (!(beta > 1e-10 * before) || k == m) break;  // an invariant subspace, or the basis is full
+      h[std::size_t(k * m + k - 1)] = beta;
+      for (double& c : w) c /= beta;
+      basis.push_back(std::move(w));
+    }
+    std::vector<double> hk(std::size_t(k * k));
+    for (int i = 0; i < k; ++i) {
+      for (int j = 0; j < k; ++j) hk[std::size_t(i * k + j)] = h[std::size_t(i * m + j)];
+    }
+    const auto [root, combination] = dominant_of(hk, std::size_t(k));
+    dominant = root;
+    std::fill(v.begin(), v.end(), 0.0);
+    for (int i = 0; i < k; ++i) {
+      for (std::size_t j = 0; j < v.size(); ++j) v[j] += combination[std::size_t(i)] * basis[std::size_t(i)][j];
+    }
   }
   e.evaluations = f.evaluations;
   e.magnitude = std::abs(dominant);
-  e.angle = std::atan2(std::abs(dominant.imag()), -dominant.real());
+  // A mode that grows (Re lambda > 0: a body falling away from a saddle, or an oscillation
+  // whose finite differences lean that way) is judged as its decaying mirror: no step keeps
+  // a growing mode bounded, and a method's stability is about the ones that should be.
+  e.angle = std::atan2(std::abs(dominant.imag()), std::abs(dominant.real()));
   return e;
 }
 

@@ -22,18 +22,21 @@ namespace kinema {
 // The dominant eigenvalue (pair) of the force model's Jacobian d(v, a)/d(x, v) at a state.
 struct StiffnessEstimate {
   double magnitude = 0;  // |lambda| (1/s); 0 when the forces do not depend on the state
-  double angle = 0;      // from the negative real axis: 0 decay, pi/2 undamped oscillation
+  double angle = 0;      // from the negative real axis, 0 (decay) to pi/2 (undamped oscillation);
+                         // a growing mode is taken as its decaying mirror
   int evaluations = 0;   // force evaluations it took
 };
 
-// Power iteration with Jacobian-vector products by finite differences of the model's
-// accelerations (Stepper::accelerations): no matrix is formed. Each iteration takes u, J u
-// and J^2 u and fits J^2 u = p J u + q u: the roots of x^2 - p x - q are the dominant
-// eigenvalue or pair, real or complex (an oscillation's +-i omega, which plain power
-// iteration on J cannot converge to). Costs 2 `iterations` + 1 evaluations of the forces, in T.
+// Restarted Arnoldi with Jacobian-vector products by finite differences of the model's
+// accelerations (Stepper::accelerations): no matrix is formed. Cycles of up to 20 products
+// build a Krylov basis and J's projection on it; the projection's dominant eigenvalue or pair
+// (real or complex: an oscillation's +-i omega) comes from fitting H^2 u = p H u + q u, the
+// roots of x^2 - p x - q. Positions are first scaled by a rough |lambda| from 8 power steps,
+// so that J is close to normal. Costs `iterations` + 17 evaluations of the forces, in T, and
+// up to 21 vectors of 6 doubles per body (fewer past 512 MiB).
 template <class T>
 StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces,
-                                     double t = 0, int iterations = 100,
+                                     double t = 0, int iterations = 120,
                                      StepperOptions options = on_calling_thread());
 
 // The largest h > 0 up to which every step is stable for the estimate's mode (0: none, as

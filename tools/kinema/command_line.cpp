@@ -99,6 +99,9 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
                 "multiply-add (faster without an FMA unit; results then differ in the last "
                 "bits from the AVX2 and AVX-512 paths)");
   run->add_flag("--quiet,-q", o.quiet, "Print nothing on success");
+  run->add_flag("--strict", o.strict,
+                "Refuse (exit 1) a dt past the method's largest stable step on this scene, which "
+                "otherwise is a warning");
 }
 
 // The options chart and stability share.

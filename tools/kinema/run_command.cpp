@@ -12,6 +12,7 @@
 
 #include "interrupt.hpp"
 #include "kinema/scenes.hpp"
+#include "kinema/stability.hpp"
 #include "progress.hpp"
 #include "report_file.hpp"
 #include "trajectory.hpp"
@@ -131,6 +132,35 @@ void advance_adaptive(World<T>& world, double t, Tolerances tolerances, Adaptive
   if (s.next_step > 0) total.next_step = s.next_step;
 }
 
+// The stiffness of the scene at its start, in double whatever the run's precision (finite
+// differences in float lose half their digits): on the particles, else the rigid bodies'
+// centres; on 1024 of them spread evenly when only local terms act (each body is then a
+// system of its own, and the stiffest of a sample stands for the rest).
+StiffnessEstimate stiffness_at_start(const Scene& scene) {
+  const ForceModel<double> forces = make_forces<double>(scene);
+  const bool sampled = forces.fusable();
+  const Scene source = sampled ? sample_bodies(scene, 1024) : scene;
+  ParticleSet<double> bodies = make_particles<double>(source);
+  if (bodies.size() == 0) bodies = make_rigid_bodies<double>(source).centers();
+  return estimate_stiffness(bodies, forces);
+}
+
+std::string mode_name(const StiffnessEstimate& e) {
+  return e.angle < 0.3 ? "damping" : e.angle > 1.27 ? "oscillation" : "damped oscillation";
+}
+
+// Warns (or with --strict refuses) when dt is past the method's largest stable step.
+void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessEstimate& e, double stable) {
+  if (!(scene.dt > stable)) return;
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "dt %g is past the largest stable step of %s on this scene, %.3g (its fastest mode: %s "
+                "at |lambda| = %.4g /s); expect the run to blow up",
+                scene.dt, scene.method.c_str(), stable, mode_name(e).c_str(), e.magnitude);
+  if (o.strict) throw Error(o.scene_path + ": " + text + " (--strict)");
+  if (!o.quiet) std::fprintf(stderr, "kinema: warning: %s\n", printable(text).c_str());
+}
+
 // What happened before stepping that the summary reports.
 struct RunContext {
   std::optional<nlohmann::ordered_json> auto_choice;
@@ -150,6 +180,11 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
       throw Error(o.scene_path + ": " + e.what());
     }
   }();
+  const StiffnessEstimate stiffness = stiffness_at_start(scene);
+  const double stable_step = largest_stable_step(method_by_name(scene.method), stiffness);
+  std::optional<Tolerances> tolerances = tolerances_of(scene);
+  if (tolerances && stable_step > 0) tolerances->max_step = stable_step;  // error control never goes past it
+  if (!tolerances) check_stable_step(scene, o, stiffness, stable_step);
   // Opened once the world stands (a scene that fails leaves no file behind), before the run.
   ReportFile summary_file(o.summary_path, "summary");
   std::optional<TrajectoryWriter> trajectory;
@@ -162,7 +197,6 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   // Error-controlled steps land on each chunk's end, so their chunks are longer: a sixteenth
   // of the run or more.
   const std::uint64_t per_chunk = std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1))));
-  const std::optional<Tolerances> tolerances = tolerances_of(scene);
   const std::uint64_t chunk = tolerances ? std::max<std::uint64_t>({1, scene.steps / 16, per_chunk})
                                          : std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), per_chunk);
   double wall_seconds = 0;  // stepping only: loading, checking and writing are not timed
@@ -216,6 +250,8 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     summary["smallest_step"] = adaptive.smallest_step;
     summary["largest_step"] = adaptive.largest_step;
   }
+  summary["stiffness"] = stiffness.magnitude;
+  if (std::isfinite(stable_step)) summary["largest_stable_step"] = stable_step;
   summary["force_evaluations"] = tolerances ? adaptive.evaluations
                                             : done * std::uint64_t(stepper.method().evaluations());
   summary["wall_seconds"] = wall_seconds;

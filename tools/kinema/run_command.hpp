@@ -25,6 +25,7 @@ struct RunOptions {
   unsigned threads = 0;         // 0: all hardware threads
   bool relaxed_fma = false;     // scalar and SSE2 paths: multiply then add
   bool quiet = false;
+  bool strict = false;          // a dt past the largest stable step is an error, not a warning
 };
 
 // Returns the process exit code: 0, or 3 when the state stopped being finite.
