@@ -19,7 +19,10 @@ namespace fs = std::filesystem;
 std::vector<const Method*> pick_methods(const std::vector<std::string>& names) {
   std::vector<const Method*> out;
   for (const std::string& n : names) out.push_back(&method_by_name(n));
-  if (out.empty()) out.assign(builtin_methods.begin(), builtin_methods.end());
+  if (out.empty()) {
+    out.assign(builtin_methods.begin(), builtin_methods.end());
+    out.insert(out.end(), staged_methods.begin(), staged_methods.end());
+  }
   return out;
 }
 

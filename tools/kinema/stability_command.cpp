@@ -1,7 +1,9 @@
 // `kinema stability`: energy error against time per method, the trajectories of planar
 // motions, and the stability regions of the explicit Runge-Kutta methods with the measured
 // limits of the test equation x' = -lambda x marked.
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <complex>
 #include <cstdio>
 #include <filesystem>
@@ -9,6 +11,7 @@
 
 #include "chart_command.hpp"
 #include "kinema/scenes.hpp"
+#include "kinema/stability.hpp"
 #include "interrupt.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
@@ -165,6 +168,75 @@ std::string spring_limits(const Scene& scene, const fs::path& dir) {
   return line;
 }
 
+// Does a run of `m` at step h over the duration stay bounded: every value finite and the
+// energy within |E0| of where it started?
+template <class T>
+bool holds(const Scene& scene, const Method& m, double h, double duration) {
+  World<T> world(scene, m, on_calling_thread());
+  const double e0 = world.total_energy();
+  world.advance(T(h), step_count(duration, h));
+  return world.finite() && std::abs(world.total_energy() - e0) <= std::max(std::abs(e0), 1e-300);
+}
+
+// The largest step that holds, by bisection on a log scale around `guess` (to 0.5%); 0 or
+// infinity when even guess / 512 fails or guess * 512 holds.
+template <class T>
+double measured_step(const Scene& scene, const Method& m, double guess, double duration) {
+  double lo = guess / 7, hi = guess * 9;  // not centred on the guess: its first midpoint is not the guess
+  const auto ok = [&](double h) { return h < duration && holds<T>(scene, m, h, duration); };
+  for (int k = 0; k < 3 && !ok(lo); ++k) hi = lo, lo /= 8;
+  if (!ok(lo)) return 0;
+  for (int k = 0; k < 3 && ok(hi); ++k) lo = hi, hi *= 8;
+  if (ok(hi)) return std::numeric_limits<double>::infinity();
+  while (hi / lo > 1.005) {
+    stop_if_interrupted();
+    const double mid = std::sqrt(lo * hi);
+    (ok(mid) ? lo : hi) = mid;
+  }
+  return lo;
+}
+
+// Each method's largest stable step on this scene, predicted from the stiffness estimate at
+// its start and measured over the duration, into step_limits.csv and a chart; one printed
+// line.
+std::string step_limits(const Scene& scene, const std::vector<const Method*>& methods, double dt, double duration,
+                        const fs::path& dir) {
+  const ForceModel<double> forces = make_forces<double>(scene);
+  ParticleSet<double> bodies = make_particles<double>(scene);
+  if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
+  const StiffnessEstimate e = estimate_stiffness(bodies, forces);
+  OutputFile csv(dir / "step_limits.csv"), dat(dir / "step_limits.dat");
+  csv << "method,stiffness,angle,predicted_step,measured_step\n";
+  std::string line = "largest stable step, predicted / measured:";
+  for (const Method* m : methods) {
+    stop_if_interrupted();
+    const double predicted = largest_stable_step(*m, e);
+    const double guess = predicted > 0 && std::isfinite(predicted) ? predicted : dt;
+    const double measured = with_precision(scene.precision, [&]<class T>() {
+      return measured_step<T>(scene, *m, guess, duration);
+    });
+    csv << m->name << ',' << e.magnitude << ',' << e.angle << ',' << predicted << ',' << measured << '\n';
+    // Zero and infinite steps have no place on a log scale: drawn at the axis' ends.
+    dat << '"' << m->name << "\" " << std::clamp(predicted, dt / 1e3, dt * 1e3) << ' '
+        << std::clamp(measured, dt / 1e3, dt * 1e3) << '\n';
+    char item[96];
+    std::snprintf(item, sizeof item, " %s %.3g / %.3g", std::string(m->name).c_str(), predicted, measured);
+    line += item;
+  }
+  csv.close();
+  dat.close();
+  char head[200];
+  std::snprintf(head, sizeof head,
+                "set logscale y\nset grid\nset key outside right\nset xtics rotate by -30\n"
+                "set title 'Largest stable step: predicted (|lambda| = %.4g /s at the start) and measured'\n"
+                "set ylabel 'h (s)'\nset xrange [-0.5:%zu]\n", e.magnitude, methods.size() - 0);
+  render_chart(dir, "step_limits",
+               std::string(head) + "plot 'step_limits.dat' using 0:2:xtic(1) with points pt 7 ps 1.5 title 'predicted', "
+               "'' using 0:3 with points pt 6 ps 2 lw 2 title 'measured blow-up', " + std::to_string(dt) +
+               " with lines dt 2 title 'the scene''s dt'");
+  return line + "\n";
+}
+
 }  // namespace
 
 int stability_scene(const StabilityOptions& o) {
@@ -217,6 +289,7 @@ int stability_scene(const StabilityOptions& o) {
   if (planar) render_chart(dir, "trajectory", path_plot);
   write_regions(dir, methods);
   const std::string springs = spring_limits(scene, dir);
+  const std::string steps_line = step_limits(scene, methods, dt, duration, dir);
   progress.finish();
   if (!o.quiet) {
     std::printf("kinema stability: %s, h = %g, %llu steps; wrote %s/{energy,trajectory,"
@@ -225,6 +298,7 @@ int stability_scene(const StabilityOptions& o) {
                 printable(o.out).c_str(),
                 planar ? "" : " (no trajectory chart: the motion is not planar)");
     std::fputs(springs.c_str(), stdout);
+    std::fputs(steps_line.c_str(), stdout);
   }
   return 0;
 }
