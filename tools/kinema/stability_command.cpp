@@ -225,7 +225,7 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
   }
   csv.close();
   dat.close();
-  char head[200];
+  char head[400];
   std::snprintf(head, sizeof head,
                 "set logscale y\nset grid\nset key outside right\nset xtics rotate by -30\n"
                 "set title 'Largest stable step: predicted (|lambda| = %.4g /s at the start) and measured'\n"
