@@ -40,12 +40,12 @@ double error_after_one_period(const ParticleSet<double>& b) {
   return std::hypot(x[0] - kPeriapsis, x[1], x[2]) + std::hypot(v[0], v[1] - kSpeed, v[2]);
 }
 
-struct AdaptiveRun {
+struct OrbitRun {
   AdaptiveStats stats;
   double error;
 };
 
-AdaptiveRun adaptive_orbit(const Method& m, double tol, StepperOptions o = test::serial_options()) {
+OrbitRun adaptive_orbit(const Method& m, double tol, StepperOptions o = test::serial_options()) {
   ParticleSet<double> b = at_periapsis();
   Stepper<double> stepper(attractor(), m, o);
   const AdaptiveStats stats = stepper.advance_to(b, kPeriod, {tol, tol});
@@ -69,7 +69,7 @@ TEST_CASE("dopri5 and bs3: the final error on the e = 0.9 orbit is proportional 
   // gives a hundred times less error.
   for (const Method* m : {&dopri5, &bs3}) {
     const double loose = m == &dopri5 ? 1e-6 : 1e-5;
-    std::vector<AdaptiveRun> runs;
+    std::vector<OrbitRun> runs;
     for (double tol : {loose, loose / 100, loose / 10000}) runs.push_back(adaptive_orbit(*m, tol));
     for (std::size_t k = 0; k + 1 < runs.size(); ++k) {
       INFO(m->name << ": errors " << runs[k].error << " then " << runs[k + 1].error << ", steps "
@@ -84,7 +84,7 @@ TEST_CASE("dopri5 and bs3: the final error on the e = 0.9 orbit is proportional 
 }
 
 TEST_CASE("dopri5's steps cost fewer force evaluations than fixed-step rk4 at the same error", "[adaptive]") {
-  const AdaptiveRun a = adaptive_orbit(dopri5, 1e-10);
+  const OrbitRun a = adaptive_orbit(dopri5, 1e-10);
   // The fewest rk4 steps that reach the adaptive run's error (found by doubling, then bisection).
   std::uint64_t lo = 1, hi = 2;
   while (rk4_orbit_error(hi) > a.error) lo = hi, hi *= 2;
@@ -99,7 +99,7 @@ TEST_CASE("dopri5's steps cost fewer force evaluations than fixed-step rk4 at th
 
 TEST_CASE("dopri5 counts six evaluations per attempt (first same as last) and bs3 three", "[adaptive]") {
   for (const Method* m : {&dopri5, &bs3}) {
-    const AdaptiveRun a = adaptive_orbit(*m, 1e-9);
+    const OrbitRun a = adaptive_orbit(*m, 1e-9);
     INFO(m->name << ": " << a.stats.accepted << " accepted, " << a.stats.rejected << " rejected");
     // One evaluation for the first guess, which the first attempt reuses.
     const std::uint64_t per_attempt = std::uint64_t(m->tableau.stages - 1);

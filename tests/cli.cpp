@@ -303,7 +303,13 @@ TEST_CASE("run --method auto reports its choice and meets the tolerance", "[cli]
                      summary.string()).code == 0);
   const auto j = nlohmann::json::parse(read(summary));
   CHECK(j["method"] == j["auto"]["method"]);
-  CHECK(j["steps"] == j["auto"]["steps"]);
+  CHECK(j["precision"] == j["auto"]["precision"]);
+  if (j["auto"].contains("rtol")) {  // error-controlled steps
+    CHECK(j["rtol"] == j["auto"]["rtol"]);
+    CHECK(j["accepted_steps"].get<int>() > 0);
+  } else {
+    CHECK(j["steps"] == j["auto"]["steps"]);
+  }
   CHECK(j["t_final"].get<double>() == Approx(20));
   CHECK(j["auto"]["estimated_error"].get<double>() <= 1e-6);
   CHECK(kinema_cli("run " + scene("damped_spring.json") + " --method auto").err.find("needs a tolerance") !=

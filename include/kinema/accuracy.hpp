@@ -7,6 +7,7 @@
 // hide first-order errors (semi-implicit Euler's positions are second order).
 
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -30,6 +31,15 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies);
 // Runs `steps` steps of duration / steps with `method` on one thread, in the scene's precision.
 BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t steps, double duration);
 
+// An error-controlled run (rtol = atol = tolerance, steps at most max_step) of a method
+// with an embedded pair over the duration: the final states and the force evaluations.
+struct AdaptiveRun {
+  BodyStates states;
+  std::uint64_t evaluations = 0;
+};
+AdaptiveRun simulate_adaptive(const Scene& scene, const Method& method, double tolerance, double duration,
+                              double max_step = std::numeric_limits<double>::infinity());
+
 // max over bodies of |x - x_ref| + |v - v_ref| (+ the rotation angle between q and q_ref).
 double state_error(const BodyStates& states, const BodyStates& reference);
 
@@ -51,8 +61,13 @@ Reference reference_states(const Scene& scene, double duration, std::uint64_t st
 
 struct MethodChoice {
   const Method* method = nullptr;
-  std::uint64_t steps = 0;  // dt = duration / steps exactly
+  std::uint64_t steps = 0;  // dt = duration / steps exactly (fixed steps)
   double dt = 0;
+  // Set when error-controlled steps of an embedded pair are the cheapest: rtol = atol =
+  // this over the duration; steps and dt then describe nothing.
+  std::optional<double> step_tolerance;
+  Precision precision = Precision::dual;  // the scene's, or float where its round-off allows
+  double evaluations = 0;                 // force evaluations the choice costs
   double estimated_error = 0;
   std::string reason;       // one line: what each candidate would cost
   // Every method that can reach the tolerance, with the step count the pilots estimate.
@@ -63,11 +78,17 @@ struct MethodChoice {
   std::vector<Candidate> candidates;
 };
 
-// The built-in method and step count with the fewest force evaluations whose estimated
-// error over the scene's duration (dt x steps) stays under `tolerance`. Each method's
-// error comes from pilot runs on a sample of bodies at N, 2N and 4N steps (Richardson,
-// with the observed order), and the choice is checked again at its own step count.
-// Throws kinema::Error when the tolerance is not positive or cannot be reached.
+// The named method and step count with the fewest force evaluations whose estimated error
+// over the scene's duration (dt x steps) stays under `tolerance`. Each method's error comes
+// from pilot runs on a sample of bodies at N, 2N and 4N steps (Richardson, with the observed
+// order), and the choice is checked again at its own step count. No step past a method's
+// largest stable step on the scene (from a stiffness estimate at its start) is proposed, and
+// a method with none is not tried. The embedded pairs are also tried with error-controlled
+// steps (rtol = atol from the tolerance down by tens, each run's error measured against one
+// a hundred times tighter). A double scene is run in float when float's round-off, measured
+// by the chosen configuration in both precisions, stays ten times under the tolerance: float
+// steps cost half. Throws kinema::Error when the tolerance is not positive or cannot be
+// reached.
 MethodChoice choose_method(const Scene& scene, double tolerance);
 
 }  // namespace kinema

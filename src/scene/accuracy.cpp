@@ -10,6 +10,7 @@
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
+#include "kinema/stability.hpp"
 #include "kinema/stepper.hpp"
 #include "kinema/world.hpp"
 
@@ -17,9 +18,7 @@ namespace kinema {
 namespace {
 
 template <class T>
-BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
-  World<T> world(scene, method, on_calling_thread());
-  world.advance(T(duration / double(steps)), steps);
+BodyStates states_of(const World<T>& world) {
   const ParticleSet<T>& particles = world.particles;
   const RigidBodySet<T>& rigid = world.rigid;
   BodyStates out;
@@ -35,6 +34,23 @@ BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, do
     out.orientations.push_back({q[0], q[1], q[2], q[3]});
   }
   return out;
+}
+
+template <class T>
+BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
+  World<T> world(scene, method, on_calling_thread());
+  world.advance(T(duration / double(steps)), steps);
+  return states_of(world);
+}
+
+template <class T>
+AdaptiveRun run_adaptive(const Scene& scene, const Method& method, double tolerance, double duration,
+                         double max_step) {
+  World<T> world(scene, method, on_calling_thread());
+  Tolerances t{tolerance, tolerance};
+  t.max_step = max_step;
+  const AdaptiveStats stats = world.advance_to(duration, t);
+  return {states_of(world), stats.evaluations};
 }
 
 // Every body under exactly one central attractor on a bound orbit: Kepler's equation in
@@ -136,6 +152,13 @@ BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t step
   if (steps == 0) throw Error("simulate: steps must be at least 1");
   return with_precision(scene.precision,
                         [&]<class T>() { return run<T>(scene, method, steps, duration); });
+}
+
+AdaptiveRun simulate_adaptive(const Scene& scene, const Method& method, double tolerance, double duration,
+                              double max_step) {
+  return with_precision(scene.precision, [&]<class T>() {
+    return run_adaptive<T>(scene, method, tolerance, duration, max_step);
+  });
 }
 
 double state_error(const BodyStates& a, const BodyStates& b) {
@@ -276,21 +299,56 @@ class Pilot {
 // tolerance: halve or double from n, then try three quarters of the last good count.
 // Gives up once the steps would cost more force evaluations than `budget`.
 std::optional<std::uint64_t> steps_needed(Pilot& pilot, const Method& m, std::uint64_t n,
-                                          double tolerance, double budget) {
+                                          double tolerance, double budget, std::uint64_t least) {
   auto fits = [&](std::uint64_t k) { return pilot.estimate(k) <= tolerance; };
   auto affordable = [&](std::uint64_t k) { return double(k) * m.evaluations() <= budget; };
+  n = std::max(n, least);
   if (fits(n)) {
-    while (n > 1 && fits(n / 2)) n /= 2;
+    while (n / 2 >= std::max<std::uint64_t>(least, 1) && fits(n / 2)) n /= 2;
   } else {
     do {
       n *= 2;
       if (!affordable(n) || n > kMostPilotSteps) return std::nullopt;
     } while (!fits(n));
   }
-  const std::uint64_t three_quarters = std::max<std::uint64_t>(1, 3 * n / 4);
+  const std::uint64_t three_quarters = std::max<std::uint64_t>({1, least, 3 * n / 4});
   if (three_quarters < n && fits(three_quarters)) n = three_quarters;
   if (!affordable(n)) return std::nullopt;
   return n;
+}
+
+// Error-controlled runs of an embedded pair: the loosest rtol = atol, from the tolerance
+// down by tens, whose error (against a run a hundred times tighter) stays under it, with
+// the force evaluations it takes; nullopt when none does within the budget.
+struct AdaptivePick {
+  double step_tolerance;
+  double evaluations;
+  double estimated_error;
+};
+std::optional<AdaptivePick> adaptive_pick(const Scene& scene, const Method& m, double duration, double tolerance,
+                                          double max_step, double budget, double& spent) {
+  const double bodies = charged_bodies(scene);
+  const auto run = [&](double tau) {
+    AdaptiveRun r = simulate_adaptive(scene, m, tau, duration, max_step);
+    spent += double(r.evaluations) / m.tableau.stages * bodies;
+    if (spent > kSearchBodySteps) throw SearchSpent{};
+    return r;
+  };
+  for (double tau = tolerance; tau >= tolerance * 1e-8; tau /= 10) {
+    const AdaptiveRun loose = run(tau);
+    if (double(loose.evaluations) > budget) return std::nullopt;
+    const double error = state_error(loose.states, run(tau / 100).states);
+    if (error <= tolerance) return AdaptivePick{tau, double(loose.evaluations), error};
+  }
+  return std::nullopt;
+}
+
+// The scene's stiffness at its start, in double, on its particles (else the rigid bodies'
+// centres).
+StiffnessEstimate stiffness_of(const Scene& scene) {
+  ParticleSet<double> bodies = make_particles<double>(scene);
+  if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
+  return estimate_stiffness(bodies, make_forces<double>(scene));
 }
 
 // Refuses at once a tolerance below the round-off of a single step: a few units in the
@@ -314,6 +372,35 @@ void check_reachable(const Scene& sample, double tolerance) {
 
 }  // namespace
 
+namespace {
+
+// Float where the chosen configuration's round-off in float, against the same run in double,
+// stays ten times under the tolerance (with the truncation error, under it).
+void consider_float(const Scene& pilot_scene, double duration, double tolerance, MethodChoice& choice) {
+  if (pilot_scene.precision != Precision::dual) return;
+  Scene single = pilot_scene;
+  single.precision = Precision::single;
+  try {
+    check_scene<float>(single);
+  } catch (const Error&) {
+    return;  // values float cannot hold
+  }
+  const auto states = [&](const Scene& s) {
+    return choice.step_tolerance ? simulate_adaptive(s, *choice.method, *choice.step_tolerance, duration).states
+                                 : simulate(s, *choice.method, choice.steps, duration);
+  };
+  const double roundoff = state_error(states(single), states(pilot_scene));
+  if (roundoff <= tolerance / 10 && choice.estimated_error + roundoff <= tolerance) {
+    choice.precision = Precision::single;
+    char text[160];
+    std::snprintf(text, sizeof text, "; float's round-off %.2g is under a tenth of the tolerance: run in float",
+                  roundoff);
+    choice.reason += text;
+  }
+}
+
+}  // namespace
+
 MethodChoice choose_method(const Scene& scene, double tolerance) {
   if (!(std::isfinite(tolerance) && tolerance > 0)) {
     throw Error("tolerance must be positive and finite");
@@ -322,20 +409,32 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
   const double duration = scene.dt * double(scene.steps);
   const Scene pilot_scene = sample_bodies(scene, 64);
   check_reachable(pilot_scene, tolerance);
+  const StiffnessEstimate stiffness = stiffness_of(pilot_scene);
   const std::uint64_t start = std::clamp<std::uint64_t>(scene.steps / 16, 8, kMostPilotSteps);
   MethodChoice choice;
+  choice.precision = scene.precision;
   double best_cost = std::numeric_limits<double>::infinity(), spent = 0;
   std::string reason;
   // Highest order first: it usually sets the budget the others must beat.
   std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
+  // Rigid bodies take the fused kernels only: the built-in methods.
+  if (pilot_scene.rigid_bodies.empty()) order.insert(order.end(), staged_methods.begin(), staged_methods.end());
   std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
+  bool spent_out = false;
   for (const Method* m : order) {
+    const double stable = largest_stable_step(*m, stiffness);
+    if (!(stable > 0)) {
+      reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " unstable here";
+      continue;
+    }
+    const std::uint64_t least = std::isfinite(stable) ? std::uint64_t(std::ceil(duration / stable)) : 1;
     Pilot pilot(pilot_scene, *m, duration, spent);
     std::optional<std::uint64_t> steps;
     try {
-      steps = steps_needed(pilot, *m, start, tolerance, best_cost);
+      steps = steps_needed(pilot, *m, start, tolerance, best_cost, least);
     } catch (const SearchSpent&) {
       reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " not tried (search budget spent)";
+      spent_out = true;
       break;  // the best so far meets the tolerance; it may not be the cheapest
     }
     reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " ";
@@ -353,6 +452,29 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
       choice.estimated_error = pilot.estimate(*steps);
     }
   }
+  // Error-controlled steps (particles only), within the stable step.
+  for (const Method* m : {&dopri5, &bs3}) {
+    if (spent_out || !pilot_scene.rigid_bodies.empty()) break;
+    const double stable = largest_stable_step(*m, stiffness);
+    if (!(stable > 0)) continue;
+    std::optional<AdaptivePick> pick;
+    try {
+      pick = adaptive_pick(pilot_scene, *m, duration, tolerance, stable, best_cost, spent);
+    } catch (const SearchSpent&) {
+      break;
+    }
+    if (!pick) continue;
+    char text[120];
+    std::snprintf(text, sizeof text, ", %s with error control (rtol = atol = %g) %.0f evaluations",
+                  std::string(m->name).c_str(), pick->step_tolerance, pick->evaluations);
+    reason += text;
+    if (pick->evaluations < best_cost) {
+      best_cost = pick->evaluations;
+      choice.method = m;
+      choice.step_tolerance = pick->step_tolerance;
+      choice.estimated_error = pick->estimated_error;
+    }
+  }
   if (choice.method == nullptr) {
     char text[256];
     std::snprintf(text, sizeof text,
@@ -361,11 +483,14 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
                   scene.precision == Precision::single ? "; in float, try double" : "");
     throw Error(text);
   }
-  choice.dt = duration / double(choice.steps);
+  choice.evaluations = best_cost;
+  if (!choice.step_tolerance) choice.dt = duration / double(choice.steps);
   char head[96];
   std::snprintf(head, sizeof head, "for error <= %g over %g s: ", tolerance, duration);
-  choice.reason = head + reason + "; picked " + std::string(choice.method->name) + " (" +
+  choice.reason = head + reason + "; picked " + std::string(choice.method->name) +
+                  (choice.step_tolerance ? " with error control" : "") + " (" +
                   std::to_string(choice.method->evaluations()) + " force evaluations per step)";
+  consider_float(pilot_scene, duration, tolerance, choice);
   return choice;
 }
 

@@ -310,14 +310,22 @@ int run_scene(const RunOptions& o) {
         throw Error(o.scene_path + ": " + e.what());
       }
     }();
-    choice = nlohmann::ordered_json{
-        {"method", std::string(c.method->name)}, {"dt", c.dt}, {"steps", c.steps},
-        {"tolerance", *scene.tolerance}, {"estimated_error", c.estimated_error},
-        {"seconds", std::chrono::duration<double>(Clock::now() - start).count()},
-        {"reason", c.reason}};
+    choice = nlohmann::ordered_json{{"method", std::string(c.method->name)}};
+    if (c.step_tolerance) {
+      (*choice)["rtol"] = *c.step_tolerance;  // the duration stays dt x steps
+      scene.rtol = scene.atol = *c.step_tolerance;
+    } else {
+      choice->update({{"dt", c.dt}, {"steps", c.steps}});
+      scene.dt = c.dt;
+      scene.steps = c.steps;
+    }
+    choice->update({{"precision", std::string(precision_name(c.precision))},
+                    {"force_evaluations", c.evaluations},
+                    {"tolerance", *scene.tolerance}, {"estimated_error", c.estimated_error},
+                    {"seconds", std::chrono::duration<double>(Clock::now() - start).count()},
+                    {"reason", c.reason}});
     scene.method = std::string(c.method->name);
-    scene.dt = c.dt;
-    scene.steps = c.steps;
+    scene.precision = c.precision;
   }
   const RunContext context{choice};
   return with_precision(scene.precision, [&]<class T>() { return run_typed<T>(scene, o, context); });
