@@ -16,12 +16,14 @@
 namespace kinema::cli {
 namespace fs = std::filesystem;
 
-std::vector<const Method*> pick_methods(const std::vector<std::string>& names) {
+std::vector<const Method*> pick_methods(const std::vector<std::string>& names, const Scene& scene) {
   std::vector<const Method*> out;
   for (const std::string& n : names) out.push_back(&method_by_name(n));
   if (out.empty()) {
     out.assign(builtin_methods.begin(), builtin_methods.end());
-    out.insert(out.end(), staged_methods.begin(), staged_methods.end());
+    // Rigid bodies take the fused kernels only: the built-in methods.
+    const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
+    if (!rigid) out.insert(out.end(), staged_methods.begin(), staged_methods.end());
   }
   return out;
 }
@@ -39,8 +41,9 @@ std::uint64_t step_count(double duration, double dt) {
   return std::uint64_t(steps);
 }
 
-Scene load_checked(const std::string& path) {
+Scene load_checked(const std::string& path, std::optional<Precision> precision) {
   Scene scene = load_scene(path);
+  if (precision) scene.precision = *precision;
   try {
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {
@@ -118,6 +121,11 @@ void write_charts(const fs::path& dir, const Scene& scene, const std::vector<con
   wp += "set xlabel 'error at the end: max over bodies of |dx| + |dv| (+ orientation, rad)'\n";
   wp += "set ylabel 'wall time per simulated second, 1 thread (s)'\n";
   wp += "plot ";
+  // Cost as force evaluations: what the method's order buys, whatever its kernel's speed.
+  std::string fe = "set logscale xy\nset grid\nset key outside right\n";
+  fe += "set title " + gnuplot_quote("Error against force evaluations: " + scene.name + " (" +
+                                      std::string(precision_name(scene.precision)) + ")") + "\n";
+  fe += "set xlabel 'error at the end'\nset ylabel 'force evaluations (stages x steps x bodies)'\nplot ";
   std::string ev = "set logscale xy\nset grid\nset key outside right\n";
   ev += "set title " + gnuplot_quote("Error against step size: " + scene.name) + "\n";
   ev += "set xlabel 'step size h (s)'\nset ylabel 'error at the end'\nplot ";
@@ -130,18 +138,20 @@ void write_charts(const fs::path& dir, const Scene& scene, const std::vector<con
           " using 5:6:(sprintf('h=%.3g', $2)) with labels offset 0.6,0.6 font ',8' tc lt " +
           std::to_string(i + 1) + " notitle" + sep;
     ev += data + " using 2:5 with linespoints pt 7" + lc + " title " + gnuplot_quote(legends[i]) + sep;
+    fe += data + " using 5:4 with linespoints pt 7" + lc + " title " + gnuplot_quote(legends[i]) + sep;
   }
   if (!ref.analytic && ref.error > 0) {
     ev += ", " + std::to_string(ref.error) + " with lines dt 2 lc 'gray' title 'reference error (estimate)'";
   }
   render_chart(dir, "work_precision", wp);
   render_chart(dir, "error_vs_step", ev);
+  render_chart(dir, "error_vs_evaluations", fe);
 }
 
 }  // namespace
 
 int chart_scene(const ChartOptions& o) {
-  const Scene full = load_checked(o.scene_path);
+  const Scene full = load_checked(o.scene_path, o.precision);
   const Scene scene = sample_bodies(full, o.max_bodies);
   const double duration = o.duration.value_or(full.dt * double(full.steps));
   if (!(duration > 0)) throw Error("the duration must be positive (--duration or the scene's dt x steps)");
@@ -149,7 +159,7 @@ int chart_scene(const ChartOptions& o) {
   if (dts.empty()) {
     for (int k = -3; k <= 4; ++k) dts.push_back(full.dt * std::ldexp(1.0, k));
   }
-  const std::vector<const Method*> methods = pick_methods(o.methods);
+  const std::vector<const Method*> methods = pick_methods(o.methods, full);
   std::sort(dts.begin(), dts.end());
   dts.erase(std::unique(dts.begin(), dts.end(), [&](double a, double b) {
               return step_count(duration, a) == step_count(duration, b);

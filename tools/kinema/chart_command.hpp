@@ -14,7 +14,8 @@ namespace kinema::cli {
 // What chart and stability share: a scene, the methods, the span, a sample of bodies.
 struct SweepOptions {
   std::string scene_path;
-  std::vector<std::string> methods;  // empty: every built-in method
+  std::vector<std::string> methods;  // empty: every named method
+  std::optional<Precision> precision;  // default: the scene's
   std::optional<double> duration;    // default: the scene's dt x steps
   std::size_t max_bodies = 256;      // bodies sampled from the scene
   std::string out;                   // output folder
@@ -37,10 +38,11 @@ struct StabilityOptions : SweepOptions {
 int stability_scene(const StabilityOptions& options);
 
 // Shared by both commands.
-// The scene file, with check_scene run in its precision (before any body is built).
-Scene load_checked(const std::string& path);
-// The built-in methods named (all of them when none is).
-std::vector<const Method*> pick_methods(const std::vector<std::string>& names);
+// The scene file in the precision asked for (default its own), with check_scene run in it
+// (before any body is built).
+Scene load_checked(const std::string& path, std::optional<Precision> precision = std::nullopt);
+// The methods named (when none is, every named method the scene's bodies can take).
+std::vector<const Method*> pick_methods(const std::vector<std::string>& names, const Scene& scene);
 // Steps of about dt over `duration`; kinema::Error past 2^32 steps or below one.
 std::uint64_t step_count(double duration, double dt);
 

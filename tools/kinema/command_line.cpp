@@ -107,6 +107,11 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
 // The options chart and stability share.
 void add_sweep_options(CLI::App& command, SweepOptions& o) {
   command.add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
+  command.add_option_function<std::string>(
+             "--precision",
+             [&o](const std::string& p) { o.precision = p == "float" ? Precision::single : Precision::dual; },
+             "Override the scene's precision: float or double")
+      ->check(CLI::IsMember({"float", "double"}));
   command.add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
   command.add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
       ->transform(positive_finite);

@@ -240,12 +240,12 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
 }  // namespace
 
 int stability_scene(const StabilityOptions& o) {
-  const Scene full = load_checked(o.scene_path);
+  const Scene full = load_checked(o.scene_path, o.precision);
   const Scene scene = sample_bodies(full, o.max_bodies);
   const double dt = o.dt.value_or(full.dt);
   const double duration = o.duration.value_or(full.dt * double(full.steps));
   const std::uint64_t steps = step_count(duration, dt);
-  const std::vector<const Method*> methods = pick_methods(o.methods);
+  const std::vector<const Method*> methods = pick_methods(o.methods, full);
   const fs::path dir = o.out;
   fs::create_directories(dir);
   OutputFile energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
