@@ -232,6 +232,25 @@ class Report {
     }
   }
 
+  void adaptive_table() {
+    if (!find(runs_, "adaptive/dopri5/float/" + isa_ + "/100000/real_time", "ns_per_body_step")) return;
+    std::printf("\nError-controlled dopri5 against fixed steps at its mean accepted step, N = 100000, 1 thread, %s "
+                "(each call from the same state over 0.5 s): ns per body-step; the share of the in-place stream\n",
+                isa_.c_str());
+    for (const std::string p : {"float", "double"}) {
+      const std::string at = "/" + isa_ + "/100000/real_time";
+      const auto adaptive = find(runs_, "adaptive/dopri5/" + p + at, "ns_per_body_step");
+      const auto fixed = find(runs_, "fixed/dopri5/" + p + at, "ns_per_body_step");
+      if (!adaptive) continue;
+      cvs_.push_back(adaptive->cv);
+      const auto bw = ratio(find(runs_, "adaptive/dopri5/" + p + at, "GB_per_s"), find(runs_, stream(100000, 1), "GB_per_s"));
+      std::printf("%-6s adaptive %.3f (%s steps per call) | fixed %s | adaptive / fixed %s | %s of the stream\n",
+                  p.c_str(), adaptive->median, value("adaptive/dopri5/" + p + at, "accepted_per_call", "%.0f").c_str(),
+                  cell(median(fixed), "%.3f").c_str(), cell(ratio(adaptive, fixed), "%.2fx").c_str(),
+                  cell(percent(bw), "%.1f%%").c_str());
+    }
+  }
+
   void paired_scaling() {
     bool header = false;
     for (const std::string p : {"float", "double"}) {
@@ -373,6 +392,7 @@ int main(int argc, char** argv) {
   report.coupled_table();
   report.frame_table();
   report.guard_table();
+  report.adaptive_table();
   report.limits();
   report.noise();
   if (csv != nullptr) std::fclose(csv);

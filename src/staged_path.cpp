@@ -1,5 +1,7 @@
 #include "staged_path.hpp"
 
+#include "error_control.hpp"
+
 #include <algorithm>
 #include <cmath>
 
@@ -354,9 +356,9 @@ void StagedPath<T>::run_finish(const StepContext<T>& c, Block b) {
   if (attempt_ != nullptr) block_error_[b.begin / kBlockBodies] = block_error(c, b);
 }
 
-// sum over the block's components of (e / (atol + rtol max(|y0|, |y1|)))^2, in double, with
-// e = h sum_s (b_s - b_hat_s) k_s (velocity stages for positions, accelerations, kept times
-// sigma h, for velocities). y0 is the state kept by the attempt.
+// The block's sum of squared weighted errors over its six components, e = h sum_s (b_s -
+// b_hat_s) k_s (velocity stages for positions, accelerations, kept times sigma h, for
+// velocities). y0 is the state kept by the attempt.
 template <class T>
 double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
   const auto& t = method_.tableau;
@@ -365,22 +367,18 @@ double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
   double sum = 0;
   for (int field = 0; field < 2; ++field) {
     for (int d = 0; d < 3; ++d) {
-      const T* y0 = saved_[field][d].data();
-      const T* y1 = field == 0 ? body.x[d] : body.v[d];
+      const T* y0 = saved_[field][d].data() + b.begin;
+      const T* y1 = (field == 0 ? body.x[d] : body.v[d]) + b.begin;
       std::array<const T*, kMaxStages> k{};
       std::array<double, kMaxStages> w{};
       for (int s = 0; s < t.stages; ++s) {
         // A stage that reads the bodies' own velocities reads them as they were: the finish
         // has moved them on.
-        k[s] = field == 1 ? accelerations(s)[d] : own_state(s) ? saved_[1][d].data() : velocities(c, s)[d];
+        const T* rates = field == 1 ? accelerations(s)[d] : own_state(s) ? saved_[1][d].data() : velocities(c, s)[d];
+        k[s] = rates + b.begin;
         w[s] = (t.b[s] - t.b_hat[s]) * (field == 0 ? double(c.h) : 1 / sigma);
       }
-      for (std::size_t i = b.begin; i < b.end; ++i) {
-        double e = 0;
-        for (int s = 0; s < t.stages; ++s) e += w[s] * double(k[s][i]);
-        const double scale = attempt_->atol + attempt_->rtol * std::max(std::abs(double(y0[i])), std::abs(double(y1[i])));
-        sum += (e / scale) * (e / scale);
-      }
+      sum += error_squares(y0, y1, k.data(), w.data(), t.stages, attempt_->rtol, attempt_->atol, b.end - b.begin);
     }
   }
   return sum;

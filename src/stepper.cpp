@@ -327,13 +327,10 @@ struct Stepper<T>::Impl {
     const T* v[3] = {b.vx(), b.vy(), b.vz()};
     double y2 = 0, f2 = 0;
     for (int d = 0; d < 3; ++d) {
-      for (std::size_t i = 0; i < b.size(); ++i) {
-        const double wx = tol.atol + tol.rtol * std::abs(double(x[d][i]));
-        const double wv = tol.atol + tol.rtol * std::abs(double(v[d][i]));
-        const double a = double(acc[d][i]) / double(c.accel_scale);
-        y2 += (x[d][i] / wx) * (x[d][i] / wx) + (v[d][i] / wv) * (v[d][i] / wv);
-        f2 += (v[d][i] / wx) * (v[d][i] / wx) + (a / wv) * (a / wv);
-      }
+      const std::size_t n = b.size();
+      y2 += scaled_squares(x[d], x[d], 1, tol.rtol, tol.atol, n) + scaled_squares(v[d], v[d], 1, tol.rtol, tol.atol, n);
+      f2 += scaled_squares(v[d], x[d], 1, tol.rtol, tol.atol, n) +
+            scaled_squares(acc[d], v[d], 1 / double(c.accel_scale), tol.rtol, tol.atol, n);
     }
     const double d0 = std::sqrt(y2), d1 = std::sqrt(f2);  // the common 1 / 6N cancels
     const double h = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
