@@ -13,6 +13,7 @@
 #include "force_lowering.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/error.hpp"
+#include "kinema/stability.hpp"
 #include "staged_path.hpp"
 #include "step_context.hpp"
 
@@ -244,10 +245,16 @@ struct Stepper<T>::Impl {
     double t = clock.time();
     if (t_end == t) return stats;
     StepController controller(std::min(method.order, method.embedded_order));
+    double max_step = tol.max_step;
+    if (tol.limit_to_stable_step) {
+      const StiffnessEstimate e = estimate_stiffness(b, *forces, t, 40, options);
+      const double stable = largest_stable_step(method, e);
+      if (stable > 0) max_step = std::min(max_step, stable);
+    }
     T kept_scale = 0;  // the acceleration scale stage 0's kept accelerations carry; 0: none
     double h = tol.initial_step > 0 ? tol.initial_step : first_step(b, t_end - t, tol, kept_scale, stats);
     while (t < t_end) {
-      h = std::min(h, tol.max_step);
+      h = std::min(h, max_step);
       const bool last = t + 1.01 * h >= t_end;  // no sliver of a last step
       const T size = T(last ? t_end - t : h);
       if (!(size > 0) || t + double(size) == t) {

@@ -11,6 +11,7 @@
 
 #include <boost/numeric/odeint.hpp>
 
+#include "kinema/stability.hpp"
 #include "support.hpp"
 
 using namespace kinema;
@@ -190,4 +191,28 @@ TEST_CASE("advance_to refuses methods without a pair, bad tolerances and times i
   s.advance_to(b, 1, {});
   CHECK_THROWS_WITH(s.advance_to(b, 0.5, {}), Catch::Contains("not before time()"));
   CHECK(s.advance_to(b, 1, {}).accepted == 0);  // already there
+}
+
+TEST_CASE("limit_to_stable_step keeps the driver's steps within the method's stability limit", "[adaptive][stability]") {
+  // Heavy drag (rate 1000) on a slow spring (omega 1): once the drag's transient has decayed,
+  // accuracy alone would allow long steps, which the drag's eigenvalue makes unstable; the
+  // uncapped controller keeps probing past the limit.
+  ForceModel<double> f;
+  f.add(LinearDrag{1000});
+  f.add(Spring{{0, 0, 0}, 1, 0});
+  const auto largest = [&](bool capped) {
+    ParticleSet<double> b;
+    b.add({1, 0, 0}, {1, 0, 0}, 1);
+    Stepper<double> s(f, dopri5, test::serial_options());
+    Tolerances t{1e-4, 1e-4};
+    t.limit_to_stable_step = capped;
+    return s.advance_to(b, 20, t).largest_step;
+  };
+  ParticleSet<double> start;
+  start.add({1, 0, 0}, {1, 0, 0}, 1);
+  const double stable = largest_stable_step(dopri5, estimate_stiffness(start, f));
+  CHECK(stable == Approx(3.3066 / 1000).epsilon(0.01));
+  // The driver's own estimate (fewer iterations) agrees to well within 0.1%.
+  CHECK(largest(true) <= stable * 1.001);
+  CHECK(largest(false) > stable * 1.01);
 }

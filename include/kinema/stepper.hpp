@@ -74,6 +74,10 @@ struct Tolerances {
   double atol = 1e-6;          // finite, >= 0 (length and velocity units); not both 0
   double initial_step = 0;     // 0: 0.01 |y| / |f(y)| in the same norm, at most t_end - t
   double max_step = std::numeric_limits<double>::infinity();
+  // Also cap the steps at the method's largest stable step for the bodies at the call's start
+  // (estimate_stiffness, kinema/stability.hpp: about 60 force evaluations, so once per run
+  // rather than once per frame).
+  bool limit_to_stable_step = false;
 };
 
 struct AdaptiveStats {
