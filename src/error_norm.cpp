@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 
 #include "error_control.hpp"
 #include "kinema/methods.hpp"
@@ -15,14 +16,17 @@ namespace {
 // Every clone does the same operations in the same order (no fused multiply-add: the library
 // builds with -ffp-contract=off), so the norm, and the steps it decides, are the same on
 // every instruction set; the clones only do more of them at once.
+// A term is 0 where e is 0 (with atol 0, a component that stays 0 would give 0 / 0), and
+// infinite where the new value is not finite: a candidate that overflowed is never accepted.
 template <int S, class T>
 [[gnu::always_inline]] inline double lane_term(const T* y0, const T* y1, const T* const* k, const double* w,
                                                double rtol, double atol, std::size_t i) {
   double e = w[0] * double(k[0][i]);
   for (int s = 1; s < S; ++s) e += w[s] * double(k[s][i]);
-  const double scale = atol + rtol * std::max(std::abs(double(y0[i])), std::abs(double(y1[i])));
-  const double q = e / scale;
-  return q * q;
+  const double y = double(y1[i]);
+  const double scale = atol + rtol * std::max(std::abs(double(y0[i])), std::abs(y));
+  const double q = e == 0 ? 0.0 : e / scale;
+  return std::abs(y) <= std::numeric_limits<double>::max() ? q * q : std::numeric_limits<double>::infinity();
 }
 
 template <int S, class T>
@@ -79,7 +83,7 @@ template <class T>
   constexpr std::size_t kLanes = 16;
   double sums[kLanes] = {};
   const auto term = [&](std::size_t i) {
-    const double q = double(a[i]) * scale / (atol + rtol * std::abs(double(w[i])));
+    const double q = a[i] == 0 ? 0.0 : double(a[i]) * scale / (atol + rtol * std::abs(double(w[i])));
     return q * q;
   };
   std::size_t i = 0;

@@ -53,10 +53,19 @@ double spectral_radius(const Matrix& m) {
   return std::max(std::abs(trace + root), std::abs(trace - root)) / 2;
 }
 
-// Is a step of h stable on the mode (a, b)? Rounding may lift a radius of exactly 1.
-bool stable(const Method& m, double h, double a, double b) {
+double radius(const Method& m, double h, double a, double b) {
   const auto c0 = one_step(m, h, a, b, {1, 0}), c1 = one_step(m, h, a, b, {0, 1});
-  return spectral_radius({{{c0[0], c1[0]}, {c0[1], c1[1]}}}) <= 1 + 1e-13;
+  return spectral_radius({{{c0[0], c1[0]}, {c0[1], c1[1]}}});
+}
+
+// Is a step of h stable on the mode (a, b)? Rounding may lift a radius of exactly 1.
+bool stable(const Method& m, double h, double a, double b) { return radius(m, h, a, b) <= 1 + 1e-13; }
+
+// The mode (a, b) of x'' = a x + b v an estimate stands for (see stability.hpp).
+std::pair<double, double> mode_of(const StiffnessEstimate& e) {
+  const double r = e.magnitude;
+  if (e.angle < 1e-3) return {0, -r};
+  return {-r * r, -2 * r * std::cos(e.angle)};
 }
 
 // The largest h up to which every step is stable on the mode (a, b) whose rate is `rate`:
@@ -234,7 +243,8 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
   // power iteration does where the top of the spectrum is dense (a cloth's modes); each
   // cycle restarts from the basis combination in H's dominant subspace.
   const std::size_t memory_cap = std::size_t(512) << 20;
-  const int m = int(std::clamp<std::size_t>(memory_cap / (8 * y.size()), 2, std::size_t(std::min(iterations, 20))));
+  const int most = std::min(iterations, 20);
+  const int m = int(std::clamp<std::size_t>(memory_cap / (8 * y.size()), std::size_t(std::min(2, most)), std::size_t(most)));
   std::vector<double> v(y.size());
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = start_component(i);
   std::complex<double> dominant = 0;
@@ -285,9 +295,14 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
 
 double largest_stable_step(const Method& method, const StiffnessEstimate& e) {
   if (!(e.magnitude > 0)) return std::numeric_limits<double>::infinity();
-  const double r = e.magnitude;
-  if (e.angle < 1e-3) return stable_edge(method, r, 0, -r);
-  return stable_edge(method, r, -r * r, -2 * r * std::cos(e.angle));
+  const auto [a, b] = mode_of(e);
+  return stable_edge(method, e.magnitude, a, b);
+}
+
+double growth_per_step(const Method& method, const StiffnessEstimate& e, double h) {
+  if (!(e.magnitude > 0)) return 1;
+  const auto [a, b] = mode_of(e);
+  return radius(method, h, a, b);
 }
 
 StabilityLimits stability_limits(const Method& method) {

@@ -378,7 +378,9 @@ double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
         k[s] = rates + b.begin;
         w[s] = (t.b[s] - t.b_hat[s]) * (field == 0 ? double(c.h) : 1 / sigma);
       }
-      sum += error_squares(y0, y1, k.data(), w.data(), t.stages, attempt_->rtol, attempt_->atol, b.end - b.begin);
+      // Real bodies only: padding stays at zero.
+      const std::size_t n = std::min(b.end, c.bodies.size()) - std::min(b.begin, c.bodies.size());
+      sum += error_squares(y0, y1, k.data(), w.data(), t.stages, attempt_->rtol, attempt_->atol, n);
     }
   }
   return sum;

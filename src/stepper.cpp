@@ -147,7 +147,8 @@ struct Stepper<T>::Impl {
     if (o.guard != FiniteGuard::clamp) return;
     for (const auto& [name, value] : {std::pair{"max_speed", o.max_speed},
                                       std::pair{"max_angular_speed", o.max_angular_speed}}) {
-      if (!(value > 0 && std::isfinite(T(value)))) {
+      // Its square too: the clamp compares squared speeds.
+      if (!(value > 0 && std::isfinite(T(value) * T(value)))) {
         throw Error(std::string("stepper options: ") + name + " must be > 0 and finite in " +
                     type_name<T>() + ", got " + shortest_text(value));
       }
@@ -255,7 +256,8 @@ struct Stepper<T>::Impl {
     double h = tol.initial_step > 0 ? tol.initial_step : first_step(b, t_end - t, tol, kept_scale, stats);
     while (t < t_end) {
       h = std::min(h, max_step);
-      const bool last = t + 1.01 * h >= t_end;  // no sliver of a last step
+      // No sliver of a last step: one within 1% of the end takes it, if max_step allows.
+      const bool last = t + 1.01 * h >= t_end && t_end - t <= max_step;
       const T size = T(last ? t_end - t : h);
       if (!(size > 0) || t + double(size) == t) {
         throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
@@ -339,7 +341,8 @@ struct Stepper<T>::Impl {
       f2 += scaled_squares(v[d], x[d], 1, tol.rtol, tol.atol, n) +
             scaled_squares(acc[d], v[d], 1 / double(c.accel_scale), tol.rtol, tol.atol, n);
     }
-    const double d0 = std::sqrt(y2), d1 = std::sqrt(f2);  // the common 1 / 6N cancels
+    const double components = 6.0 * double(std::max<std::size_t>(b.size(), 1));
+    const double d0 = std::sqrt(y2 / components), d1 = std::sqrt(f2 / components);  // RMS, as the norm
     const double h = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
     return std::min(h, span);
   }

@@ -43,6 +43,10 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
 // for Euler on an undamped oscillation; infinity when the estimate's magnitude is 0).
 double largest_stable_step(const Method& method, const StiffnessEstimate& estimate);
 
+// How much the estimate's mode grows (or shrinks) per step of size h under the method: the
+// spectral radius of the step's 2 x 2 matrix (see above).
+double growth_per_step(const Method& method, const StiffnessEstimate& estimate, double h);
+
 // h |lambda| at the edge of the stability region on the negative real axis (damping at the
 // rate |lambda|) and on the imaginary axis (an undamped oscillation at |lambda|): 2 and 0
 // for euler, about 2.785 and 2.828 for rk4, 2 on the imaginary axis for the symplectic

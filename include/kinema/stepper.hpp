@@ -75,8 +75,8 @@ struct Tolerances {
   double initial_step = 0;     // 0: 0.01 |y| / |f(y)| in the same norm, at most t_end - t
   double max_step = std::numeric_limits<double>::infinity();
   // Also cap the steps at the method's largest stable step for the bodies at the call's start
-  // (estimate_stiffness, kinema/stability.hpp: about 60 force evaluations, so once per run
-  // rather than once per frame).
+  // (estimate_stiffness, kinema/stability.hpp, in T: about 60 force evaluations, so once per
+  // run rather than once per frame).
   bool limit_to_stable_step = false;
 };
 
@@ -118,6 +118,9 @@ class Stepper {
   // error_control.hpp); the last step lands on t_end. A pair whose last stage is evaluated at
   // the new state (FSAL) reuses it as the next step's first. The accepted steps depend only
   // on the bodies and the tolerances: the same on every thread count and instruction set.
+  // A candidate that is not finite is rejected like one too inaccurate (the finiteness guard
+  // applies to step and advance; here nothing non-finite is ever accepted), so a blow-up ends
+  // in the underflow error with the bodies at the last accepted step.
   // Throws kinema::Error for a method without a pair, bad tolerances, t_end before time(),
   // or a step that would underflow.
   AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances);

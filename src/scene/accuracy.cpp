@@ -302,6 +302,8 @@ std::optional<std::uint64_t> steps_needed(Pilot& pilot, const Method& m, std::ui
                                           double tolerance, double budget, std::uint64_t least) {
   auto fits = [&](std::uint64_t k) { return pilot.estimate(k) <= tolerance; };
   auto affordable = [&](std::uint64_t k) { return double(k) * m.evaluations() <= budget; };
+  // A stable step that already costs too much rules the method out before any pilot runs.
+  if (least > kMostPilotSteps || !affordable(least)) return std::nullopt;
   n = std::max(n, least);
   if (fits(n)) {
     while (n / 2 >= std::max<std::uint64_t>(least, 1) && fits(n / 2)) n /= 2;
@@ -376,7 +378,8 @@ namespace {
 
 // Float where the chosen configuration's round-off in float, against the same run in double,
 // stays ten times under the tolerance (with the truncation error, under it).
-void consider_float(const Scene& pilot_scene, double duration, double tolerance, MethodChoice& choice) {
+void consider_float(const Scene& pilot_scene, double duration, double tolerance, double max_step,
+                    MethodChoice& choice) {
   if (pilot_scene.precision != Precision::dual) return;
   Scene single = pilot_scene;
   single.precision = Precision::single;
@@ -386,7 +389,7 @@ void consider_float(const Scene& pilot_scene, double duration, double tolerance,
     return;  // values float cannot hold
   }
   const auto states = [&](const Scene& s) {
-    return choice.step_tolerance ? simulate_adaptive(s, *choice.method, *choice.step_tolerance, duration).states
+    return choice.step_tolerance ? simulate_adaptive(s, *choice.method, *choice.step_tolerance, duration, max_step).states
                                  : simulate(s, *choice.method, choice.steps, duration);
   };
   const double roundoff = state_error(states(single), states(pilot_scene));
@@ -490,7 +493,8 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
   choice.reason = head + reason + "; picked " + std::string(choice.method->name) +
                   (choice.step_tolerance ? " with error control" : "") + " (" +
                   std::to_string(choice.method->evaluations()) + " force evaluations per step)";
-  consider_float(pilot_scene, duration, tolerance, choice);
+  const double stable = largest_stable_step(*choice.method, stiffness);
+  consider_float(pilot_scene, duration, tolerance, stable > 0 ? stable : std::numeric_limits<double>::infinity(), choice);
   return choice;
 }
 

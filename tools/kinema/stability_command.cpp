@@ -156,15 +156,16 @@ std::string spring_limits(const Scene& scene, const fs::path& dir) {
   const double omega = spring_frequency_bound(make_particles<double>(scene), forces.springs());
   OutputFile csv(dir / "spring_limit.csv");
   csv << "omega_bound,method,largest_stable_h\n";
-  const std::pair<const char*, double> limits[] = {
-      {"symplectic_euler", 2}, {"velocity_verlet", 2}, {"rk4", 2 * std::sqrt(2.0)}};
-  for (const auto& [method, c] : limits) csv << omega << ',' << method << ',' << c / omega << '\n';
+  for (const Method* m : {&symplectic_euler, &velocity_verlet, &rk4}) {
+    csv << omega << ',' << m->name << ',' << stability_limits(*m).imaginary_axis / omega << '\n';
+  }
   csv.close();
   char line[256];
   std::snprintf(line, sizeof line,
                 "springs: fastest mode omega <= %.4g rad/s; undamped, velocity_verlet and "
                 "symplectic_euler hold for h < %.4g, rk4 for h < %.4g, euler never\n",
-                omega, 2 / omega, 2 * std::sqrt(2.0) / omega);
+                omega, stability_limits(velocity_verlet).imaginary_axis / omega,
+                stability_limits(rk4).imaginary_axis / omega);
   return line;
 }
 

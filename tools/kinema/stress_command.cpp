@@ -276,7 +276,7 @@ class StressRun {
     j["scene"] = name_;
     j["bodies"] = bodies_;
     j["method"] = std::string(s.method().name);
-    j["precision"] = type_name();
+    j["precision"] = std::string(precision_name(sizeof(T) == 4 ? Precision::single : Precision::dual));
     j["isa"] = std::string(isa_name(s.isa()));
     j["threads"] = s.threads();
     j["guard"] = guard_name(o_.guard);
@@ -306,8 +306,6 @@ class StressRun {
     }
     return j;
   }
-
-  static std::string type_name() { return sizeof(T) == 4 ? "float" : "double"; }
 
   void print(const Json& j) const {
     std::printf("kinema stress: %s\n", printable(j["scene"].get<std::string>()).c_str());
