@@ -87,7 +87,7 @@ TEST_CASE("dopri5 and bs3: the final error on the e = 0.9 orbit is proportional 
   }
 }
 
-TEST_CASE("dopri5's steps cost fewer force evaluations than fixed-step rk4 at the same error", "[adaptive]") {
+TEST_CASE("dopri5's steps cost fewer force evaluations than fixed-step rk4 at the same error", "[driver]") {
   const OrbitRun a = adaptive_orbit(dopri5, 1e-10);
   // The fewest rk4 steps that reach the adaptive run's error (found by doubling, then bisection).
   std::uint64_t lo = 1, hi = 2;
@@ -112,7 +112,7 @@ TEST_CASE("dopri5 counts six evaluations per attempt (first same as last) and bs
 }
 
 TEST_CASE("the driver takes about the steps Boost.Odeint's controlled dopri5 takes, to an error of the same order",
-          "[adaptive][odeint]") {
+          "[driver][odeint]") {
   namespace odeint = boost::numeric::odeint;
   using State = std::array<double, 4>;  // x, y, vx, vy
   const auto kepler = [](const State& s, State& ds, double) {
@@ -142,7 +142,7 @@ TEST_CASE("the driver takes about the steps Boost.Odeint's controlled dopri5 tak
   }
 }
 
-TEST_CASE("the accepted steps are the same on every thread count, job system and ISA", "[adaptive][determinism]") {
+TEST_CASE("the accepted steps are the same on every thread count, job system and ISA", "[driver][determinism]") {
   // Every local term and a chain of springs (so stages are jobs of their own too): the hash
   // covers the final state and the step statistics.
   const auto run = [](const StepperOptions& o, std::size_t n) {

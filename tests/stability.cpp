@@ -183,7 +183,7 @@ TEST_CASE("the stiffness estimate of an undamped spring is its angular frequency
   CHECK(estimate_stiffness(bf, ff).magnitude == Approx(omega).epsilon(0.01));  // in float too
 }
 
-TEST_CASE("predicted stable steps match bisected blow-ups within 2%", "[stability]") {
+TEST_CASE("predicted stable steps match bisected blow-ups within 2%", "[prediction]") {
   // An undamped oscillator (omega = 20): imaginary-axis limits.
   ForceModel<double> spring;
   spring.add(Spring{{0, 0, 0}, 400, 0});

@@ -169,6 +169,8 @@ class StressRun {
     ReportFile report(o_.report_path, "report");
     for (const auto& g : groups_) conservation_.push_back(conservation_start(g));
     step_until_done();
+    // The final drifts are those of the final state, whenever the last interval closed.
+    for (std::size_t k = 0; k < groups_.size(); ++k) conservation_update(groups_[k], conservation_[k]);
     const Json summary = summarize();
     report.write(summary);
     if (!o_.quiet) print(summary);
