@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <limits>
 
+#include "cloned.hpp"
 #include "error_control.hpp"
 #include "kinema/methods.hpp"
 
@@ -61,13 +62,13 @@ template <class T>
 
 }  // namespace
 
-[[gnu::target_clones("avx512f", "avx2", "default")]] double error_squares(const float* y0, const float* y1,
+KINEMA_CLONED double error_squares(const float* y0, const float* y1,
                                                                          const float* const* k, const double* w,
                                                                          int stages, double rtol, double atol,
                                                                          std::size_t n) {
   return weighted_squares(y0, y1, k, w, stages, rtol, atol, n);
 }
-[[gnu::target_clones("avx512f", "avx2", "default")]] double error_squares(const double* y0, const double* y1,
+KINEMA_CLONED double error_squares(const double* y0, const double* y1,
                                                                          const double* const* k, const double* w,
                                                                          int stages, double rtol, double atol,
                                                                          std::size_t n) {
@@ -98,11 +99,11 @@ template <class T>
 
 }  // namespace
 
-[[gnu::target_clones("avx512f", "avx2", "default")]] double scaled_squares(const float* a, const float* w, double scale,
+KINEMA_CLONED double scaled_squares(const float* a, const float* w, double scale,
                                                                           double rtol, double atol, std::size_t n) {
   return scaled_squares_of(a, w, scale, rtol, atol, n);
 }
-[[gnu::target_clones("avx512f", "avx2", "default")]] double scaled_squares(const double* a, const double* w,
+KINEMA_CLONED double scaled_squares(const double* a, const double* w,
                                                                           double scale, double rtol, double atol,
                                                                           std::size_t n) {
   return scaled_squares_of(a, w, scale, rtol, atol, n);

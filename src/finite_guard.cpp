@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "blocks.hpp"
+#include "cloned.hpp"
 
 namespace kinema {
 namespace {
@@ -32,13 +33,13 @@ void keep_lowest(std::atomic<std::size_t>& lowest, std::size_t k) {
 using FloatBits [[gnu::may_alias]] = std::uint32_t;
 using DoubleBits [[gnu::may_alias]] = std::uint64_t;
 
-[[gnu::target_clones("avx512f", "avx2", "default")]] bool any_not_finite(const float* values, std::size_t n) {
+KINEMA_CLONED bool any_not_finite(const float* values, std::size_t n) {
   const auto* a = reinterpret_cast<const FloatBits*>(values);
   std::uint32_t carries = 0;
   for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7F800000u) + 0x00800000u;
   return (carries >> 31) != 0;
 }
-[[gnu::target_clones("avx512f", "avx2", "default")]] bool any_not_finite(const double* values, std::size_t n) {
+KINEMA_CLONED bool any_not_finite(const double* values, std::size_t n) {
   const auto* a = reinterpret_cast<const DoubleBits*>(values);
   std::uint64_t carries = 0;
   for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7FF0000000000000ull) + 0x0010000000000000ull;
