@@ -48,19 +48,30 @@ struct BlockTask {
 
 }  // namespace detail
 
+// Where a call's blocks run: as jobs on `jobs` that at most `count` workers can share (each
+// range at least blocks / count long), or, for a count of 0, on the calling thread alone.
+struct Workers {
+  JobSystem* jobs = nullptr;
+  unsigned count = 0;
+};
+
+// Every worker of the job system.
+inline Workers all_workers(JobSystem& jobs) { return {&jobs, std::max(1u, jobs.worker_count())}; }
+
 // Calls fn(Block) for every block of `bodies` bodies (a padded count): on the calling thread
-// when `parallel` is false or there is one block; else as one job on `jobs`, which may run
-// the blocks in any order on any worker. What fn throws comes out here, on the calling
-// thread, once every range of the job has returned.
+// for a count of 0 or a single block; else as one job, which may run the blocks in any order
+// on any worker. What fn throws comes out here, on the calling thread, once every range of
+// the job has returned.
 template <class F>
-void for_each_block(JobSystem& jobs, bool parallel, std::size_t bodies, F&& fn) {
+void for_each_block(const Workers& workers, std::size_t bodies, F&& fn) {
   const std::size_t blocks = block_count(bodies);
-  if (!parallel || blocks <= 1) {
+  if (workers.count == 0 || blocks <= 1) {
     for (std::size_t b = 0; b < blocks; ++b) fn(block(b, bodies));
     return;
   }
+  const std::size_t min_range = (blocks + workers.count - 1) / workers.count;
   detail::BlockTask<F> task{fn, bodies, {false}, nullptr};
-  jobs.wait(jobs.enqueue(&detail::BlockTask<F>::run, blocks, 1, &task));
+  workers.jobs->wait(workers.jobs->enqueue(&detail::BlockTask<F>::run, blocks, min_range, &task));
   if (task.error) std::rethrow_exception(task.error);
 }
 

@@ -149,8 +149,8 @@ void Checkpoint<T>::save(const StateArrays<T>& s, Block b) {
 }
 
 template <class T>
-void Checkpoint<T>::restore(GuardJobs where, const StateArrays<T>& s) const {
-  for_each_block(where.jobs, where.parallel, s.padded, [&](Block b) {
+void Checkpoint<T>::restore(const Workers& workers, const StateArrays<T>& s) const {
+  for_each_block(workers, s.padded, [&](Block b) {
     for (int a = 0; a < s.count; ++a) {
       std::memcpy(s.data[a] + b.begin, copy_[a].data() + b.begin, (b.end - b.begin) * sizeof(T));
     }

@@ -31,12 +31,6 @@ StateArrays<T> state_arrays(ParticleSet<T>& bodies);
 template <class T>
 StateArrays<T> state_arrays(RigidBodySet<T>& bodies);
 
-// Where blocks run: on `jobs` when `parallel`, else on the calling thread.
-struct GuardJobs {
-  JobSystem& jobs;
-  bool parallel;
-};
-
 // The state an advance call starts from, saved block by block.
 template <class T>
 class Checkpoint {
@@ -46,7 +40,7 @@ class Checkpoint {
   void reserve(const StateArrays<T>& state);
   // Blocks may be saved concurrently; restore puts every block back.
   void save(const StateArrays<T>& state, Block block);
-  void restore(GuardJobs where, const StateArrays<T>& state) const;
+  void restore(const Workers& workers, const StateArrays<T>& state) const;
   std::size_t bytes() const;
 
  private:

@@ -108,13 +108,12 @@ class SliceSchedule {
  public:
   SliceSchedule(RangeTask task, std::size_t items, std::size_t min_range, unsigned workers,
                 void* context)
-      : task_(task),
-        context_(context),
-        items_(items),
-        slices_(std::min(workers, kMaxSlices)) {
+      : task_(task), context_(context), items_(items) {
     constexpr std::size_t kMaxChunks = std::numeric_limits<std::uint32_t>::max();
     grain_ = std::max({min_range, items / kMaxChunks + 1});  // so that chunks fit 32 bits
     const std::size_t chunks = items / grain_ + (items % grain_ != 0);
+    // A long min_range caps the workers a job wants: no helper is woken for an empty slice.
+    slices_ = unsigned(std::min<std::size_t>({workers, kMaxSlices, chunks}));
     for (unsigned s = 0; s < slices_; ++s) {
       slice_[s].reset(std::uint32_t(chunks * s / slices_), std::uint32_t(chunks * (s + 1) / slices_));
     }

@@ -76,13 +76,12 @@ void StagedPath<T>::reserve(std::size_t padded) {
 }
 
 template <class T>
-void StagedPath<T>::step(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
-  if (!may_throw()) return run_phases(c, jobs, inline_below);
+void StagedPath<T>::step(const StepContext<T>& c) {
+  if (!may_throw()) return run_phases(c);
   // User code runs in this step: keep the bodies' state, so a throw leaves them as they were.
-  const bool parallel = c.bodies.size() >= inline_below;
-  for_each_block(jobs, parallel, c.bodies.padded_size(), [&](Block b) { copy_state(c, b, true); });
+  for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { copy_state(c, b, true); });
   try {
-    run_phases(c, jobs, inline_below);
+    run_phases(c);
   } catch (...) {
     for (std::size_t i = 0; i < block_count(c.bodies.padded_size()); ++i) {
       copy_state(c, block(i, c.bodies.padded_size()), false);
@@ -92,18 +91,18 @@ void StagedPath<T>::step(const StepContext<T>& c, JobSystem& jobs, std::size_t i
 }
 
 template <class T>
-double StagedPath<T>::attempt(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below, const Attempt& a) {
+double StagedPath<T>::attempt(const StepContext<T>& c, const Attempt& a) {
   attempt_ = &a;
   std::fill(block_error_.begin(), block_error_.end(), 0.0);
   if (!saves_in_block()) {
-    for_each_block(jobs, c.bodies.size() >= inline_below, c.bodies.padded_size(),
+    for_each_block(c.workers, c.bodies.padded_size(),
                    [&](Block b) { copy_state(c, b, true); });
   }
   try {
-    run_phases(c, jobs, inline_below);
+    run_phases(c);
   } catch (...) {
     attempt_ = nullptr;
-    take_back(c, jobs, inline_below);
+    take_back(c);
     throw;
   }
   attempt_ = nullptr;
@@ -113,8 +112,8 @@ double StagedPath<T>::attempt(const StepContext<T>& c, JobSystem& jobs, std::siz
 }
 
 template <class T>
-void StagedPath<T>::take_back(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
-  for_each_block(jobs, c.bodies.size() >= inline_below, c.bodies.padded_size(),
+void StagedPath<T>::take_back(const StepContext<T>& c) {
+  for_each_block(c.workers, c.bodies.padded_size(),
                  [&](Block b) { copy_state(c, b, false); });
 }
 
@@ -124,10 +123,10 @@ void StagedPath<T>::keep_last_stage() {
 }
 
 template <class T>
-void StagedPath<T>::evaluate_first_stage(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
+void StagedPath<T>::evaluate_first_stage(const StepContext<T>& c) {
   first_stage_only_ = true;
   try {
-    run_phases(c, jobs, inline_below);
+    run_phases(c);
   } catch (...) {
     first_stage_only_ = false;
     throw;
@@ -150,19 +149,19 @@ void StagedPath<T>::copy_state(const StepContext<T>& c, Block b, bool save) {
 }
 
 template <class T>
-void StagedPath<T>::run_phases(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below) {
+void StagedPath<T>::run_phases(const StepContext<T>& c) {
   const std::size_t n = c.bodies.padded_size();
-  const bool parallel = c.bodies.size() >= inline_below;
   if (coupled()) {
     for (int p = 0; p < phase_count_; ++p) {
       if (skipped(phases_[p])) continue;
       // Gravity costs a block n interactions per body: worth the threads at any n.
       const bool quadratic = phases_[p].kind == PhaseKind::coupled && coupled_.nbody;
-      for_each_block(jobs, parallel || quadratic, n, [&](Block b) { run(c, phases_[p], b); });
+      const Workers workers = quadratic ? all_workers(*c.workers.jobs) : c.workers;
+      for_each_block(workers, n, [&](Block b) { run(c, phases_[p], b); });
     }
     return;
   }
-  for_each_block(jobs, parallel, n, [&](Block b) { run_block(c, b); });
+  for_each_block(c.workers, n, [&](Block b) { run_block(c, b); });
 }
 
 // Every phase of one block while it is in cache (no coupled terms).

@@ -31,10 +31,10 @@ class StagedPath {
   void reserve(std::size_t padded);
   std::size_t capacity() const { return capacity_; }
   std::size_t bytes() const;  // of the scratch arrays
-  // One step. Sets of fewer than inline_below bodies run on the calling thread. When user
+  // One step, its blocks run where the context's workers say. When user
   // code (a callback or a CoupledTerm) throws, the bodies are put back as they were and the
   // exception is rethrown here, on the calling thread.
-  void step(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
+  void step(const StepContext<T>& context);
 
   // Error control, for a method with an embedded pair: one step that can be taken back.
   struct Attempt {
@@ -47,15 +47,15 @@ class StagedPath {
   // estimate's weighted RMS norm: sqrt(mean over every body's position and velocity
   // components of (e / (atol + rtol max(|y0|, |y1|)))^2), e the difference of the two
   // solutions. Blocks' sums are added in block order, so the norm does not depend on threads.
-  double attempt(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below, const Attempt& a);
+  double attempt(const StepContext<T>& context, const Attempt& a);
   // Puts back the state the last attempt started from.
-  void take_back(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
+  void take_back(const StepContext<T>& context);
   // After an accepted step of a method whose last stage is evaluated at the new state: that
   // stage's accelerations become the ones kept for the next attempt's stage 0.
   void keep_last_stage();
   // Evaluates stage 0 alone (the accelerations at the bodies' state, times the context's
   // acceleration scale) and keeps them as an attempt's reuse_scale expects.
-  void evaluate_first_stage(const StepContext<T>& context, JobSystem& jobs, std::size_t inline_below);
+  void evaluate_first_stage(const StepContext<T>& context);
   // Stage 0's accelerations (times the scale they were evaluated with), for the driver's
   // first step size.
   std::array<const T*, 3> first_stage() const { return accelerations(0); }
@@ -69,7 +69,7 @@ class StagedPath {
   static constexpr int kMaxPhases = 3 * kMaxStages + 1;
 
   void plan();
-  void run_phases(const StepContext<T>& c, JobSystem& jobs, std::size_t inline_below);
+  void run_phases(const StepContext<T>& c);
   // Saves the block's positions and velocities to saved_, or puts them back.
   void copy_state(const StepContext<T>& c, Block b, bool save);
   bool may_throw() const { return !forces_.callbacks().empty() || !forces_.coupled_terms().empty(); }

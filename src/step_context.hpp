@@ -4,6 +4,7 @@
 
 #include <cstddef>
 
+#include "blocks.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
 
@@ -21,6 +22,7 @@ struct StepContext {
   T h;                     // step size
   T accel_scale;           // what stage accelerations are multiplied by (sigma h, or 1)
   double t0 = 0;           // time at the start of the step (staged path: callbacks see it)
+  Workers workers{};       // where this call's blocks run
 };
 
 }  // namespace kinema

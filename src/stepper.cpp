@@ -3,6 +3,7 @@
 // path live in their own files.
 #include "kinema/stepper.hpp"
 
+#include <bit>
 #include <cmath>
 #include <memory>
 #include <string>
@@ -16,6 +17,7 @@
 #include "kinema/stability.hpp"
 #include "staged_path.hpp"
 #include "step_context.hpp"
+#include "worker_tuner.hpp"
 
 namespace kinema {
 namespace {
@@ -54,6 +56,8 @@ struct Stepper<T>::Impl {
   std::unique_ptr<StagedPath<T>> probe;   // evaluates accelerations alone (made on demand)
   Clock<T> clock;
   Checkpoint<T> checkpoint;  // the finiteness guard's copy of the state
+  WorkerTuners tuners;       // worker counts measured per kind and size of call
+  unsigned favoured_workers = 0;
 
   Impl(std::shared_ptr<const ForceModel<T>> f, const Method& m, StepperOptions o)
       : method(m), options(o) {
@@ -130,17 +134,33 @@ struct Stepper<T>::Impl {
     }
   }
 
-  StepContext<T> start(ParticleSet<T>& bodies, T step_size, const kernels::LocalForces<T>& forces) {
+  StepContext<T> start(ParticleSet<T>& bodies, T step_size, const kernels::LocalForces<T>& forces,
+                       const Workers& workers) {
     check_step_size(step_size, forces);
     clock.use(step_size);
-    return {bodies, step_size, accel_scale(step_size)};
+    return {bodies, step_size, accel_scale(step_size), 0, workers};
   }
 
-  // Over the blocks of a set; sets of fewer than inline_below real bodies stay inline.
+  // Kinds of call that cost differently per body-step: each has its own measurements.
+  enum class CallKind : std::uint64_t { fused, staged, rigid, adaptive, accelerations };
+
+  // Runs fn(workers) on the workers chosen for this kind and size of call, and times it: fn
+  // returns the body-steps it did. A call that throws is not counted.
   template <class Fn>
-  void for_each_block(const ParticleSet<T>& b, Fn&& fn) {
-    kinema::for_each_block(*jobs, b.size() >= options.inline_below, b.padded_size(), fn);
+  void timed(CallKind kind, std::size_t bodies, std::uint64_t steps, Fn&& fn) {
+    if (bodies < options.inline_below || block_count(bodies) <= 1) return void(fn(Workers{jobs, 0}));
+    if (options.workers == WorkerChoice::all) return void(fn(all_workers(*jobs)));
+    const std::uint64_t key = std::uint64_t(kind) << 8 | std::uint64_t(std::bit_width(bodies)) << 1 | (steps > 1);
+    WorkerTuner& tuner = tuners.find(key, jobs->worker_count());
+    const Workers workers{jobs, tuner.choose()};
+    const std::uint64_t begin = tuner_ticks();
+    const double work = fn(workers);
+    tuner.record(workers.count, tuner_ticks() - begin, work);
+    favoured_workers = tuner.best();
   }
+
+  CallKind kind_of(const ParticleSet<T>&) const { return fused_fn ? CallKind::fused : CallKind::staged; }
+  CallKind kind_of(const RigidBodySet<T>&) const { return CallKind::rigid; }
 
   // Speed limits the clamp can hold in T.
   static void check_guard(const StepperOptions& o) {
@@ -167,17 +187,24 @@ struct Stepper<T>::Impl {
 
   template <class Set>
   void advance(Set& b, T step_size, std::uint64_t steps) {
-    if (options.guard == FiniteGuard::off) return run(b, step_size, steps, nullptr);
+    timed(kind_of(b), b.size(), steps, [&](const Workers& w) {
+      advance(w, b, step_size, steps);
+      return double(b.size()) * double(steps);
+    });
+  }
+
+  template <class Set>
+  void advance(const Workers& w, Set& b, T step_size, std::uint64_t steps) {
+    if (options.guard == FiniteGuard::off) return run(w, b, step_size, steps, nullptr);
     const StateArrays<T> state = state_arrays(b);
     checkpoint.reserve(state);
-    if (!guarded_run(b, step_size, steps, state)) return;
+    if (!guarded_run(w, b, step_size, steps, state)) return;
     // Back to the start, then step by step to the step that made the value.
-    const GuardJobs where{*jobs, b.size() >= options.inline_below};
-    checkpoint.restore(where, state);
+    checkpoint.restore(w, state);
     clock.steps -= steps;
     for (std::uint64_t k = 1; k <= steps; ++k) {
-      if (const auto bad = guarded_run(b, step_size, 1, state)) {
-        checkpoint.restore(where, state);
+      if (const auto bad = guarded_run(w, b, step_size, 1, state)) {
+        checkpoint.restore(w, state);
         --clock.steps;
         throw NonFiniteError(k, clock.time(), bad->body, bad->field);
       }
@@ -185,9 +212,10 @@ struct Stepper<T>::Impl {
   }
 
   template <class Set>
-  std::optional<NonFinite> guarded_run(Set& b, T step_size, std::uint64_t steps, const StateArrays<T>& state) {
+  std::optional<NonFinite> guarded_run(const Workers& w, Set& b, T step_size, std::uint64_t steps,
+                                       const StateArrays<T>& state) {
     Guard guard{state, checkpoint, FiniteScan<T>(state), options.guard == FiniteGuard::clamp};
-    run(b, step_size, steps, &guard);
+    run(w, b, step_size, steps, &guard);
     return guard.scan.found();
   }
 
@@ -208,31 +236,31 @@ struct Stepper<T>::Impl {
     if (guard) guard->scan.scan(block);
   }
 
-  void run(RigidBodySet<T>& b, T step_size, std::uint64_t steps, Guard* guard) {
+  void run(const Workers& w, RigidBodySet<T>& b, T step_size, std::uint64_t steps, Guard* guard) {
     if (rigid_fn == nullptr) {
       throw Error("rigid bodies need a built-in method and local force terms only (no "
                   "callbacks, no coupled terms)");
     }
-    const StepContext<T> c = start(b.centers_, step_size, lowered->rigid);
+    const StepContext<T> c = start(b.centers_, step_size, lowered->rigid, w);
     const kernels::RigidJob<T> job{arrays(b.centers_), {b.q(0), b.q(1), b.q(2), b.q(3)},
                                    {b.l(0), b.l(1), b.l(2)},
                                    {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
                                    lowered->rigid, lowered->rotation, c.h,
                                    options.renormalize_quaternions};
-    for_each_block(b.centers_, [&](Block block) {
+    for_each_block(w, b.centers_.padded_size(), [&](Block block) {
       run_block(b, block, steps, guard, [&](Block k) { rigid_fn(job, k.begin, k.end); });
     });
     clock.steps += steps;
   }
 
-  void run(ParticleSet<T>& b, T step_size, std::uint64_t steps, Guard* guard) {
+  void run(const Workers& w, ParticleSet<T>& b, T step_size, std::uint64_t steps, Guard* guard) {
     check_reach(b);
-    StepContext<T> c = start(b, step_size, lowered->particle);
+    StepContext<T> c = start(b, step_size, lowered->particle, w);
     if (fused_fn == nullptr) return run_staged(c, steps, guard);
     // Local, time-independent forces: each block can take all its steps while it sits in
     // cache. Every body sees the same operations as step by step, so the bits agree.
     const kernels::FusedJob<T> job{arrays(b), lowered->particle, c.h};
-    for_each_block(b, [&](Block block) {
+    for_each_block(w, b.padded_size(), [&](Block block) {
       run_block(b, block, steps, guard, [&](Block k) { fused_fn(job, k.begin, k.end); });
     });
     clock.steps += steps;
@@ -241,6 +269,15 @@ struct Stepper<T>::Impl {
   AdaptiveStats advance_to(ParticleSet<T>& b, double t_end, const Tolerances& tol) {
     check_adaptive(t_end, tol);
     check_reach(b);
+    AdaptiveStats stats;
+    timed(CallKind::adaptive, b.size(), 2, [&](const Workers& w) {
+      stats = advance_to(w, b, t_end, tol);
+      return double(b.size()) * double(stats.evaluations);
+    });
+    return stats;
+  }
+
+  AdaptiveStats advance_to(const Workers& w, ParticleSet<T>& b, double t_end, const Tolerances& tol) {
     staged->reserve(b.padded_size());
     AdaptiveStats stats;
     double t = clock.time();
@@ -253,7 +290,7 @@ struct Stepper<T>::Impl {
       if (stable > 0) max_step = std::min(max_step, stable);
     }
     T kept_scale = 0;  // the acceleration scale stage 0's kept accelerations carry; 0: none
-    double h = tol.initial_step > 0 ? tol.initial_step : first_step(b, t_end - t, tol, kept_scale, stats);
+    double h = tol.initial_step > 0 ? tol.initial_step : first_step(w, b, t_end - t, tol, kept_scale, stats);
     while (t < t_end) {
       h = std::min(h, max_step);
       // No sliver of a last step: one within 1% of the end takes it, if max_step allows.
@@ -263,10 +300,10 @@ struct Stepper<T>::Impl {
         throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
                     "; the tolerances cannot be met in " + type_name<T>());
       }
-      StepContext<T> c = start(b, size, lowered->particle);
+      StepContext<T> c = start(b, size, lowered->particle, w);
       c.t0 = clock.time();
       const typename StagedPath<T>::Attempt attempt{tol.rtol, tol.atol, kept_scale > 0 ? c.accel_scale / kept_scale : T(0)};
-      const double err = staged->attempt(c, *jobs, options.inline_below, attempt);
+      const double err = staged->attempt(c, attempt);
       stats.evaluations += std::uint64_t(method.tableau.stages - (kept_scale > 0 ? 1 : 0));
       const bool accepted = err <= 1;
       if (accepted) {
@@ -279,7 +316,7 @@ struct Stepper<T>::Impl {
         if (method.tableau.first_same_as_last()) staged->keep_last_stage();
         kept_scale = method.tableau.first_same_as_last() ? c.accel_scale : T(0);
       } else {
-        staged->take_back(c, *jobs, options.inline_below);
+        staged->take_back(c);
         ++stats.rejected;
         kept_scale = c.accel_scale;  // stage 0 was evaluated at the state kept
       }
@@ -295,9 +332,11 @@ struct Stepper<T>::Impl {
     probe->reserve(b.padded_size());
     // Euler's stage 0 carries accelerations times h; with h = 1 they are the accelerations.
     // The stage reads the bodies and writes scratch only.
-    StepContext<T> c{const_cast<ParticleSet<T>&>(b), T(1), T(1)};
-    c.t0 = t;
-    probe->evaluate_first_stage(c, *jobs, options.inline_below);
+    timed(CallKind::accelerations, b.size(), 1, [&](const Workers& w) {
+      const StepContext<T> c{const_cast<ParticleSet<T>&>(b), T(1), T(1), t, w};
+      probe->evaluate_first_stage(c);
+      return double(b.size());
+    });
     const auto acc = probe->first_stage();
     for (int d = 0; d < 3; ++d) std::copy(acc[d], acc[d] + b.padded_size(), out[d]);
   }
@@ -323,12 +362,12 @@ struct Stepper<T>::Impl {
 
   // 0.01 |y| / |f(y)| in the error norm's weights (Hairer and Wanner's first guess), from
   // stage 0's accelerations, which the first attempt then reuses.
-  double first_step(ParticleSet<T>& b, double span, const Tolerances& tol, T& kept_scale, AdaptiveStats& stats) {
+  double first_step(const Workers& w, ParticleSet<T>& b, double span, const Tolerances& tol, T& kept_scale,
+                    AdaptiveStats& stats) {
     const T probe = T(std::min(span, 1.0));
     check_step_size(probe, lowered->particle);
-    StepContext<T> c{b, probe, accel_scale(probe)};
-    c.t0 = clock.time();
-    staged->evaluate_first_stage(c, *jobs, options.inline_below);
+    const StepContext<T> c{b, probe, accel_scale(probe), clock.time(), w};
+    staged->evaluate_first_stage(c);
     ++stats.evaluations;
     kept_scale = c.accel_scale;
     const auto acc = staged->first_stage();
@@ -350,14 +389,15 @@ struct Stepper<T>::Impl {
   // One pass per stage: the guard's save, clamp and scan are passes of their own.
   void run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
     staged->reserve(c.bodies.padded_size());
-    if (guard) for_each_block(c.bodies, [&](Block b) { guard->checkpoint.save(guard->state, b); });
+    const std::size_t n = c.bodies.padded_size();
+    if (guard) for_each_block(c.workers, n, [&](Block b) { guard->checkpoint.save(guard->state, b); });
     for (std::uint64_t k = 0; k < steps; ++k) {
       c.t0 = clock.time();
-      staged->step(c, *jobs, options.inline_below);
+      staged->step(c);
       ++clock.steps;
-      if (guard && guard->clamp) for_each_block(c.bodies, [&](Block b) { clamp(c.bodies, b); });
+      if (guard && guard->clamp) for_each_block(c.workers, n, [&](Block b) { clamp(c.bodies, b); });
     }
-    if (guard) for_each_block(c.bodies, [&](Block b) { guard->scan.scan(b); });
+    if (guard) for_each_block(c.workers, n, [&](Block b) { guard->scan.scan(b); });
   }
 };
 
@@ -459,6 +499,11 @@ bool Stepper<T>::fused() const {
 template <class T>
 unsigned Stepper<T>::threads() const {
   return impl_->jobs->worker_count();
+}
+
+template <class T>
+unsigned Stepper<T>::chosen_workers() const {
+  return impl_->options.workers == WorkerChoice::all ? impl_->jobs->worker_count() : impl_->favoured_workers;
 }
 
 template class Stepper<float>;

@@ -280,7 +280,7 @@ TEST_CASE("a callback that throws inside an attempt leaves the bodies at the las
   TbbJobSystem jobs(2);
   StepperOptions o;
   o.jobs = &jobs;
-  o.inline_below = 0;
+  o.workers = WorkerChoice::all;
   const Tolerances tol{1e-9, 1e-9};
   ParticleSet<double> interrupted = test::cloud<double>(n);
   Stepper<double> s(throwing, dopri5, o);

@@ -56,7 +56,7 @@ long allocations_in_steps(const Method& method, ForceModel<T> forces, bool stage
   ParticleSet<T> bodies = test::cloud<T>(count);
   TbbJobSystem jobs(2);
   StepperOptions o = tbb ? StepperOptions{} : test::serial_options();
-  if (tbb) o.jobs = &jobs, o.inline_below = 0;
+  if (tbb) o.jobs = &jobs, o.workers = WorkerChoice::all;
   o.force_staged = staged;
   o.guard = guard;
   Stepper<T> stepper(std::move(forces), method, o);

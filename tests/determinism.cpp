@@ -33,7 +33,7 @@ void check_thread_counts() {
       TbbJobSystem tbb(threads);
       StepperOptions o;
       o.jobs = &tbb;
-      o.inline_below = 0;
+      o.workers = WorkerChoice::all;
       INFO("threads " << threads);
       CHECK(run_hash(*m, f, o) == serial);
     }
@@ -103,7 +103,7 @@ TEST_CASE("a host's own thread pool gives the serial bits", "[determinism][job_s
   for (const Method* m : {&rk4, &velocity_verlet}) {
     StepperOptions o;
     o.jobs = &pool;
-    o.inline_below = 0;
+    o.workers = WorkerChoice::all;
     CHECK(run_hash(*m, f, o) == run_hash(*m, f, test::serial_options()));
     StepperOptions staged = o;
     staged.force_staged = true;
@@ -122,7 +122,7 @@ TEST_CASE("one scene, every ISA and thread count: one hash", "[determinism][isa]
       StepperOptions o;
       o.isa = isa;
       o.jobs = &tbb;
-      o.inline_below = 0;
+      o.workers = WorkerChoice::all;
       ++hashes[run_hash(rk4, f, o, 5000, 10)];
     }
   }
@@ -158,7 +158,7 @@ TEST_CASE("the relaxed scalar and SSE2 builds stay deterministic and close", "[d
     }
     TbbJobSystem two(2);
     relaxed.jobs = &two;
-    relaxed.inline_below = 0;
+    relaxed.workers = WorkerChoice::all;
     ParticleSet<float> again = test::cloud<float>(2000);
     Stepper<float>(f, rk4, relaxed).advance(again, 0.01f, 20);
     CHECK(test::state_hash(again) == test::state_hash(fast));

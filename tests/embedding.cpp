@@ -81,7 +81,7 @@ TEST_CASE("a callback that throws leaves the set as before the step, on any job 
     for (JobSystem* jobs : {static_cast<JobSystem*>(&tbb), static_cast<JobSystem*>(&pool)}) {
       StepperOptions o;
       o.jobs = jobs;
-      o.inline_below = 0;
+      o.workers = WorkerChoice::all;
       check_throw_leaves_state(*m, o);
       check_coupled_throw(*m, o);
     }
@@ -110,6 +110,8 @@ TEST_CASE("inline_below counts real bodies, not padding", "[embedding]") {
     CountingJobs jobs;
     StepperOptions o;
     o.jobs = &jobs;
+    o.workers = WorkerChoice::all;
+    o.inline_below = 8192;
     ParticleSet<float> b = test::cloud<float>(count);
     Stepper<float>(test::all_local_terms<float>(), rk4, o).step(b, 0.01f);
     CHECK(jobs.jobs == (count < o.inline_below ? 0 : 1));
@@ -128,7 +130,7 @@ std::uint64_t stepped_hash(StepperOptions o) {
 StepperOptions on(JobSystem& jobs) {
   StepperOptions o;
   o.jobs = &jobs;
-  o.inline_below = 0;
+  o.workers = WorkerChoice::all;
   return o;
 }
 

@@ -63,7 +63,7 @@ void on_each_job_system(FiniteGuard guard, Check&& check) {
     for (bool staged : {false, true}) {
       INFO((parallel ? "2 threads" : "serial") << (staged ? ", staged" : ", fused"));
       StepperOptions o = test::serial_options();
-      if (parallel) o.jobs = &tbb, o.inline_below = 0;
+      if (parallel) o.jobs = &tbb, o.workers = WorkerChoice::all;
       o.force_staged = staged;
       o.guard = guard;
       check(o);

@@ -108,7 +108,7 @@ TEST_CASE("coupled terms give the same bits on any number of threads", "[forces]
     ParticleSet<double> b = test::cloud<double>(n);
     StepperOptions o;
     o.jobs = &jobs;
-    o.inline_below = 0;
+    o.workers = WorkerChoice::all;
     Stepper<double> s(f, m, o);
     s.advance(b, 0.005, 10);
     return test::state_hash(b);

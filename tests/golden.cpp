@@ -119,6 +119,7 @@ TEST_CASE("shipped scenes hash to their stored values on every ISA, thread count
           StepperOptions o;
           o.isa = isa;
           o.threads = threads;
+          o.workers = WorkerChoice::all;
           INFO(isa_name(isa) << ", " << threads << " threads");
           CHECK(scene_hash(scene, precision, o) == reference);
         }

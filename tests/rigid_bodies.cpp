@@ -327,7 +327,7 @@ void check_rigid_determinism() {
       TbbJobSystem tbb(threads);
       StepperOptions o;
       o.jobs = &tbb;
-      o.inline_below = 0;
+      o.workers = WorkerChoice::all;
       INFO(m->name << " on " << threads << " threads");
       CHECK(run(o) == scalar);
     }

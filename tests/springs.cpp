@@ -384,7 +384,7 @@ TEST_CASE("springs: the irregular network steps to the same bits on any thread c
     TbbJobSystem tbb(threads);
     StepperOptions o;
     o.jobs = &tbb;
-    o.inline_below = 0;
+    o.workers = WorkerChoice::all;
     CHECK(hash(o) == serial);
   }
 }

@@ -3,10 +3,13 @@
 //
 // The contract, as kinema uses it:
 // - A job is `item_count` items; an item is one block of kBlockBodies bodies (the last one
-//   shorter), and `min_range` is 1. The host may split [0, item_count) into any ranges of at
-//   least `min_range` items, run them on any workers or inline (in `enqueue` or `wait`), in
-//   any order: every block is computed the same way whoever runs it, so results do not
+//   shorter). The host may split [0, item_count) into any ranges of at least `min_range` items
+//   (except a last, shorter one), run them on any workers or inline (in `enqueue` or `wait`),
+//   in any order: every block is computed the same way whoever runs it, so results do not
 //   depend on the split or on the number of workers. kinema ignores the `worker` argument.
+// - `min_range` is how kinema says how many workers a job is worth: a job meant for k
+//   workers has min_range = item_count / k rounded up (1 for all of them). A host that
+//   honours it wakes no more workers than that.
 // - `wait` returns once every range of that job has returned; then kinema reads the
 //   results. Tasks never throw into the host: what user code throws in a block is caught,
 //   later blocks of the job are skipped, and it is rethrown by `wait`'s caller.
@@ -14,9 +17,10 @@
 //   stepper call), and from inside one of the host's own tasks (a step run as a task): a
 //   host whose `wait` helps run queued ranges, as oneTBB's and most engines' do, cannot
 //   deadlock there.
-// - Every job goes to the job system, whatever `worker_count()` says (a host may give kinema
-//   one dedicated physics thread); only sets below StepperOptions::inline_below, and sets of
-//   one block, run inline on the calling thread without a job.
+// - With one worker (a host may give kinema one dedicated physics thread) every job goes to
+//   the job system. With more, a stepper runs a call on the calling thread, without a job,
+//   when its timings show that the workers do not pay (StepperOptions::workers); sets below
+//   StepperOptions::inline_below, and sets of one block, always run that way.
 // - `enqueue` may run ranges before it returns, but must not throw once it has taken any:
 //   they point into the caller's stack frame until `wait` returns.
 // - A JobSystem must outlive every stepper that uses it.

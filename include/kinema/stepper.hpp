@@ -36,15 +36,24 @@ enum class FiniteGuard {
   clamp,
 };
 
+enum class WorkerChoice { measured, all };
+
 struct StepperOptions {
   Isa isa = Isa::automatic;
   // The host's job system; nullptr uses the process-wide default_job_system(threads)
   // (0: all hardware threads), shared with every other stepper that is given none.
   JobSystem* jobs = nullptr;
   unsigned threads = 0;
-  // Sets with fewer (real) bodies than this run on the calling thread: below it, task
-  // overhead costs more than a second core gains. Every other job goes to the job system.
-  std::size_t inline_below = 8192;
+  // How many of the job system's workers a call uses. Results are the same bits for any
+  // count, so by default the stepper times its own calls, as the host makes them (back to
+  // back, or once a frame with the workers asleep in between), and uses the count that runs
+  // them fastest for that kind and size of call: the calling thread alone, or 2 .. all
+  // workers. Each is tried a few times at first use and again now and then (at most about 1%
+  // of the time). `all` hands every call to all workers (a host that wants its own policy).
+  // A job system of one worker (a host's physics thread) gets every call either way.
+  WorkerChoice workers = WorkerChoice::measured;
+  // Sets with fewer (real) bodies than this always run on the calling thread.
+  std::size_t inline_below = 0;
   // Take the staged path even where the fused one applies (cross-checks, benchmarks).
   bool force_staged = false;
   // Scalar and SSE2 paths only (CPUs without FMA, or a forced isa): multiply then add
@@ -156,6 +165,9 @@ class Stepper {
   Isa isa() const;           // the resolved instruction set the kernels use
   bool fused() const;        // true when steps take the fused single-pass path
   unsigned threads() const;  // workers of the job system in use
+  // The worker count the stepper's measurements favour for its last kind and size of call
+  // (0: the calling thread alone); what `workers = all` uses otherwise.
+  unsigned chosen_workers() const;
 
  private:
   struct Impl;

@@ -33,10 +33,13 @@ class ForkJoinPool final : public kinema::JobSystem {
   }
   unsigned worker_count() const override { return unsigned(threads_.size()) + 1; }
 
-  kinema::JobHandle enqueue(kinema::RangeTask task, std::size_t items, std::size_t, void* context) override {
+  kinema::JobHandle enqueue(kinema::RangeTask task, std::size_t items, std::size_t min_range,
+                            void* context) override {
     std::unique_lock lock(mutex_);
     idle_.wait(lock, [this] { return running_ == 0; });  // one job at a time
-    job_ = {task, items, context};
+    // Equal shares, each at least min_range items long (kinema caps a job's workers that way).
+    const std::size_t shares = std::clamp<std::size_t>(items / std::max<std::size_t>(min_range, 1), 1, worker_count());
+    job_ = {task, items, shares, context};
     const Job mine = job_;  // the helpers read job_ under the lock; this thread its copy
     running_ = threads_.size();
     ++generation_;
@@ -55,11 +58,13 @@ class ForkJoinPool final : public kinema::JobSystem {
   struct Job {
     kinema::RangeTask task = nullptr;
     std::size_t items = 0;
+    std::size_t shares = 1;
     void* context = nullptr;
   };
 
   void run_share(const Job& job, unsigned worker) {
-    const std::size_t n = worker_count(), begin = job.items * worker / n, end = job.items * (worker + 1) / n;
+    if (worker >= job.shares) return;
+    const std::size_t n = job.shares, begin = job.items * worker / n, end = job.items * (worker + 1) / n;
     if (begin < end) job.task(begin, end, worker, job.context);
   }
 

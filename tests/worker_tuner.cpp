@@ -1,0 +1,163 @@
+// The measured worker choice: it settles on the cheapest option, retries the others at a
+// bounded cost, follows a change of costs, and shrugs off a pre-empted call and the cost of
+// switching. Costs are simulated (ticks per body-step), so the facts are exact.
+#include <catch2/catch.hpp>
+
+#include <functional>
+#include <vector>
+
+#include "blocks.hpp"
+#include "kinema/kinema.hpp"
+#include "support.hpp"
+#include "thread_pool.hpp"
+#include "worker_tuner.hpp"
+
+using namespace kinema;
+
+namespace {
+
+// Ticks per unit of work for `count` workers, given the count of the call before.
+using CostModel = std::function<double(unsigned count, unsigned previous)>;
+
+struct Run {
+  double spent = 0;    // ticks in all
+  std::vector<unsigned> counts;
+};
+
+Run drive(WorkerTuner& tuner, int calls, const CostModel& cost, unsigned previous = 0) {
+  Run run;
+  for (int k = 0; k < calls; ++k) {
+    const unsigned count = tuner.choose();
+    const double ticks = 1000 * cost(count, previous);
+    tuner.record(count, std::uint64_t(ticks), 1000);
+    run.spent += ticks;
+    run.counts.push_back(count);
+    previous = count;
+  }
+  return run;
+}
+
+CostModel flat(double inline_cost, double two_cost) {
+  return [=](unsigned count, unsigned) { return count == 0 ? inline_cost : two_cost; };
+}
+
+}  // namespace
+
+TEST_CASE("the worker tuner settles on the cheaper option and retries the other at about 1%",
+          "[worker_tuner]") {
+  for (const auto& [inline_cost, two_cost, winner] :
+       {std::tuple{1.0, 0.6, 2u}, std::tuple{0.6, 1.0, 0u}, std::tuple{1.0, 25.0, 0u}}) {
+    INFO("inline " << inline_cost << ", 2 workers " << two_cost);
+    WorkerTuner tuner(2);
+    drive(tuner, 50, flat(inline_cost, two_cost));
+    CHECK(tuner.best() == winner);
+    const Run settled = drive(tuner, 20000, flat(inline_cost, two_cost));
+    const double best_cost = std::min(inline_cost, two_cost);
+    const double overhead = settled.spent / (20000 * 1000 * best_cost) - 1;
+    CHECK(overhead > 0);        // it does retry
+    CHECK(overhead < 0.025);    // each retry's cost spread over about 100 calls (a retry is 2 calls)
+  }
+}
+
+TEST_CASE("the worker tuner follows a change of costs", "[worker_tuner]") {
+  WorkerTuner tuner(2);
+  drive(tuner, 5000, flat(1.0, 0.6));
+  REQUIRE(tuner.best() == 2);
+  // The other core gets busy: 2 workers now cost more than the calling thread alone.
+  const Run after = drive(tuner, 300, flat(0.6, 1.0), 2);
+  CHECK(tuner.best() == 0);
+  int late_twos = 0;
+  for (std::size_t k = 200; k < after.counts.size(); ++k) late_twos += after.counts[k] == 2;
+  CHECK(late_twos <= 4);  // retries only: 2 calls about every 70
+}
+
+TEST_CASE("the worker tuner ignores a pre-empted call and the first call after a switch",
+          "[worker_tuner]") {
+  SECTION("one call taking 100x") {
+    WorkerTuner tuner(2);
+    drive(tuner, 200, flat(1.0, 0.6));
+    REQUIRE(tuner.best() == 2);
+    tuner.record(tuner.choose(), 60000 * 100, 1000);
+    CHECK(tuner.best() == 2);
+  }
+  SECTION("waking the workers costs the first call after the calling thread ran alone") {
+    // Back to back, 2 workers are cheaper; only a call right after an inline one pays the wake.
+    const CostModel wake = [](unsigned count, unsigned previous) {
+      if (count == 0) return 1.0;
+      return previous == 0 ? 3.0 : 0.6;
+    };
+    WorkerTuner tuner(2);
+    drive(tuner, 200, wake);
+    CHECK(tuner.best() == 2);
+  }
+}
+
+TEST_CASE("the worker tuner: one worker is the only option, more give 0 and 2 .. n",
+          "[worker_tuner]") {
+  WorkerTuner single(1);
+  for (int k = 0; k < 20; ++k) {
+    CHECK(single.choose() == 1);
+    single.record(1, 100, 1);
+  }
+  WorkerTuner four(4);
+  std::vector<unsigned> seen = drive(four, 40, [](unsigned count, unsigned) { return 1.0 + count; }).counts;
+  std::sort(seen.begin(), seen.end());
+  seen.erase(std::unique(seen.begin(), seen.end()), seen.end());
+  CHECK(seen == std::vector<unsigned>{0, 2, 3, 4});
+  CHECK(four.best() == 0);
+}
+
+namespace {
+
+// Records the min_range of each job and runs it inline.
+class RecordingJobs final : public JobSystem {
+ public:
+  explicit RecordingJobs(unsigned workers) : workers_(workers) {}
+  unsigned worker_count() const override { return workers_; }
+  JobHandle enqueue(RangeTask task, std::size_t count, std::size_t min_range, void* context) override {
+    min_ranges.push_back(min_range);
+    task(0, count, 0, context);
+    return nullptr;
+  }
+  void wait(JobHandle) override {}
+  std::vector<std::size_t> min_ranges;
+
+ private:
+  unsigned workers_;
+};
+
+}  // namespace
+
+TEST_CASE("a call meant for k workers asks for ranges of at least blocks / k", "[worker_tuner]") {
+  RecordingJobs jobs(8);
+  const std::size_t bodies = 10 * kBlockBodies;
+  int blocks = 0;
+  for (unsigned k : {0u, 1u, 2u, 3u, 8u}) for_each_block(Workers{&jobs, k}, bodies, [&](Block) { ++blocks; });
+  CHECK(blocks == 50);
+  CHECK(jobs.min_ranges == std::vector<std::size_t>{10, 5, 4, 2});  // 0 workers: no job
+}
+
+TEST_CASE("measured worker counts on a TBB job system keep every result's bits while the choice changes",
+          "[worker_tuner][job_system]") {
+  ParticleSet<double> serial = test::cloud<double>(5000);
+  ParticleSet<double> measured = serial;
+  Stepper<double>(test::all_local_terms<double>(), rk4, test::serial_options()).advance(serial, 0.01, 40);
+  TbbJobSystem tbb(2);
+  StepperOptions o;
+  o.jobs = &tbb;
+  Stepper<double> stepper(test::all_local_terms<double>(), rk4, o);
+  for (int k = 0; k < 40; ++k) stepper.step(measured, 0.01);  // first use tries both options
+  CHECK(test::state_hash(measured) == test::state_hash(serial));
+  CHECK((stepper.chosen_workers() == 0 || stepper.chosen_workers() == 2));
+}
+
+TEST_CASE("measured choice: a host's single physics thread gets every call", "[worker_tuner]") {
+  RecordingJobs physics(1);
+  StepperOptions o;
+  o.jobs = &physics;
+  ParticleSet<float> b = test::cloud<float>(5000);
+  Stepper<float> stepper(test::all_local_terms<float>(), rk4, o);
+  for (int k = 0; k < 30; ++k) stepper.step(b, 0.01f);
+  CHECK(physics.min_ranges.size() == 30);
+  CHECK(stepper.chosen_workers() == 1);
+}
