@@ -41,6 +41,7 @@ struct CaseStepper {
     o.isa = c.isa;
     o.jobs = c.threads == 1 ? static_cast<JobSystem*>(&serial) : &jobs;
     o.force_staged = c.staged;
+    o.workers = WorkerChoice::all;  // n threads, not the measured choice (frame_loop times that)
     o.relaxed_fma = c.relaxed;
     return o;
   }

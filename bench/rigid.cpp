@@ -38,6 +38,7 @@ void rigid_steps(benchmark::State& state, unsigned threads, bool blocked) {
   CaseJobs jobs(threads);
   StepperOptions o;
   o.jobs = jobs.get();
+  o.workers = WorkerChoice::all;  // n threads, not the measured choice (frame_loop times that)
   Stepper<T> stepper(make_forces<T>(scene), rk4, o);
   const std::uint64_t steps = blocked ? 64 : 1;
   stepper.advance(bodies, T(kDt), 1);
