@@ -13,7 +13,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include "bench_scene.hpp"
 
@@ -33,21 +32,7 @@ class ParallelForJobs final : public JobSystem {
   void wait(JobHandle) override {}
 };
 
-class ArenaParallelForJobs final : public JobSystem {
- public:
-  unsigned worker_count() const override { return hardware_threads(); }
-  JobHandle enqueue(RangeTask task, std::size_t items, std::size_t min_range, void* context) override {
-    arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, items, min_range),
-                      [&](const tbb::blocked_range<std::size_t>& r) { task(r.begin(), r.end(), 0, context); });
-    });
-    return nullptr;
-  }
-  void wait(JobHandle) override {}
-  tbb::task_arena arena{2};
-};
-
-enum class Variant { one_thread, measured, two_threads, parallel_for, arena };
+enum class Variant { one_thread, measured, two_threads, parallel_for };
 
 StepperOptions options_for(Variant v) {
   static ParallelForJobs peer;
@@ -57,7 +42,6 @@ StepperOptions options_for(Variant v) {
     case Variant::measured: return o;
     case Variant::two_threads: o.threads = 2; break;
     case Variant::parallel_for: o.jobs = &peer; break;
-    case Variant::arena: { static ArenaParallelForJobs a; o.jobs = &a; break; }
   }
   o.workers = WorkerChoice::all;
   return o;
@@ -97,7 +81,7 @@ void register_all() {
   const std::pair<Variant, const char*> variants[] = {{Variant::one_thread, "threads:1"},
                                                       {Variant::measured, "default"},
                                                       {Variant::two_threads, "threads:2"},
-                                                      {Variant::parallel_for, "parallel_for"}, {Variant::arena, "arena"}};
+                                                      {Variant::parallel_for, "parallel_for"}};
   for (int gap_us : {0, 1000, 8000}) {
     for (const auto& [variant, label] : variants) {
       const std::string suffix = "/gap_us:" + std::to_string(gap_us) + "/" + label;

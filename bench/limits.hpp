@@ -14,9 +14,18 @@ using StreamFn = void (*)(float* x, const float* v, std::size_t n, float h);
 using PeakFloatFn = float (*)(long rounds, double* out_flops);
 using PeakDoubleFn = double (*)(long rounds, double* out_flops);
 
+// The particle state's own traffic, bodies [begin, end): 7 arrays read, 6 written in place
+// (p += h v, then v += h w p per axis), as a step of the fused kernels moves them, with
+// almost no arithmetic. All pointers 64-byte aligned, begin and end multiples of 16.
+template <class T>
+using StateStreamFn = void (*)(T* const p[3], T* const v[3], const T* w, std::size_t begin,
+                               std::size_t end, T h);
+
 struct LimitKernels {
   const char* isa;
   StreamFn stream;
+  StateStreamFn<float> state_stream_float;
+  StateStreamFn<double> state_stream_double;
   PeakFloatFn peak_float;
   PeakDoubleFn peak_double;
 };

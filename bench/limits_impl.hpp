@@ -1,5 +1,7 @@
 #pragma once
 // Written once over xsimd batches; FMA through the instruction itself (see src/kernels).
+#include <type_traits>
+
 #include <xsimd/xsimd.hpp>
 
 #include "limits.hpp"
@@ -37,6 +39,37 @@ void stream(float* x, const float* v, std::size_t n, float h) {
   }
 }
 
+template <class B>
+inline B fma_any(const B& a, const B& b, const B& c) {
+  if constexpr (std::is_same_v<typename B::value_type, float>) {
+    return fma_op(a, b, c);
+  } else {
+    return fma_op_d(a, b, c);
+  }
+}
+
+template <class T, class A>
+void state_stream(T* const p[3], T* const v[3], const T* w, std::size_t begin, std::size_t end, T h) {
+  using B = xsimd::batch<T, A>;
+  constexpr std::size_t kLine = 64 / sizeof(T), kAhead = 1024 / sizeof(T);  // 1 KiB ahead, as the kernels
+  const B hb(h);
+  for (std::size_t i = begin; i < end; i += B::size) {
+    if (i % kLine == 0) {
+      for (int d = 0; d < 3; ++d) {
+        __builtin_prefetch(p[d] + i + kAhead, 1);
+        __builtin_prefetch(v[d] + i + kAhead, 1);
+      }
+      __builtin_prefetch(w + i + kAhead, 0);
+    }
+    const B hw = hb * B::load_aligned(w + i);
+    for (int d = 0; d < 3; ++d) {
+      const B x = fma_any(hb, B::load_aligned(v[d] + i), B::load_aligned(p[d] + i));
+      x.store_aligned(p[d] + i);
+      fma_any(hw, x, B::load_aligned(v[d] + i)).store_aligned(v[d] + i);
+    }
+  }
+}
+
 // 12 independent chains hide the FMA latency (4 cycles) on two pipes.
 template <class T, class A, class Op>
 T peak(long rounds, double* out_flops, Op op) {
@@ -61,7 +94,7 @@ T peak(long rounds, double* out_flops, Op op) {
 
 template <class A>
 LimitKernels make(const char* name) {
-  return {name, &stream<A>,
+  return {name, &stream<A>, &state_stream<float, A>, &state_stream<double, A>,
           [](long rounds, double* flops) {
             return peak<float, A>(rounds, flops, [](auto a, auto b, auto c) { return fma_op(a, b, c); });
           },

@@ -59,6 +59,50 @@ void stream_in_place(benchmark::State& state) {
 }
 
 template <class T>
+struct StateArraysOf {
+  AlignedArray<T> a[7];  // px py pz vx vy vz w
+};
+
+// A particle set's state arrays at each size, made once and shared by the benchmark's threads.
+template <class T>
+StateArraysOf<T>& state_arrays(std::size_t bodies) {
+  static std::mutex mutex;
+  static std::map<std::size_t, StateArraysOf<T>> arrays;
+  std::lock_guard lock(mutex);
+  auto [it, fresh] = arrays.try_emplace(bodies);
+  if (fresh) {
+    for (auto& array : it->second.a) {
+      array = AlignedArray<T>(padded_count<T>(bodies));
+      for (std::size_t i = 0; i < array.size(); ++i) array[i] = T(1e-3);
+    }
+  }
+  return it->second;
+}
+
+// The state's own traffic (7 arrays read, 6 written): the memory limit of a fused step at
+// this size and thread count. Each benchmark thread streams its own share of the bodies.
+template <class T>
+void state_stream(benchmark::State& state) {
+  const auto n = std::size_t(state.range(0));
+  StateArraysOf<T>& s = state_arrays<T>(n);
+  T* const p[3] = {s.a[0].data(), s.a[1].data(), s.a[2].data()};
+  T* const v[3] = {s.a[3].data(), s.a[4].data(), s.a[5].data()};
+  const std::size_t share = padded_count<T>(n) / std::size_t(state.threads()) / 16 * 16;
+  const std::size_t begin = share * std::size_t(state.thread_index());
+  for (auto _ : state) {
+    if constexpr (sizeof(T) == 4) {
+      best_limits().state_stream_float(p, v, s.a[6].data(), begin, begin + share, T(1e-9));
+    } else {
+      best_limits().state_stream_double(p, v, s.a[6].data(), begin, begin + share, T(1e-9));
+    }
+    benchmark::ClobberMemory();
+  }
+  const double bytes = 13.0 * sizeof(T) * double(share) * double(state.iterations());
+  state.counters["GB_per_s"] = benchmark::Counter(bytes * 1e-9, benchmark::Counter::kIsRate);
+  state.SetLabel(best_limits().isa);
+}
+
+template <class T>
 void fma_peak(benchmark::State& state) {
   double flops = 0, total = 0;
   for (auto _ : state) {
@@ -74,9 +118,13 @@ void fma_peak(benchmark::State& state) {
 }
 
 void register_all() {
-  // 1382400 bodies' state is the 38.7 MB a 512 x 512 cloth's spring kernel moves.
-  for (std::int64_t n : {1 << 10, 1 << 14, 100000, 1 << 20, 1382400, 1 << 22}) {
-    benchmark::RegisterBenchmark("limit/stream", stream_in_place)
+  // x += h v over the 38.7 MB a 512 x 512 cloth's spring kernel moves (1382400 bodies' state).
+  benchmark::RegisterBenchmark("limit/stream", stream_in_place)
+      ->Arg(1382400)->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
+  for (std::int64_t n : {1 << 10, 1 << 12, 1 << 14, 1 << 16, 100000, 1 << 20, 1 << 22}) {
+    benchmark::RegisterBenchmark("limit/state_stream/float", state_stream<float>)
+        ->Arg(n)->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
+    benchmark::RegisterBenchmark("limit/state_stream/double", state_stream<double>)
         ->Arg(n)->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
   }
   benchmark::RegisterBenchmark("limit/fma_peak/float", fma_peak<float>)

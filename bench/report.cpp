@@ -68,6 +68,11 @@ std::string baseline(const char* name, const std::string& p, long n) {
 std::string stream(long n, int threads) {
   return "limit/stream/" + std::to_string(n) + "/real_time/threads:" + std::to_string(threads);
 }
+// The particle state's own traffic at n bodies (7 arrays read, 6 written), widest ISA.
+std::string state_stream(const std::string& p, long n, int threads) {
+  return "limit/state_stream/" + p + "/" + std::to_string(n) + "/real_time/threads:" + std::to_string(threads);
+}
+double value_bytes(const std::string& p) { return p == "float" ? 4 : 8; }
 std::string peak(const std::string& p, int threads) {
   return "limit/fma_peak/" + p + "/real_time/threads:" + std::to_string(threads);
 }
@@ -94,10 +99,81 @@ std::optional<double> ratio(std::optional<Figure> a, std::optional<Figure> b) {
   return a->median / b->median;
 }
 
+// Data cache sizes per level from the run's context (Google Benchmark reads them).
+std::map<int, double> data_caches(const json& context) {
+  std::map<int, double> sizes;
+  for (const json& c : context.value("caches", json::array())) {
+    if (c.value("type", "") != "Instruction") sizes[c.value("level", 0)] = c.value("size", 0.0);
+  }
+  return sizes;
+}
+
 class Report {
  public:
-  Report(Runs runs, std::string isa, std::FILE* csv)
-      : runs_(std::move(runs)), isa_(std::move(isa)), csv_(csv) {}
+  Report(Runs runs, std::string isa, std::map<int, double> caches, std::FILE* csv)
+      : runs_(std::move(runs)), isa_(std::move(isa)), caches_(std::move(caches)), csv_(csv) {}
+
+  // Each method at each size against the limit that bounds it: the compute ceiling (the
+  // kernel with its traffic removed) or the state stream at that size, whichever is slower.
+  void bounds_table() {
+    const long sizes[] = {16384L, 100000L, 4194304L};
+    if (!find(runs_, run_name("fused", "euler", "float", isa_, 1, 4194304), "ns_per_body_step")) return;
+    std::printf("\nWhat bounds each method, 1 thread, %s: ns per body-step, the bound (compute: the ceiling; "
+                "L2 / L3 / DRAM: the state stream at that size) and the share of it reached\n", isa_.c_str());
+    std::printf("%-6s %-16s", "prec", "method");
+    for (long n : sizes) std::printf(" | %8ld: ns   bound    %%", n);
+    std::printf("\n");
+    for (const std::string p : {"float", "double"}) {
+      for (const char* m : {"euler", "midpoint", "heun", "rk4", "symplectic_euler", "velocity_verlet"}) {
+        std::printf("%-6s %-16s", p.c_str(), m);
+        for (long n : sizes) bounds_cell(p, m, n);
+        std::printf("\n");
+      }
+    }
+    for (const std::string& line : below_70_) std::printf("%s\n", line.c_str());
+  }
+
+  // One step per frame with idle gaps: default options against one thread, both threads and
+  // a plain tbb::parallel_for.
+  void frame_loop_table() {
+    if (!find(runs_, frame_loop_run("float", 0, "threads:1", 1024), "ns_per_body_step")) return;
+    std::printf("\nOne rk4 step per frame after an idle gap (0: back to back), %s: us per step; speed "
+                "against 1 thread (the calling thread alone)\n", isa_.c_str());
+    std::printf("%-6s %8s %8s | %9s | %9s %5s %7s | %9s %7s | %12s %7s\n", "prec", "gap us", "N", "1 thread",
+                "default", "wkrs", "speed", "2 threads", "speed", "parallel_for", "speed");
+    double worst_default = 1e9, worst_peer = 1e9;
+    std::string worst_default_at, worst_peer_at;
+    for (int gap : {0, 1000, 8000}) {
+      for (const std::string p : {"float", "double"}) {
+        for (long n : {1024L, 4096L, 16384L, 65536L, 100000L, 1048576L}) {
+          const auto one = find(runs_, frame_loop_run(p, gap, "threads:1", n), "ns_per_body_step");
+          const auto measured = find(runs_, frame_loop_run(p, gap, "default", n), "ns_per_body_step");
+          const auto two = find(runs_, frame_loop_run(p, gap, "threads:2", n), "ns_per_body_step");
+          const auto peer = find(runs_, frame_loop_run(p, gap, "parallel_for", n), "ns_per_body_step");
+          if (!one || !measured) continue;
+          for (const auto& r : {one, measured}) cvs_.push_back(r->cv);
+          const double us = double(n) * 1e-3;
+          const std::string at = p + " N = " + std::to_string(n) + " gap " + std::to_string(gap) + " us";
+          if (one->median / measured->median < worst_default) {
+            worst_default = one->median / measured->median, worst_default_at = at;
+          }
+          if (n >= 16384 && peer && peer->median / measured->median < worst_peer) {
+            worst_peer = peer->median / measured->median, worst_peer_at = at;
+          }
+          std::printf("%-6s %8d %8ld | %9.2f | %9.2f %5s %7s | %9s %7s | %12s %7s\n", p.c_str(), gap, n,
+                      one->median * us, measured->median * us,
+                      value(frame_loop_run(p, gap, "default", n), "workers", "%.0f").c_str(),
+                      cell(ratio(one, measured), "%.2fx").c_str(), cell(two ? two->median * us : NAN, "%.2f").c_str(),
+                      cell(ratio(one, two), "%.2fx").c_str(), cell(peer ? peer->median * us : NAN, "%.2f").c_str(),
+                      cell(ratio(one, peer), "%.2fx").c_str());
+        }
+      }
+    }
+    std::printf("default: every hardware thread, the worker count measured by the stepper (wkrs: its choice at "
+                "the end, 0 = the calling thread alone); 2 threads: both on every step.\n"
+                "worst default against 1 thread: %.2fx (%s); worst default against parallel_for at N >= 16384: "
+                "%.2fx (%s)\n", worst_default, worst_default_at.c_str(), worst_peer, worst_peer_at.c_str());
+  }
 
   void rk4_table() {
     std::printf("\nFused RK4 (gravity + linear drag + spring), %s, ns per body-step; ratios from this run\n",
@@ -109,9 +185,10 @@ class Report {
     }
     std::printf("ceiling: the same kernel with its memory traffic removed (each cache-resident block "
                 "takes all steps in turn), as ceiling time / step time.\nBW: state bytes read + "
-                "written per second against in-place streaming (x += h v) at the same size and "
-                "thread count.\n2 threads at N = 1024: below StepperOptions::inline_below the "
-                "step runs inline on the calling thread, so both columns time the same code.\n");
+                "written per second against the state's own stream (the same 7 arrays read and 6 "
+                "written, almost no arithmetic, %s) at the same size, precision and thread count.\n"
+                "2 threads: every step on both (workers = all); at N = 1024 the set is one block, "
+                "run on the calling thread.\n", isa_.c_str());
   }
 
   void methods_table() {
@@ -210,7 +287,7 @@ class Report {
   void guard_table() {
     if (!find(runs_, "guard/float/off/" + isa_ + "/100000/real_time", "ns_per_body_step")) return;
     std::printf("\nThe finiteness guard, one rk4 step per call, 1 thread, %s: ns per body-step (times the "
-                "guard off); the guard's own traffic (a copy of 6 arrays, a scan of 6) at this size's in-place stream speed\n", isa_.c_str());
+                "guard off); the guard's own traffic (a copy of 6 arrays, a scan of 6) at this size's state-stream speed\n", isa_.c_str());
     for (const std::string p : {"float", "double"}) {
       for (long n : {100000L, 1L << 20}) {
         const std::string at = "/" + isa_ + "/" + std::to_string(n) + "/real_time";
@@ -219,7 +296,7 @@ class Report {
         const auto check = find(runs_, "guard/" + p + "/check" + at, "ns_per_body_step");
         const auto clamp = find(runs_, "guard/" + p + "/clamp" + at, "ns_per_body_step");
         // Bytes per body the guard moves (12 arrays read, 6 written) over bytes per ns.
-        const auto s = find(runs_, stream(n, 1), "GB_per_s");
+        const auto s = find(runs_, state_stream(p, n, 1), "GB_per_s");
         const double pass_ns = s ? 18.0 * (p == "float" ? 4 : 8) / s->median : 0;
         for (const auto& r : {off, check, clamp}) {
           if (r) cvs_.push_back(r->cv);
@@ -235,7 +312,7 @@ class Report {
   void adaptive_table() {
     if (!find(runs_, "adaptive/dopri5/float/" + isa_ + "/100000/real_time", "ns_per_body_step")) return;
     std::printf("\nError-controlled dopri5 against fixed steps at its mean accepted step, N = 100000, 1 thread, %s "
-                "(each call from the same state over 0.5 s): ns per body-step; the share of the in-place stream\n",
+                "(each call from the same state over 0.5 s): ns per body-step; the share of the state stream\n",
                 isa_.c_str());
     for (const std::string p : {"float", "double"}) {
       const std::string at = "/" + isa_ + "/100000/real_time";
@@ -243,7 +320,7 @@ class Report {
       const auto fixed = find(runs_, "fixed/dopri5/" + p + at, "ns_per_body_step");
       if (!adaptive) continue;
       cvs_.push_back(adaptive->cv);
-      const auto bw = ratio(find(runs_, "adaptive/dopri5/" + p + at, "GB_per_s"), find(runs_, stream(100000, 1), "GB_per_s"));
+      const auto bw = ratio(find(runs_, "adaptive/dopri5/" + p + at, "GB_per_s"), find(runs_, state_stream(p, 100000, 1), "GB_per_s"));
       std::printf("%-6s adaptive %.3f (%s steps per call) | fixed %s | adaptive / fixed %s | %s of the stream\n",
                   p.c_str(), adaptive->median, value("adaptive/dopri5/" + p + at, "accepted_per_call", "%.0f").c_str(),
                   cell(median(fixed), "%.3f").c_str(), cell(ratio(adaptive, fixed), "%.2fx").c_str(),
@@ -273,10 +350,11 @@ class Report {
 
   void limits() {
     std::printf("\nMachine limits in this run: FMA peak float %s / %s GFLOP/s (1 / 2 threads), double %s / %s;"
-                "\n  in-place streaming at 4M bodies' state: %s / %s GB/s\n",
+                "\n  the state stream at 4M float bodies (%s): %s / %s GB/s\n",
                 value(peak("float", 1), "GFLOP_per_s").c_str(), value(peak("float", 2), "GFLOP_per_s").c_str(),
                 value(peak("double", 1), "GFLOP_per_s").c_str(), value(peak("double", 2), "GFLOP_per_s").c_str(),
-                value(stream(4194304, 1), "GB_per_s").c_str(), value(stream(4194304, 2), "GB_per_s").c_str());
+                isa_.c_str(), value(state_stream("float", 4194304, 1), "GB_per_s").c_str(),
+                value(state_stream("float", 4194304, 2), "GB_per_s").c_str());
     const auto one = find(runs_, peak("float", 1), "GFLOP_per_s");
     const auto two = find(runs_, peak("float", 2), "GFLOP_per_s");
     if (one && two) {
@@ -311,6 +389,41 @@ class Report {
     return "nbody/" + p + "/" + isa_ + "/threads:" + std::to_string(threads) + "/" + std::to_string(n) + "/real_time";
   }
 
+  std::string frame_loop_run(const std::string& p, int gap, const char* variant, long n) const {
+    const std::string iterations = gap >= 8000 ? "iterations:40/" : gap >= 1000 ? "iterations:200/" : "";
+    return "frame_loop/" + p + "/gap_us:" + std::to_string(gap) + "/" + variant + "/" + std::to_string(n) + "/" +
+           iterations + "manual_time";
+  }
+
+  // Where a state of n bodies of precision p lives: the smallest data cache holding it.
+  std::string level(const std::string& p, long n) const {
+    const double bytes = 7 * value_bytes(p) * double(n);
+    for (const auto& [l, size] : caches_) {
+      if (l >= 2 && bytes <= size) return l == 2 ? "L2" : l == 3 ? "L3" : "L4";
+    }
+    return "DRAM";
+  }
+
+  void bounds_cell(const std::string& p, const char* m, long n) {
+    const auto f = find(runs_, run_name("fused", m, p, isa_, 1, n), "ns_per_body_step");
+    const auto c = find(runs_, run_name("ceiling", m, p, isa_, 1, 100000), "ns_per_body_step");
+    const auto s = find(runs_, state_stream(p, n, 1), "GB_per_s");
+    if (!f || !c || !s) return void(std::printf(" | %26s", "-"));
+    cvs_.push_back(f->cv);
+    const double memory_ns = 13 * value_bytes(p) / s->median;
+    const bool compute = c->median >= memory_ns;
+    const double bound = compute ? c->median : memory_ns;
+    const std::string kind = compute ? "compute" : level(p, n);
+    const double share = bound / f->median;
+    std::printf(" | %14.3f %7s %4.0f", f->median, kind.c_str(), 100 * share);
+    if (share < 0.7) {
+      char line[256];
+      std::snprintf(line, sizeof line, "below 70%%: %s %s at %ld: %.3f ns against %s %.3f (ceiling %.3f, state stream %.3f)",
+                    p.c_str(), m, n, f->median, kind.c_str(), bound, c->median, memory_ns);
+      below_70_.push_back(line);
+    }
+  }
+
   std::string value(const std::string& run, const char* counter, const char* format = "%.1f") const {
     const auto f = find(runs_, run, counter);
     return f ? cell(f->median, format) : "-";
@@ -325,9 +438,9 @@ class Report {
     const auto odeint = find(runs_, baseline("odeint", p, n), "ns_per_body_step");
     const auto ceiling = find(runs_, run_name("ceiling", "rk4", p, isa_, 1, 100000), "ns_per_body_step");
     const auto bw1 = ratio(find(runs_, run_name("fused", "rk4", p, isa_, 1, n), "GB_per_s"),
-                           find(runs_, stream(n, 1), "GB_per_s"));
+                           find(runs_, state_stream(p, n, 1), "GB_per_s"));
     const auto bw2 = ratio(find(runs_, run_name("fused", "rk4", p, isa_, 2, n), "GB_per_s"),
-                           find(runs_, stream(n, 2), "GB_per_s"));
+                           find(runs_, state_stream(p, n, 2), "GB_per_s"));
     std::printf("%-6s %8ld | %7.3f ±%2.0f%% %7s %8s %8s %6s | %12s %7s %6s\n", p.c_str(), n, one->median,
                 100 * one->cv, cell(ratio(naive, one), "%.1fx").c_str(),
                 cell(ratio(odeint, one), "%.1fx").c_str(), cell(percent(ratio(ceiling, one)), "%.0f%%").c_str(),
@@ -344,8 +457,10 @@ class Report {
 
   Runs runs_;
   std::string isa_;
+  std::map<int, double> caches_;
   std::FILE* csv_;
   std::vector<double> cvs_;
+  std::vector<std::string> below_70_;
 };
 
 // Google Benchmark writes a counter's undefined statistics (the cv of a counter that is 0 in
@@ -383,9 +498,11 @@ int main(int argc, char** argv) {
                       "speedup_odeint,ceiling_fraction,bandwidth_fraction,bandwidth_fraction_2t,"
                       "scaling_2t\n");
   }
-  Report report(load_runs(doc), isa, csv);
+  Report report(load_runs(doc), isa, data_caches(context), csv);
   report.rk4_table();
   report.methods_table();
+  report.bounds_table();
+  report.frame_loop_table();
   report.isa_table();
   report.rigid_table();
   report.paired_scaling();
