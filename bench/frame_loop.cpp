@@ -2,6 +2,7 @@
 // workers. Each iteration sleeps `gap` (0: back to back), then times one rk4 step. Rows:
 //   threads:1   on the calling thread alone
 //   default     default options: every hardware thread, the worker count measured
+//   prepared    the same, with Stepper::prepare() called right before each step (timed too)
 //   threads:2   both threads on every step (workers = all)
 //   parallel_for  the peer: a plain tbb::parallel_for over the same blocks, same kernel
 // The steppers step a few frames before the timing, as a game's first frames would.
@@ -32,14 +33,15 @@ class ParallelForJobs final : public JobSystem {
   void wait(JobHandle) override {}
 };
 
-enum class Variant { one_thread, measured, two_threads, parallel_for };
+enum class Variant { one_thread, measured, prepared, two_threads, parallel_for };
 
 StepperOptions options_for(Variant v) {
   static ParallelForJobs peer;
   StepperOptions o;
   switch (v) {
     case Variant::one_thread: return on_calling_thread();
-    case Variant::measured: return o;
+    case Variant::measured:
+    case Variant::prepared: return o;
     case Variant::two_threads: o.threads = 2; break;
     case Variant::parallel_for: o.jobs = &peer; break;
   }
@@ -56,16 +58,20 @@ void frame_loop(benchmark::State& state, Variant variant, int gap_us) {
   ParticleSet<T> bodies = initial;
   Stepper<T> stepper(make_forces<T>(bench_scene(n)), rk4, options_for(variant));
   const auto gap = std::chrono::microseconds(gap_us);
+  const auto frame = [&] {
+    if (variant == Variant::prepared) stepper.prepare();
+    stepper.step(bodies, T(kDt));
+  };
   for (int k = 0; k < kWarmFrames; ++k) {
     std::this_thread::sleep_for(gap);
-    stepper.step(bodies, T(kDt));
+    frame();
   }
   std::int64_t k = 0;
   for (auto _ : state) {
     if (++k % kRestoreEvery == 0) restore(bodies, initial);
     if (gap_us > 0) std::this_thread::sleep_for(gap);
     const auto begin = std::chrono::steady_clock::now();
-    stepper.step(bodies, T(kDt));
+    frame();
     const auto end = std::chrono::steady_clock::now();
     state.SetIterationTime(std::chrono::duration<double>(end - begin).count());
   }
@@ -75,11 +81,12 @@ void frame_loop(benchmark::State& state, Variant variant, int gap_us) {
 }
 
 // Iterations with a gap are counted, not timed to a minimum: the gaps are most of the time.
-int iterations_for(int gap_us) { return gap_us >= 8000 ? 40 : gap_us >= 1000 ? 200 : 0; }
+int iterations_for(int gap_us) { return gap_us >= 8000 ? 100 : gap_us >= 1000 ? 400 : 0; }
 
 void register_all() {
   const std::pair<Variant, const char*> variants[] = {{Variant::one_thread, "threads:1"},
                                                       {Variant::measured, "default"},
+                                                      {Variant::prepared, "prepared"},
                                                       {Variant::two_threads, "threads:2"},
                                                       {Variant::parallel_for, "parallel_for"}};
   for (int gap_us : {0, 1000, 8000}) {

@@ -139,9 +139,9 @@ class Report {
     if (!find(runs_, frame_loop_run("float", 0, "threads:1", 1024), "ns_per_body_step")) return;
     std::printf("\nOne rk4 step per frame after an idle gap (0: back to back), %s: us per step; speed "
                 "against 1 thread (the calling thread alone)\n", isa_.c_str());
-    std::printf("%-6s %8s %8s | %9s | %9s %5s %7s | %9s %7s | %12s %7s\n", "prec", "gap us", "N", "1 thread",
-                "default", "wkrs", "speed", "2 threads", "speed", "parallel_for", "speed");
-    double worst_default = 1e9, worst_peer = 1e9;
+    std::printf("%-6s %6s %8s | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", "prec", "gap us", "N",
+                "1 thread", "default", "wkrs", "speed", "prepared", "speed", "2 threads", "speed", "parallel_for", "speed");
+    double worst_default = 1e9, worst_peer = 1e9, worst_default_noise = 0;
     std::string worst_default_at, worst_peer_at;
     for (int gap : {0, 1000, 8000}) {
       for (const std::string p : {"float", "double"}) {
@@ -149,30 +149,35 @@ class Report {
           const auto one = find(runs_, frame_loop_run(p, gap, "threads:1", n), "ns_per_body_step");
           const auto measured = find(runs_, frame_loop_run(p, gap, "default", n), "ns_per_body_step");
           const auto two = find(runs_, frame_loop_run(p, gap, "threads:2", n), "ns_per_body_step");
+          const auto prepared = find(runs_, frame_loop_run(p, gap, "prepared", n), "ns_per_body_step");
           const auto peer = find(runs_, frame_loop_run(p, gap, "parallel_for", n), "ns_per_body_step");
           if (!one || !measured) continue;
           for (const auto& r : {one, measured}) cvs_.push_back(r->cv);
           const double us = double(n) * 1e-3;
           const std::string at = p + " N = " + std::to_string(n) + " gap " + std::to_string(gap) + " us";
+          const double noise = std::hypot(one->cv, measured->cv);
           if (one->median / measured->median < worst_default) {
             worst_default = one->median / measured->median, worst_default_at = at;
+            worst_default_noise = noise;
           }
           if (n >= 16384 && peer && peer->median / measured->median < worst_peer) {
             worst_peer = peer->median / measured->median, worst_peer_at = at;
           }
-          std::printf("%-6s %8d %8ld | %9.2f | %9.2f %5s %7s | %9s %7s | %12s %7s\n", p.c_str(), gap, n,
-                      one->median * us, measured->median * us,
-                      value(frame_loop_run(p, gap, "default", n), "workers", "%.0f").c_str(),
-                      cell(ratio(one, measured), "%.2fx").c_str(), cell(two ? two->median * us : NAN, "%.2f").c_str(),
+          std::printf("%-6s %6d %8ld | %9.2f | %9.2f %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", p.c_str(), gap, n,
+                      one->median * us, measured->median * us, workers(frame_loop_run(p, gap, "default", n)).c_str(),
+                      cell(ratio(one, measured), "%.2fx").c_str(), cell(prepared ? prepared->median * us : NAN, "%.2f").c_str(),
+                      cell(ratio(one, prepared), "%.2fx").c_str(), cell(two ? two->median * us : NAN, "%.2f").c_str(),
                       cell(ratio(one, two), "%.2fx").c_str(), cell(peer ? peer->median * us : NAN, "%.2f").c_str(),
                       cell(ratio(one, peer), "%.2fx").c_str());
         }
       }
     }
-    std::printf("default: every hardware thread, the worker count measured by the stepper (wkrs: its choice at "
-                "the end, 0 = the calling thread alone); 2 threads: both on every step.\n"
-                "worst default against 1 thread: %.2fx (%s); worst default against parallel_for at N >= 16384: "
-                "%.2fx (%s)\n", worst_default, worst_default_at.c_str(), worst_peer, worst_peer_at.c_str());
+    std::printf("default: every hardware thread, the worker count measured by the stepper (wkrs: the count it "
+                "favoured at the end, 0 = the calling thread alone); prepared: default with Stepper::prepare() "
+                "right before each step, timed with it; 2 threads: both on every step.\n"
+                "worst default against 1 thread: %.2fx (%s; the two rows' combined cv %.0f%%); worst default against "
+                "parallel_for at N >= 16384: %.2fx (%s)\n", worst_default, worst_default_at.c_str(),
+                100 * worst_default_noise, worst_peer, worst_peer_at.c_str());
   }
 
   void rk4_table() {
@@ -390,9 +395,16 @@ class Report {
   }
 
   std::string frame_loop_run(const std::string& p, int gap, const char* variant, long n) const {
-    const std::string iterations = gap >= 8000 ? "iterations:40/" : gap >= 1000 ? "iterations:200/" : "";
+    const std::string iterations = gap >= 8000 ? "iterations:100/" : gap >= 1000 ? "iterations:400/" : "";
     return "frame_loop/" + p + "/gap_us:" + std::to_string(gap) + "/" + variant + "/" + std::to_string(n) + "/" +
            iterations + "manual_time";
+  }
+
+  // The worker count a frame-loop row's stepper favoured (0 is a value here, not a gap).
+  std::string workers(const std::string& run) const {
+    const auto r = runs_.find(run);
+    if (r == runs_.end() || !r->second.count("workers")) return "-";
+    return cell(r->second.at("workers").median, "%.0f");
   }
 
   // Where a state of n bodies of precision p lives: the smallest data cache holding it.

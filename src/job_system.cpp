@@ -197,6 +197,12 @@ TbbJobSystem::~TbbJobSystem() = default;
 
 unsigned TbbJobSystem::worker_count() const { return arena_->threads; }
 
+// An empty task per worker: a sleeping worker wakes to take it, then looks for more work for
+// a while before it sleeps again, which is when the job should come.
+void TbbJobSystem::wake() {
+  for (unsigned w = 1; w < arena_->threads; ++w) arena_->arena.enqueue([] {});
+}
+
 JobHandle TbbJobSystem::enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
                                 void* context) {
   if (item_count == 0) return nullptr;

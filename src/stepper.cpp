@@ -57,6 +57,7 @@ struct Stepper<T>::Impl {
   Clock<T> clock;
   Checkpoint<T> checkpoint;  // the finiteness guard's copy of the state
   WorkerTuners tuners;       // worker counts measured per kind and size of call
+  WorkerTuner* last_tuner = nullptr;  // of the last call measured (for prepare)
   unsigned favoured_workers = 0;
 
   Impl(std::shared_ptr<const ForceModel<T>> f, const Method& m, StepperOptions o)
@@ -152,6 +153,7 @@ struct Stepper<T>::Impl {
     if (options.workers == WorkerChoice::all) return void(fn(all_workers(*jobs)));
     const std::uint64_t key = std::uint64_t(kind) << 8 | std::uint64_t(std::bit_width(bodies)) << 1 | (steps > 1);
     WorkerTuner& tuner = tuners.find(key, jobs->worker_count());
+    last_tuner = &tuner;
     const Workers workers{jobs, tuner.choose()};
     const std::uint64_t begin = tuner_ticks();
     const double work = fn(workers);
@@ -451,6 +453,13 @@ void Stepper<T>::check_step_size(T h) const {
 template <class T>
 void Stepper<T>::accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]) {
   impl_->accelerations(bodies, t, out);
+}
+
+template <class T>
+void Stepper<T>::prepare() {
+  const Impl& i = *impl_;
+  const bool all = i.options.workers == WorkerChoice::all && i.jobs->worker_count() > 1;
+  if (all || (i.last_tuner != nullptr && i.last_tuner->choose() >= 2)) i.jobs->wake();
 }
 
 template <class T>

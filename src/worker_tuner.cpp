@@ -14,10 +14,11 @@ namespace {
 constexpr unsigned kNone = WorkerTuner::kMaxOptions;
 // Kept samples of each option before the choice settles.
 constexpr unsigned kFirstSamples = 3;
-// Calls between retries of an option that costs `ratio` times the best: its extra cost spread
-// over about 100 calls of the best (1%), at least every 8 calls, at most every 4096.
+// Calls between retries of an option that costs `ratio` times the best: a retry is two calls
+// (the first after a switch is not kept), their extra cost spread over about 200 calls of the
+// best (1%), at least every 8 calls, at most every 4096.
 std::uint64_t retry_period(double ratio) {
-  const double calls = std::ceil(100 * (ratio - 1));
+  const double calls = std::ceil(200 * (ratio - 1));
   return std::uint64_t(std::clamp(calls, 8.0, 4096.0));
 }
 
@@ -49,7 +50,7 @@ unsigned WorkerTuner::index_of(unsigned count) const {
   return kNone;
 }
 
-unsigned WorkerTuner::choose() {
+unsigned WorkerTuner::choose() const {
   if (options_ == 1) return option_[0].count;
   // Settling: the option with the fewest kept samples.
   unsigned fewest = 0;

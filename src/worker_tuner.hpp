@@ -27,7 +27,7 @@ class WorkerTuner {
   explicit WorkerTuner(unsigned workers = 1);
 
   // The worker count for the next call (0: the calling thread).
-  unsigned choose();
+  unsigned choose() const;
   // A call with `count` workers took `ticks` for `work` units (body-steps).
   void record(unsigned count, std::uint64_t ticks, double work);
 

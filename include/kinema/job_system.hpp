@@ -45,6 +45,10 @@ class JobSystem {
                             void* context) = 0;
   // Returns when every range of the job has run.
   virtual void wait(JobHandle job) = 0;
+  // A hint that a job comes soon (Stepper::prepare): a job system whose workers sleep may
+  // start waking them now, so that the job does not wait for them. Optional: by default
+  // nothing happens.
+  virtual void wake() {}
 };
 
 // Runs everything inline on the calling thread.
@@ -69,6 +73,7 @@ class TbbJobSystem final : public JobSystem {
   JobHandle enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
                     void* context) override;
   void wait(JobHandle) override {}
+  void wake() override;
 
  private:
   struct Arena;
