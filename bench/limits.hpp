@@ -16,10 +16,11 @@ using PeakDoubleFn = double (*)(long rounds, double* out_flops);
 
 // The particle state's own traffic, bodies [begin, end): 7 arrays read, 6 written in place
 // (p += h v, then v += h w p per axis), as a step of the fused kernels moves them, with
-// almost no arithmetic. All pointers 64-byte aligned, begin and end multiples of 16.
+// almost no arithmetic, each array asked for `ahead` bytes ahead (0: not at all). All
+// pointers 64-byte aligned, begin and end multiples of 16.
 template <class T>
 using StateStreamFn = void (*)(T* const p[3], T* const v[3], const T* w, std::size_t begin,
-                               std::size_t end, T h);
+                               std::size_t end, T h, std::size_t ahead);
 
 struct LimitKernels {
   const char* isa;

@@ -49,12 +49,17 @@ inline B fma_any(const B& a, const B& b, const B& c) {
 }
 
 template <class T, class A>
-void state_stream(T* const p[3], T* const v[3], const T* w, std::size_t begin, std::size_t end, T h) {
+void state_stream(T* const p_in[3], T* const v_in[3], const T* w, std::size_t begin, std::size_t end, T h,
+                  std::size_t ahead) {
   using B = xsimd::batch<T, A>;
-  constexpr std::size_t kLine = 64 / sizeof(T), kAhead = 1024 / sizeof(T);  // 1 KiB ahead, as the kernels
+  // Copies: stores cannot alias them, so the pointers stay in registers (as in the kernels).
+  T* const p[3] = {p_in[0], p_in[1], p_in[2]};
+  T* const v[3] = {v_in[0], v_in[1], v_in[2]};
+  constexpr std::size_t kLine = 64 / sizeof(T);
+  const std::size_t kAhead = ahead / sizeof(T);
   const B hb(h);
   for (std::size_t i = begin; i < end; i += B::size) {
-    if (i % kLine == 0) {
+    if (kAhead > 0 && i % kLine == 0) {
       for (int d = 0; d < 3; ++d) {
         __builtin_prefetch(p[d] + i + kAhead, 1);
         __builtin_prefetch(v[d] + i + kAhead, 1);

@@ -84,6 +84,7 @@ StateArraysOf<T>& state_arrays(std::size_t bodies) {
 template <class T>
 void state_stream(benchmark::State& state) {
   const auto n = std::size_t(state.range(0));
+  const auto ahead = std::size_t(state.range(1));
   StateArraysOf<T>& s = state_arrays<T>(n);
   T* const p[3] = {s.a[0].data(), s.a[1].data(), s.a[2].data()};
   T* const v[3] = {s.a[3].data(), s.a[4].data(), s.a[5].data()};
@@ -91,9 +92,9 @@ void state_stream(benchmark::State& state) {
   const std::size_t begin = share * std::size_t(state.thread_index());
   for (auto _ : state) {
     if constexpr (sizeof(T) == 4) {
-      best_limits().state_stream_float(p, v, s.a[6].data(), begin, begin + share, T(1e-9));
+      best_limits().state_stream_float(p, v, s.a[6].data(), begin, begin + share, T(1e-9), ahead);
     } else {
-      best_limits().state_stream_double(p, v, s.a[6].data(), begin, begin + share, T(1e-9));
+      best_limits().state_stream_double(p, v, s.a[6].data(), begin, begin + share, T(1e-9), ahead);
     }
     benchmark::ClobberMemory();
   }
@@ -122,10 +123,12 @@ void register_all() {
   benchmark::RegisterBenchmark("limit/stream", stream_in_place)
       ->Arg(1382400)->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
   for (std::int64_t n : {1 << 10, 1 << 12, 1 << 14, 1 << 16, 100000, 1 << 20, 1 << 22}) {
-    benchmark::RegisterBenchmark("limit/state_stream/float", state_stream<float>)
-        ->Arg(n)->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
-    benchmark::RegisterBenchmark("limit/state_stream/double", state_stream<double>)
-        ->Arg(n)->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
+    for (std::int64_t ahead : {0, 1024, 4096}) {
+      benchmark::RegisterBenchmark("limit/state_stream/float", state_stream<float>)
+          ->Args({n, ahead})->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
+      benchmark::RegisterBenchmark("limit/state_stream/double", state_stream<double>)
+          ->Args({n, ahead})->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
+    }
   }
   benchmark::RegisterBenchmark("limit/fma_peak/float", fma_peak<float>)
       ->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond);

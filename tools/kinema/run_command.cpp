@@ -252,6 +252,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   summary["isa"] = std::string(isa_name(stepper.isa()));
   summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
+  summary["workers_used"] = stepper.chosen_workers();  // what the measurements favoured (0: the calling thread)
   if (tolerances) {
     summary["rtol"] = tolerances->rtol;
     summary["atol"] = tolerances->atol;
