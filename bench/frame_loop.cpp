@@ -1,15 +1,18 @@
 // Stepping as an engine does: one step per frame, the rest of the frame idle for the step's
-// workers. Each iteration sleeps `gap` (0: back to back), then times one rk4 step. Rows:
+// workers. Each frame sleeps `gap` (0: back to back), then times one rk4 step. Variants:
 //   threads:1   on the calling thread alone
 //   default     default options: every hardware thread, the worker count measured
 //   prepared    the same, with Stepper::prepare() called right before each step (timed too)
 //   threads:2   both threads on every step (workers = all)
 //   parallel_for  the peer: a plain tbb::parallel_for over the same blocks, same kernel
-// The steppers step a few frames before the timing, as a game's first frames would.
+// The steppers step a few frames before the timing, as a game's first frames would. Back to
+// back, each variant is a row of its own; with gaps, the variants take turns frame by frame in
+// one row (a shared machine drifts more between rows than the differences being measured).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
 #include <chrono>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -53,62 +56,109 @@ StepperOptions options_for(Variant v) {
 
 constexpr int kWarmFrames = 24;
 
+const std::pair<Variant, const char*> kVariants[] = {{Variant::one_thread, "threads:1"},
+                                                     {Variant::measured, "default"},
+                                                     {Variant::prepared, "prepared"},
+                                                     {Variant::two_threads, "threads:2"},
+                                                     {Variant::parallel_for, "parallel_for"}};
+
+// One variant's stepper and bodies, and the time of each frame's step it played.
 template <class T>
-void frame_loop(benchmark::State& state, Variant variant, int gap_us) {
-  const auto n = std::size_t(state.range(0));
-  const ParticleSet<T>& initial = cached_particles<T>(n);
-  ParticleSet<T> bodies = initial;
-  Stepper<T> stepper(make_forces<T>(bench_scene(n)), rk4, options_for(variant));
-  const auto gap = std::chrono::microseconds(gap_us);
-  const auto frame = [&] {
+struct Player {
+  Player(Variant v, std::size_t n)
+      : variant(v), bodies(cached_particles<T>(n)), stepper(make_forces<T>(bench_scene(n)), rk4, options_for(v)) {}
+
+  // Sleeps `gap` (the rest of the frame), then times the step (prepare too, where used).
+  double frame(std::chrono::microseconds gap) {
+    if (gap.count() > 0) std::this_thread::sleep_for(gap);
+    const auto begin = std::chrono::steady_clock::now();
     if (variant == Variant::prepared) stepper.prepare();
     stepper.step(bodies, T(kDt));
-  };
-  for (int k = 0; k < kWarmFrames; ++k) {
-    std::this_thread::sleep_for(gap);
-    frame();
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+    if (++frames % kRestoreEvery == 0) restore(bodies, cached_particles<T>(bodies.size()));
+    return s;
   }
+
+  Variant variant;
+  ParticleSet<T> bodies;
+  Stepper<T> stepper;
+  std::int64_t frames = 0;
   std::vector<double> seconds;
-  seconds.reserve(std::size_t(std::min<benchmark::IterationCount>(state.max_iterations, 1 << 22)));
-  std::int64_t k = 0;
-  for (auto _ : state) {
-    if (++k % kRestoreEvery == 0) restore(bodies, initial);
-    if (gap_us > 0) std::this_thread::sleep_for(gap);
-    const auto begin = std::chrono::steady_clock::now();
-    frame();
-    const auto end = std::chrono::steady_clock::now();
-    seconds.push_back(std::chrono::duration<double>(end - begin).count());
-    state.SetIterationTime(seconds.back());
-  }
-  require_finite(state, bodies);
-  report_body_steps(state, double(n), particle_step_bytes<T>());
-  state.counters["workers"] = stepper.chosen_workers();
-  // The typical frame: a pre-empted step or a rare retry of another worker count moves the
-  // mean (the time columns), not this.
-  std::nth_element(seconds.begin(), seconds.begin() + std::ptrdiff_t(seconds.size() / 2), seconds.end());
-  if (!seconds.empty()) state.counters["median_ns_per_body_step"] = seconds[seconds.size() / 2] * 1e9 / double(n);
+};
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+  return v[v.size() / 2];
 }
 
-// Iterations with a gap are counted, not timed to a minimum: the gaps are most of the time.
-int iterations_for(int gap_us) { return gap_us >= 8000 ? 100 : gap_us >= 1000 ? 400 : 0; }
+// Back to back: one variant per row, each step right after the last.
+template <class T>
+void back_to_back(benchmark::State& state, Variant variant) {
+  const auto n = std::size_t(state.range(0));
+  Player<T> player(variant, n);
+  for (int k = 0; k < kWarmFrames; ++k) player.frame({});
+  player.seconds.reserve(std::size_t(std::min<benchmark::IterationCount>(state.max_iterations, 1 << 22)));
+  for (auto _ : state) {
+    player.seconds.push_back(player.frame({}));
+    state.SetIterationTime(player.seconds.back());
+  }
+  require_finite(state, player.bodies);
+  report_body_steps(state, double(n), particle_step_bytes<T>());
+  state.counters["workers"] = player.stepper.chosen_workers();
+  // The typical step: a pre-empted one moves the mean (the time columns), not this.
+  state.counters["median_ns_per_body_step"] = median_of(player.seconds) * 1e9 / double(n);
+}
+
+// With idle gaps: every variant plays one frame per iteration, in turn, so that all of them
+// meet the same moments of a shared machine; the counters are each variant's median and mean
+// step (ns per body-step) over the run's frames.
+template <class T>
+void interleaved(benchmark::State& state, int gap_us) {
+  const auto n = std::size_t(state.range(0));
+  const auto gap = std::chrono::microseconds(gap_us);
+  std::vector<std::unique_ptr<Player<T>>> players;
+  for (const auto& [variant, label] : kVariants) players.push_back(std::make_unique<Player<T>>(variant, n));
+  for (int k = 0; k < kWarmFrames; ++k) {
+    for (auto& p : players) p->frame(gap);
+  }
+  for (auto _ : state) {
+    double round = 0;
+    for (auto& p : players) {
+      p->seconds.push_back(p->frame(gap));
+      round += p->seconds.back();
+    }
+    state.SetIterationTime(round);
+  }
+  for (std::size_t v = 0; v < players.size(); ++v) {
+    const std::vector<double>& s = players[v]->seconds;
+    double sum = 0;
+    for (double x : s) sum += x;
+    const std::string label = kVariants[v].second;
+    state.counters["median:" + label] = median_of(s) * 1e9 / double(n);
+    state.counters["mean:" + label] = s.empty() ? 0 : sum / double(s.size()) * 1e9 / double(n);
+    require_finite(state, players[v]->bodies);
+  }
+  state.counters["workers"] = players[1]->stepper.chosen_workers();
+}
 
 void register_all() {
-  const std::pair<Variant, const char*> variants[] = {{Variant::one_thread, "threads:1"},
-                                                      {Variant::measured, "default"},
-                                                      {Variant::prepared, "prepared"},
-                                                      {Variant::two_threads, "threads:2"},
-                                                      {Variant::parallel_for, "parallel_for"}};
-  for (int gap_us : {0, 1000, 8000}) {
-    for (const auto& [variant, label] : variants) {
-      const std::string suffix = "/gap_us:" + std::to_string(gap_us) + "/" + label;
-      for (auto* b : {benchmark::RegisterBenchmark(("frame_loop/float" + suffix).c_str(), frame_loop<float>,
-                                                   variant, gap_us),
-                      benchmark::RegisterBenchmark(("frame_loop/double" + suffix).c_str(), frame_loop<double>,
-                                                   variant, gap_us)}) {
-        for (std::int64_t n : {1024, 4096, 16384, 65536, 100000, 1 << 20}) b->Arg(n);
-        b->UseManualTime()->Unit(benchmark::kMicrosecond);
-        if (iterations_for(gap_us) > 0) b->Iterations(iterations_for(gap_us));
-      }
+  const std::int64_t sizes[] = {1024, 4096, 16384, 65536, 100000, 1 << 20};
+  for (const auto& [variant, label] : kVariants) {
+    const std::string suffix = std::string("/gap_us:0/") + label;
+    for (auto* b : {benchmark::RegisterBenchmark(("frame_loop/float" + suffix).c_str(), back_to_back<float>, variant),
+                    benchmark::RegisterBenchmark(("frame_loop/double" + suffix).c_str(), back_to_back<double>, variant)}) {
+      for (std::int64_t n : sizes) b->Arg(n);
+      b->UseManualTime()->Unit(benchmark::kMicrosecond);
+    }
+  }
+  // Rounds are counted, not timed to a minimum: the gaps are most of the time.
+  for (const auto& [gap_us, rounds] : {std::pair{1000, 120}, std::pair{8000, 40}}) {
+    const std::string suffix = "/gap_us:" + std::to_string(gap_us) + "/interleaved";
+    for (auto* b : {benchmark::RegisterBenchmark(("frame_loop/float" + suffix).c_str(), interleaved<float>, gap_us),
+                    benchmark::RegisterBenchmark(("frame_loop/double" + suffix).c_str(), interleaved<double>, gap_us)}) {
+      for (std::int64_t n : sizes) b->Arg(n);
+      b->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(rounds);
     }
   }
 }

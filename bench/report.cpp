@@ -22,6 +22,7 @@ using json = nlohmann::json;
 struct Figure {
   double median = 0;  // of the counter, over repetitions
   double cv = 0;      // coefficient of variation, 0 without repetitions
+  double max = 0;     // the best repetition, where the run computed it (the machine's limits)
 };
 
 // run_name -> counter -> figure
@@ -32,7 +33,7 @@ Runs load_runs(const json& doc) {
   for (const json& b : doc.at("benchmarks")) {
     const std::string run = b.value("run_name", b.value("name", ""));
     const std::string aggregate = b.value("aggregate_name", "");
-    if (b.value("run_type", "") == "aggregate" && aggregate != "median" && aggregate != "cv") {
+    if (b.value("run_type", "") == "aggregate" && aggregate != "median" && aggregate != "cv" && aggregate != "max") {
       continue;
     }
     if (b.contains("error_occurred") && b["error_occurred"].get<bool>()) continue;
@@ -41,6 +42,8 @@ Runs load_runs(const json& doc) {
       Figure& f = runs[run][key];
       if (aggregate == "cv") {
         f.cv = value.get<double>();
+      } else if (aggregate == "max") {
+        f.max = value.get<double>();
       } else if (aggregate == "median" || aggregate.empty()) {
         f.median = value.get<double>();
       }
@@ -135,60 +138,30 @@ class Report {
     for (const std::string& line : below_70_) std::printf("%s\n", line.c_str());
   }
 
-  // One step per frame with idle gaps: default options against one thread, both threads and
-  // a plain tbb::parallel_for.
+  // One step per frame, back to back and after idle gaps: default options against one thread,
+  // default with prepare(), both threads on every step and a plain tbb::parallel_for.
   void frame_loop_table() {
-    if (!find(runs_, frame_loop_run("float", 0, "threads:1", 1024), "ns_per_body_step")) return;
-    std::printf("\nOne rk4 step per frame after an idle gap (0: back to back), %s: the median step over each run's "
+    if (!frame_step(FrameRow{"float", 0, 16384}, "threads:1", "median")) return;
+    std::printf("\nOne rk4 step per frame after an idle gap (0: back to back), %s: the median step over the run's "
                 "frames, us (median of the runs); speed against 1 thread (the calling thread alone)\n", isa_.c_str());
     std::printf("%-6s %6s %8s | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", "prec", "gap us", "N",
                 "1 thread", "default", "wkrs", "speed", "prepared", "speed", "2 threads", "speed", "parallel_for", "speed");
-    double worst_default = 1e9, worst_peer = 1e9, worst_default_noise = 0, worst_mean = 1e9;
-    std::string worst_default_at, worst_peer_at, worst_mean_at;
+    Worst by_median, by_mean, against_peer;
     for (int gap : {0, 1000, 8000}) {
       for (const std::string p : {"float", "double"}) {
-        for (long n : {1024L, 4096L, 16384L, 65536L, 100000L, 1048576L}) {
-          const char* c = "median_ns_per_body_step";
-          const auto one = find(runs_, frame_loop_run(p, gap, "threads:1", n), c);
-          const auto measured = find(runs_, frame_loop_run(p, gap, "default", n), c);
-          const auto two = find(runs_, frame_loop_run(p, gap, "threads:2", n), c);
-          const auto prepared = find(runs_, frame_loop_run(p, gap, "prepared", n), c);
-          const auto peer = find(runs_, frame_loop_run(p, gap, "parallel_for", n), c);
-          const auto one_mean = find(runs_, frame_loop_run(p, gap, "threads:1", n), "ns_per_body_step");
-          const auto measured_mean = find(runs_, frame_loop_run(p, gap, "default", n), "ns_per_body_step");
-          if (!one || !measured) continue;
-          if (one_mean && measured_mean && one_mean->median / measured_mean->median < worst_mean) {
-            worst_mean = one_mean->median / measured_mean->median;
-            worst_mean_at = p + " N = " + std::to_string(n) + " gap " + std::to_string(gap) + " us";
-          }
-          const double us = double(n) * 1e-3;
-          const std::string at = p + " N = " + std::to_string(n) + " gap " + std::to_string(gap) + " us";
-          const double noise = std::hypot(one->cv, measured->cv);
-          if (one->median / measured->median < worst_default) {
-            worst_default = one->median / measured->median, worst_default_at = at;
-            worst_default_noise = noise;
-          }
-          if (n >= 16384 && peer && peer->median / measured->median < worst_peer) {
-            worst_peer = peer->median / measured->median, worst_peer_at = at;
-          }
-          std::printf("%-6s %6d %8ld | %9.2f | %9.2f %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", p.c_str(), gap, n,
-                      one->median * us, measured->median * us, workers(frame_loop_run(p, gap, "default", n)).c_str(),
-                      cell(ratio(one, measured), "%.2fx").c_str(), cell(prepared ? prepared->median * us : NAN, "%.2f").c_str(),
-                      cell(ratio(one, prepared), "%.2fx").c_str(), cell(two ? two->median * us : NAN, "%.2f").c_str(),
-                      cell(ratio(one, two), "%.2fx").c_str(), cell(peer ? peer->median * us : NAN, "%.2f").c_str(),
-                      cell(ratio(one, peer), "%.2fx").c_str());
-        }
+        for (long n : {1024L, 4096L, 16384L, 65536L, 100000L, 1048576L}) frame_loop_row({p, gap, n}, by_median, by_mean, against_peer);
       }
     }
     std::printf("default: every hardware thread, the worker count measured by the stepper (wkrs: the count it "
                 "favoured at the end, 0 = the calling thread alone); prepared: default with Stepper::prepare() "
-                "right before each step, timed with it; 2 threads: both on every step.\n"
-                "worst default against 1 thread: %.2fx (%s; the two rows' combined cv %.0f%%); worst default against "
-                "parallel_for at N >= 16384: %.2fx (%s)\nby mean step time instead (every frame counted, pre-empted "
-                "ones and retries of the other worker count too), worst default against 1 thread: %.2fx (%s)\n",
-                worst_default, worst_default_at.c_str(), 100 * worst_default_noise, worst_peer, worst_peer_at.c_str(),
-                worst_mean, worst_mean_at.c_str());
+                "right before each step, timed with it; 2 threads: both on every step. Back to back each variant "
+                "is a row of its own; with gaps the variants take turns frame by frame in one row.\n"
+                "worst default against 1 thread: %.2fx (%s); by mean step (every frame, pre-empted ones and retries "
+                "of the other worker count too): %.2fx (%s); worst default against parallel_for at N >= 16384: %.2fx (%s)\n",
+                by_median.ratio, by_median.at.c_str(), by_mean.ratio, by_mean.at.c_str(), against_peer.ratio,
+                against_peer.at.c_str());
   }
+
 
   void rk4_table() {
     std::printf("\nFused RK4 (gravity + linear drag + spring), %s, ns per body-step; ratios from this run\n",
@@ -201,7 +174,7 @@ class Report {
     std::printf("ceiling: the same kernel with its memory traffic removed (each cache-resident block "
                 "takes all steps in turn), as ceiling time / step time.\nBW: state bytes read + "
                 "written per second against the state's own stream (the same 7 arrays read and 6 "
-                "written, almost no arithmetic, %s; the fastest of three prefetch distances) at the same size, precision and thread count.\n"
+                "written, almost no arithmetic, %s; the best repetition at the fastest of three prefetch distances) at the same size, precision and thread count.\n"
                 "2 threads: every step on both (workers = all); at N = 1024 the set is one block, "
                 "run on the calling thread.\n", isa_.c_str());
   }
@@ -407,18 +380,75 @@ class Report {
     return "nbody/" + p + "/" + isa_ + "/threads:" + std::to_string(threads) + "/" + std::to_string(n) + "/real_time";
   }
 
-  std::string frame_loop_run(const std::string& p, int gap, const char* variant, long n) const {
-    const std::string iterations = gap >= 8000 ? "iterations:100/" : gap >= 1000 ? "iterations:400/" : "";
-    return "frame_loop/" + p + "/gap_us:" + std::to_string(gap) + "/" + variant + "/" + std::to_string(n) + "/" +
-           iterations + "manual_time";
+  struct FrameRow {
+    std::string p;
+    int gap;
+    long n;
+  };
+  struct Worst {
+    double ratio = 1e9;
+    std::string at;
+    void see(double r, const FrameRow& row) {
+      if (r >= ratio) return;
+      ratio = r;
+      at = row.p + " N = " + std::to_string(row.n) + " gap " + std::to_string(row.gap) + " us";
+    }
+  };
+
+  // A variant's median or mean step at a row, ns per body-step: back to back from its own
+  // row, with gaps from the interleaved row's counters.
+  std::optional<Figure> frame_step(const FrameRow& r, const char* variant, const char* statistic) const {
+    const std::string n = std::to_string(r.n);
+    if (r.gap == 0) {
+      const std::string run = "frame_loop/" + r.p + "/gap_us:0/" + variant + "/" + n + "/manual_time";
+      return find(runs_, run, std::string(statistic) == "median" ? "median_ns_per_body_step" : "ns_per_body_step");
+    }
+    const std::string rounds = r.gap >= 8000 ? "40" : "120";
+    const std::string run = "frame_loop/" + r.p + "/gap_us:" + std::to_string(r.gap) + "/interleaved/" + n +
+                            "/iterations:" + rounds + "/manual_time";
+    return find(runs_, run, (std::string(statistic) + ":" + variant).c_str());
   }
 
-  // The state stream's limit: the fastest of its prefetch distances (none, 1 KiB, 4 KiB).
+  std::string frame_workers(const FrameRow& r) const {
+    const std::string n = std::to_string(r.n);
+    const std::string run = r.gap == 0 ? "frame_loop/" + r.p + "/gap_us:0/default/" + n + "/manual_time"
+                                       : "frame_loop/" + r.p + "/gap_us:" + std::to_string(r.gap) + "/interleaved/" +
+                                             n + "/iterations:" + (r.gap >= 8000 ? "40" : "120") + "/manual_time";
+    return workers(run);
+  }
+
+  void frame_loop_row(const FrameRow& r, Worst& by_median, Worst& by_mean, Worst& against_peer) {
+    const auto one = frame_step(r, "threads:1", "median");
+    const auto measured = frame_step(r, "default", "median");
+    const auto prepared = frame_step(r, "prepared", "median");
+    const auto two = frame_step(r, "threads:2", "median");
+    const auto peer = frame_step(r, "parallel_for", "median");
+    if (!one || !measured) return;
+    cvs_.push_back(one->cv);
+    cvs_.push_back(measured->cv);
+    by_median.see(one->median / measured->median, r);
+    const auto one_mean = frame_step(r, "threads:1", "mean"), measured_mean = frame_step(r, "default", "mean");
+    if (one_mean && measured_mean) by_mean.see(one_mean->median / measured_mean->median, r);
+    if (r.n >= 16384 && peer) against_peer.see(peer->median / measured->median, r);
+    const double us = double(r.n) * 1e-3;
+    const auto in_us = [&](const std::optional<Figure>& f) { return cell(f ? f->median * us : NAN, "%.2f"); };
+    std::printf("%-6s %6d %8ld | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", r.p.c_str(), r.gap, r.n,
+                in_us(one).c_str(), in_us(measured).c_str(), frame_workers(r).c_str(),
+                cell(ratio(one, measured), "%.2fx").c_str(), in_us(prepared).c_str(), cell(ratio(one, prepared), "%.2fx").c_str(),
+                in_us(two).c_str(), cell(ratio(one, two), "%.2fx").c_str(), in_us(peer).c_str(),
+                cell(ratio(one, peer), "%.2fx").c_str());
+  }
+
+
+  // The state stream's limit: its best repetition at the fastest of its prefetch distances
+  // (none, 1 KiB, 4 KiB).
   std::optional<Figure> state_stream(const std::string& p, long n, int threads) const {
     std::optional<Figure> best;
     for (long ahead : {0L, 1024L, 4096L}) {
-      const auto f = find(runs_, state_stream_run(p, n, ahead, threads), "GB_per_s");
-      if (f && (!best || f->median > best->median)) best = f;
+      auto f = find(runs_, state_stream_run(p, n, ahead, threads), "GB_per_s");
+      if (!f) continue;
+      f->median = std::max(f->median, f->max);
+      if (!best || f->median > best->median) best = f;
     }
     return best;
   }
