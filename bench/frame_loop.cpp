@@ -130,13 +130,16 @@ void interleaved(benchmark::State& state, int gap_us) {
     }
     state.SetIterationTime(round);
   }
+  const std::vector<double>& alone = players[0]->seconds;  // threads:1
   for (std::size_t v = 0; v < players.size(); ++v) {
     const std::vector<double>& s = players[v]->seconds;
     double sum = 0;
-    for (double x : s) sum += x;
+    std::vector<double> speed;  // against one thread, round by round: a paired figure
+    for (std::size_t k = 0; k < s.size(); ++k) sum += s[k], speed.push_back(alone[k] / s[k]);
     const std::string label = kVariants[v].second;
     state.counters["median:" + label] = median_of(s) * 1e9 / double(n);
     state.counters["mean:" + label] = s.empty() ? 0 : sum / double(s.size()) * 1e9 / double(n);
+    state.counters["speed:" + label] = median_of(speed);
     require_finite(state, players[v]->bodies);
   }
   state.counters["workers"] = players[1]->stepper.chosen_workers();
@@ -153,7 +156,7 @@ void register_all() {
     }
   }
   // Rounds are counted, not timed to a minimum: the gaps are most of the time.
-  for (const auto& [gap_us, rounds] : {std::pair{1000, 120}, std::pair{8000, 40}}) {
+  for (const auto& [gap_us, rounds] : {std::pair{1000, 120}, std::pair{8000, 60}}) {
     const std::string suffix = "/gap_us:" + std::to_string(gap_us) + "/interleaved";
     for (auto* b : {benchmark::RegisterBenchmark(("frame_loop/float" + suffix).c_str(), interleaved<float>, gap_us),
                     benchmark::RegisterBenchmark(("frame_loop/double" + suffix).c_str(), interleaved<double>, gap_us)}) {
