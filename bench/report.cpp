@@ -148,9 +148,13 @@ class Report {
     std::printf("%-6s %6s %8s | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", "prec", "gap us", "N",
                 "1 thread", "default", "wkrs", "speed", "prepared", "speed", "2 threads", "speed", "parallel_for", "speed");
     Worst by_median, by_mean, against_peer;
+    double same_low = 1e9, same_high = 0;  // N = 1024: one block, the same code in every variant
     for (int gap : {0, 1000, 8000}) {
       for (const std::string p : {"float", "double"}) {
         for (long n : {1024L, 4096L, 16384L, 65536L, 100000L, 1048576L}) frame_loop_row({p, gap, n}, by_median, by_mean, against_peer);
+        for (const char* v : {"default", "prepared", "threads:2", "parallel_for"}) {
+          if (const auto s = speed({p, gap, 1024}, v)) same_low = std::min(same_low, *s), same_high = std::max(same_high, *s);
+        }
       }
     }
     std::printf("default: every hardware thread, the worker count measured by the stepper (wkrs: the count it "
@@ -158,9 +162,11 @@ class Report {
                 "right before each step, timed with it; 2 threads: both on every step. Back to back each variant "
                 "is a row of its own; with gaps the variants take turns frame by frame in one row.\n"
                 "worst default against 1 thread: %.2fx (%s); by mean step (every frame, pre-empted ones and retries "
-                "of the other worker count too): %.2fx (%s); worst default against parallel_for at N >= 16384: %.2fx (%s)\n",
+                "of the other worker count too): %.2fx (%s); worst default against parallel_for at N >= 16384: %.2fx (%s)\n"
+                "the run's noise: at N = 1024 every variant runs the same code on the calling thread (one block), and "
+                "their speeds range %.2f-%.2fx\n",
                 by_median.ratio, by_median.at.c_str(), by_mean.ratio, by_mean.at.c_str(), against_peer.ratio,
-                against_peer.at.c_str());
+                against_peer.at.c_str(), same_low, same_high);
   }
 
 
