@@ -134,40 +134,84 @@ KINEMA_INLINE void store_rigid(const RigidJob<value_t<V>>& job, std::size_t i, R
   store3(job.l, i, s.l);
 }
 
+// A rigid step is two independent problems sharing inv_mass: the centre's x and v, and the
+// orientation's q and L (the force of point terms is constant; only the torque turns with q).
+// The kernel takes them in two passes over the range. The translation is the particle step.
+// The rotation is a long chain of dependent operations per stage (|q|^2, a division, R^T L,
+// R again, the quaternion rate); two batches go through each stage together so that the core
+// overlaps their chains. Every value sees the operations of the one-pass kernel, in order.
 template <const Method& M, bool Quadratic, bool Central, class V>
-void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, std::size_t end) {
-  const RigidJob<value_t<V>> job = shared;  // a copy: stores cannot alias its pointers
+KINEMA_INLINE void rigid_translation(const RigidJob<value_t<V>>& job, const Forces<V>& f, std::size_t i) {
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
   constexpr double sigma = acceleration_scale(tab);
   const value_t<V> h = job.h;
-  const Forces<V> f(job.forces, value_t<V>(sigma) * h);
-  const Rotational<V> rf(job.rotation);
-  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    const RigidState<V> s0 = load_rigid<V>(job, i);
-    const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
-    const Vec<V> p = linear_part(body, anchored(f, s0.x));
-    const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
-    Vec<V> kx[S], kv[S], kl[S];
-    Quat4<V> kq[S];
-    static_for<S>([&](auto s) {
-      constexpr Weights row = tab.a[s];
-      const Vec<V> vs = advanced<row, sigma>(h, kv, s0.v);
-      const Vec<V> ps = stage_linear_part<row>(h, body, kx, p);
-      const Vec<V> xs = Central ? advanced<row>(h, kx, s0.x) : s0.x;
-      const Quat4<V> qs = advanced<row>(h, kq, s0.q);
-      const Vec<V> ls = advanced<row>(h, kl, s0.l);
-      const Rotation<V> r = rotation(qs);
-      const Vec<V> omega = angular_velocity(r, inv_inertia, ls);
-      kx[s] = vs;
-      kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
-      kq[s] = quaternion_rate(omega, qs);
-      kl[s] = torque(rf, body, r, omega);
-    });
-    store_rigid<V>(job, i,
-                   {advanced<tab.b>(h, kx, s0.x), advanced<tab.b, sigma>(h, kv, s0.v),
-                    advanced<tab.b>(h, kq, s0.q), advanced<tab.b>(h, kl, s0.l)});
+  const Vec<V> x = load3<V>(job.bodies.x, i), v = load3<V>(job.bodies.v, i);
+  const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
+  const Vec<V> p = linear_part(body, anchored(f, x));
+  Vec<V> kx[S], kv[S];
+  static_for<S>([&](auto s) {
+    constexpr Weights row = tab.a[s];
+    const Vec<V> vs = advanced<row, sigma>(h, kv, v);
+    const Vec<V> ps = stage_linear_part<row>(h, body, kx, p);
+    const Vec<V> xs = Central ? advanced<row>(h, kx, x) : x;
+    kx[s] = vs;
+    kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
+  });
+  store3(job.bodies.x, i, advanced<tab.b>(h, kx, x));
+  store3(job.bodies.v, i, advanced<tab.b, sigma>(h, kv, v));
+}
+
+template <class M>
+struct Dynamic {
+  M dynamic;  // what torque() reads of a body
+};
+
+template <const Method& M, int U, class V>
+KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotational<V>& rf, std::size_t i) {
+  constexpr ButcherTableau tab = M.tableau;
+  constexpr int S = tab.stages;
+  constexpr std::size_t W = Lane<V>::width;
+  const value_t<V> h = job.h;
+  using Mask = std::decay_t<decltype(load<V>(job.bodies.inv_mass) != V(0))>;
+  Quat4<V> q0[U], kq[U][S];
+  Vec<V> l0[U], inv_inertia[U], kl[U][S];
+  Dynamic<Mask> body[U];
+  for (int u = 0; u < U; ++u) {
+    q0[u] = load_n<4, V>(job.q, i + u * W);
+    l0[u] = load3<V>(job.l, i + u * W);
+    inv_inertia[u] = load3<V>(job.inv_inertia, i + u * W);
+    body[u].dynamic = load<V>(job.bodies.inv_mass + i + u * W) != V(0);
   }
+  static_for<S>([&](auto s) {
+    constexpr Weights row = tab.a[s];
+    for (int u = 0; u < U; ++u) {
+      const Quat4<V> qs = advanced<row>(h, kq[u], q0[u]);
+      const Vec<V> ls = advanced<row>(h, kl[u], l0[u]);
+      const Rotation<V> r = rotation(qs);
+      const Vec<V> omega = angular_velocity(r, inv_inertia[u], ls);
+      kq[u][s] = quaternion_rate(omega, qs);
+      kl[u][s] = torque(rf, body[u], r, omega);
+    }
+  });
+  for (int u = 0; u < U; ++u) {
+    const Quat4<V> q = advanced<tab.b>(h, kq[u], q0[u]);
+    store_n<4, V>(job.q, i + u * W, job.renormalize ? normalized(q) : q);
+    store3(job.l, i + u * W, advanced<tab.b>(h, kl[u], l0[u]));
+  }
+}
+
+template <const Method& M, bool Quadratic, bool Central, class V>
+void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, std::size_t end) {
+  const RigidJob<value_t<V>> job = shared;  // a copy: stores cannot alias its pointers
+  constexpr double sigma = acceleration_scale(M.tableau);
+  const Forces<V> f(job.forces, value_t<V>(sigma) * job.h);
+  const Rotational<V> rf(job.rotation);
+  constexpr std::size_t W = Lane<V>::width;
+  for (std::size_t i = begin; i < end; i += W) rigid_translation<M, Quadratic, Central>(job, f, i);
+  std::size_t i = begin;
+  for (; i + 2 * W <= end; i += 2 * W) rigid_rotation<M, 2>(job, rf, i);
+  if (i < end) rigid_rotation<M, 1>(job, rf, i);
 }
 
 // Kick-drift for rigid bodies: a kick updates v and L; a drift moves x and turns q with the
