@@ -348,7 +348,8 @@ class Report {
 
   void limits() {
     std::printf("\nMachine limits in this run: FMA peak float %s / %s GFLOP/s (1 / 2 threads), double %s / %s;"
-                "\n  the state stream at 4M float bodies (%s): %s / %s GB/s\n",
+                "\n  the state stream at 4M float bodies (%s): %s / %s GB/s (2 threads: Google Benchmark averages each "
+                "thread's own time, so a limit measured on threads that did not overlap reads high)\n",
                 value(peak("float", 1), "GFLOP_per_s").c_str(), value(peak("float", 2), "GFLOP_per_s").c_str(),
                 value(peak("double", 1), "GFLOP_per_s").c_str(), value(peak("double", 2), "GFLOP_per_s").c_str(),
                 isa_.c_str(), cell(median(state_stream("float", 4194304, 1)), "%.1f").c_str(),
