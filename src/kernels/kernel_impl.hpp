@@ -248,31 +248,39 @@ KINEMA_INLINE void prefetch(const BodyArrays<T>& b, std::size_t i) {
   __builtin_prefetch(b.inv_mass + i + ahead, 0);
 }
 
-template <const Method& M, bool Quadratic, bool Central, class V>
-void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+// One batch of a Runge-Kutta step of positions and velocities, the bodies at i, all stages in
+// registers. `Pushed`: rigid bodies add the constant force of their point-force terms.
+template <const Method& M, bool Quadratic, bool Central, bool Pushed = false, class V>
+KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forces<V>& f, value_t<V> h,
+                                     std::size_t i) {
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
   constexpr double sigma = acceleration_scale(tab);
+  const Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
+  const auto body = body_terms<Pushed>(f, load<V>(b.inv_mass + i));
+  const Vec<V> p = linear_part(body, anchored(f, x));
+  Vec<V> kx[S], kv[S];  // stage velocities and accelerations
+  static_for<S>([&](auto s) {
+    constexpr Weights row = tab.a[s];
+    const Vec<V> vs = advanced<row, sigma>(h, kv, v);
+    const Vec<V> ps = stage_linear_part<row>(h, body, kx, p);
+    // The world position only where a central term needs it.
+    const Vec<V> xs = Central ? advanced<row>(h, kx, x) : x;
+    kx[s] = vs;
+    kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
+  });
+  store3(b.x, i, advanced<tab.b>(h, kx, x));
+  store3(b.v, i, advanced<tab.b, sigma>(h, kv, v));
+}
+
+template <const Method& M, bool Quadratic, bool Central, class V>
+void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   const value_t<V> h = job.h;
-  const Forces<V> f(job.forces, value_t<V>(sigma) * h);
+  const Forces<V> f(job.forces, value_t<V>(acceleration_scale(M.tableau)) * h);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     prefetch<V>(b, i);
-    const Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
-    const auto body = body_terms(f, load<V>(b.inv_mass + i));
-    const Vec<V> p = linear_part(body, anchored(f, x));
-    Vec<V> kx[S], kv[S];  // stage velocities and accelerations
-    static_for<S>([&](auto s) {
-      constexpr Weights row = tab.a[s];
-      const Vec<V> vs = advanced<row, sigma>(h, kv, v);
-      const Vec<V> ps = stage_linear_part<row>(h, body, kx, p);
-      // The world position only where a central term needs it.
-      const Vec<V> xs = Central ? advanced<row>(h, kx, x) : x;
-      kx[s] = vs;
-      kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
-    });
-    store3(b.x, i, advanced<tab.b>(h, kx, x));
-    store3(b.v, i, advanced<tab.b, sigma>(h, kv, v));
+    runge_kutta_batch<M, Quadratic, Central>(b, f, h, i);
   }
 }
 

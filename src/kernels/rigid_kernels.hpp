@@ -136,32 +136,11 @@ KINEMA_INLINE void store_rigid(const RigidJob<value_t<V>>& job, std::size_t i, R
 
 // A rigid step is two independent problems sharing inv_mass: the centre's x and v, and the
 // orientation's q and L (the force of point terms is constant; only the torque turns with q).
-// The kernel takes them in two passes over the range. The translation is the particle step.
+// The kernel takes them in two passes over the range. The translation is the particle step's
+// batch (runge_kutta_batch, with the point forces' push).
 // The rotation is a long chain of dependent operations per stage (|q|^2, a division, R^T L,
 // R again, the quaternion rate); two batches go through each stage together so that the core
 // overlaps their chains. Every value sees the operations of the one-pass kernel, in order.
-template <const Method& M, bool Quadratic, bool Central, class V>
-KINEMA_INLINE void rigid_translation(const RigidJob<value_t<V>>& job, const Forces<V>& f, std::size_t i) {
-  constexpr ButcherTableau tab = M.tableau;
-  constexpr int S = tab.stages;
-  constexpr double sigma = acceleration_scale(tab);
-  const value_t<V> h = job.h;
-  const Vec<V> x = load3<V>(job.bodies.x, i), v = load3<V>(job.bodies.v, i);
-  const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
-  const Vec<V> p = linear_part(body, anchored(f, x));
-  Vec<V> kx[S], kv[S];
-  static_for<S>([&](auto s) {
-    constexpr Weights row = tab.a[s];
-    const Vec<V> vs = advanced<row, sigma>(h, kv, v);
-    const Vec<V> ps = stage_linear_part<row>(h, body, kx, p);
-    const Vec<V> xs = Central ? advanced<row>(h, kx, x) : x;
-    kx[s] = vs;
-    kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
-  });
-  store3(job.bodies.x, i, advanced<tab.b>(h, kx, x));
-  store3(job.bodies.v, i, advanced<tab.b, sigma>(h, kv, v));
-}
-
 template <class M>
 struct Dynamic {
   M dynamic;  // what torque() reads of a body
@@ -208,7 +187,7 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, st
   const Forces<V> f(job.forces, value_t<V>(sigma) * job.h);
   const Rotational<V> rf(job.rotation);
   constexpr std::size_t W = Lane<V>::width;
-  for (std::size_t i = begin; i < end; i += W) rigid_translation<M, Quadratic, Central>(job, f, i);
+  for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true>(job.bodies, f, job.h, i);
   std::size_t i = begin;
   for (; i + 2 * W <= end; i += 2 * W) rigid_rotation<M, 2>(job, rf, i);
   if (i < end) rigid_rotation<M, 1>(job, rf, i);
