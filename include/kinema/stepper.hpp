@@ -146,10 +146,10 @@ class Stepper {
   // bodies at time t, into out[0..2] (padded_size() each). Not for the inside of a frame:
   // the first call allocates what it needs.
   void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]);
-  // A hint for a frame loop: call it a little before step() or advance() (when the frame's
-  // update starts, say). When the stepper's next call of the kind it last made is to use
-  // workers, the job system is asked to wake them now (JobSystem::wake), so the call does
-  // not wait for them; they then spin on their cores for a while. Otherwise nothing happens.
+  // A hint for a frame loop, called before step() or advance(): when the stepper's next call
+  // of the kind it last made is to use workers, the job system is asked to wake them now
+  // (JobSystem::wake), so that they may be awake when the call comes. Otherwise nothing
+  // happens. Whether it pays depends on how long the job system keeps woken workers awake.
   void prepare();
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);
