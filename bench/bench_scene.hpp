@@ -4,10 +4,12 @@
 
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstddef>
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <vector>
 
 #include "kinema/scenes.hpp"
 
@@ -65,6 +67,13 @@ void restore(ParticleSet<T>& bodies, const ParticleSet<T>& initial) {
 }
 
 inline constexpr std::int64_t kRestoreEvery = 4096;
+
+// The middle value (the upper one of an even count); 0 for none.
+inline double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
 
 // The job system a case runs on: the calling thread alone for one thread, else oneTBB.
 struct CaseJobs {

@@ -86,12 +86,6 @@ struct Player {
   std::vector<double> seconds;
 };
 
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
-
 // Back to back: one variant per row, each step right after the last.
 template <class T>
 void back_to_back(benchmark::State& state, Variant variant) {
@@ -107,7 +101,7 @@ void back_to_back(benchmark::State& state, Variant variant) {
   report_body_steps(state, double(n), particle_step_bytes<T>());
   state.counters["workers"] = player.stepper.chosen_workers();
   // The typical step: a pre-empted one moves the mean (the time columns), not this.
-  state.counters["median_ns_per_body_step"] = median_of(player.seconds) * 1e9 / double(n);
+  state.counters["median_ns_per_body_step"] = median(player.seconds) * 1e9 / double(n);
 }
 
 // With idle gaps: every variant plays one frame per iteration, in turn, so that all of them
@@ -137,9 +131,9 @@ void interleaved(benchmark::State& state, int gap_us) {
     std::vector<double> speed;  // against one thread, round by round: a paired figure
     for (std::size_t k = 0; k < s.size(); ++k) sum += s[k], speed.push_back(alone[k] / s[k]);
     const std::string label = kVariants[v].second;
-    state.counters["median:" + label] = median_of(s) * 1e9 / double(n);
+    state.counters["median:" + label] = median(s) * 1e9 / double(n);
     state.counters["mean:" + label] = s.empty() ? 0 : sum / double(s.size()) * 1e9 / double(n);
-    state.counters["speed:" + label] = median_of(speed);
+    state.counters["speed:" + label] = median(speed);
     require_finite(state, players[v]->bodies);
   }
   state.counters["workers"] = players[1]->stepper.chosen_workers();

@@ -118,12 +118,6 @@ double fma_scaling(JobSystem& two) {
   return t1 / t2;
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-
 // Each iteration is one round: an FMA probe, a few steps on 1 thread, the same steps on 2,
 // another probe. Separate 1- and 2-thread runs are minutes apart and a shared host drifts
 // in between; a pair is seconds of the same conditions. Pairs count only when both probes

@@ -140,7 +140,7 @@ KINEMA_INLINE void store_rigid(const RigidJob<value_t<V>>& job, std::size_t i, R
 // batch (runge_kutta_batch, with the point forces' push).
 // The rotation is a long chain of dependent operations per stage (|q|^2, a division, R^T L,
 // R again, the quaternion rate); two batches go through each stage together so that the core
-// overlaps their chains. Every value sees the operations of the one-pass kernel, in order.
+// overlaps their chains. Each value sees the same operations in the same order either way.
 template <class M>
 struct Dynamic {
   M dynamic;  // what torque() reads of a body
