@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "bench_scene.hpp"
-#include "coupled_forces.hpp"
+#include "forces/coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 
 namespace kinema::bench {

@@ -13,7 +13,7 @@
 
 #include <boost/numeric/odeint.hpp>
 
-#include "error_control.hpp"
+#include "kernels/reductions.hpp"
 #include "kinema/stability.hpp"
 #include "support.hpp"
 

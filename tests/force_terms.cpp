@@ -6,7 +6,7 @@
 #include <set>
 #include <string>
 
-#include "force_terms.hpp"
+#include "forces/force_terms.hpp"
 #include "support.hpp"
 
 using namespace kinema;

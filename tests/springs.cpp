@@ -9,7 +9,7 @@
 #include <random>
 #include <set>
 
-#include "coupled_forces.hpp"
+#include "forces/coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/stability.hpp"
 #include "support.hpp"

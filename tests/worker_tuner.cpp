@@ -6,11 +6,11 @@
 #include <functional>
 #include <vector>
 
-#include "blocks.hpp"
+#include "parallel/blocks.hpp"
 #include "kinema/kinema.hpp"
 #include "support.hpp"
 #include "thread_pool.hpp"
-#include "worker_tuner.hpp"
+#include "parallel/worker_tuner.hpp"
 
 using namespace kinema;
 

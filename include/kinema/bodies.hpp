@@ -18,8 +18,6 @@ template <class T>
 using Vec3 = std::array<T, 3>;
 
 template <class T>
-class Stepper;
-template <class T>
 class RigidBodySet;
 
 // Storage alignment and padding unit, in bytes: one AVX-512 register.
@@ -232,8 +230,6 @@ class RigidBodySet {
   Vec3<double> angular_velocity(std::size_t i) const;
 
  private:
-  template <class>
-  friend class Stepper;  // steps the centre arrays in place
   void grow_rotation_arrays();
   void pad_rotation_arrays(std::size_t from);  // identity orientation from `from` on
 

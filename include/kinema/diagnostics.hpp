@@ -7,6 +7,7 @@
 #include <span>
 
 #include "kinema/bodies.hpp"
+#include "kinema/error.hpp"
 #include "kinema/forces.hpp"
 
 namespace kinema {
@@ -32,12 +33,8 @@ Vec3<double> angular_momentum(const ParticleSet<T>& bodies);
 template <class T>
 bool all_finite(const ParticleSet<T>& bodies);
 
-// The lowest-numbered body with a non-finite component, and that component ("px" .. "vz",
-// for rigid bodies also "qw" .. "qz", "lx" .. "lz"); nullopt when all are finite.
-struct NonFinite {
-  std::size_t body;
-  const char* field;
-};
+// The lowest-numbered body with a non-finite component (NonFinite, kinema/error.hpp);
+// nullopt when all are finite.
 template <class T>
 std::optional<NonFinite> first_non_finite(const ParticleSet<T>& bodies);
 

@@ -14,6 +14,13 @@ class Error : public std::runtime_error {
   explicit Error(const std::string& message) : std::runtime_error(message) {}
 };
 
+// A body with a value that is not finite, and its first such field: "px" .. "vz", for rigid
+// bodies also "qw" .. "qz", "lx" .. "lz".
+struct NonFinite {
+  std::size_t body;
+  const char* field;
+};
+
 // Thrown by a step under a finiteness guard (StepperOptions::guard) when its result is not
 // finite. The bodies and the stepper's clock hold the state before that step.
 class NonFiniteError : public Error {

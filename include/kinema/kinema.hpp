@@ -3,6 +3,7 @@
 // the stepper, job systems and diagnostics. Scenes, worlds and the accuracy tools are the
 // separate library kinema::scene (kinema/scenes.hpp).
 
+#include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"

@@ -9,13 +9,11 @@
 // eigenvalue -r is taken as damping (a = 0, b = -r: eigenvalues 0 and -r), any other as a
 // damped oscillation (a = -|lambda|^2, b = 2 Re lambda).
 
-#include <complex>
-#include <limits>
+#include <functional>
+#include <type_traits>
 
 #include "kinema/bodies.hpp"
-#include "kinema/forces.hpp"
 #include "kinema/methods.hpp"
-#include "kinema/stepper.hpp"
 
 namespace kinema {
 
@@ -27,17 +25,23 @@ struct StiffnessEstimate {
   int evaluations = 0;   // force evaluations it took
 };
 
-// Restarted Arnoldi with Jacobian-vector products by finite differences of the model's
-// accelerations (Stepper::accelerations): no matrix is formed. Cycles of up to 20 products
-// build a Krylov basis and J's projection on it; the projection's dominant eigenvalue or pair
-// (real or complex: an oscillation's +-i omega) comes from fitting H^2 u = p H u + q u, the
-// roots of x^2 - p x - q. Positions are first scaled by a rough |lambda| from 8 power steps,
-// so that J is close to normal. Costs `iterations` + 17 evaluations of the forces, in T, and
-// up to 21 vectors of 6 doubles per body (fewer past 512 MiB).
+// Writes the accelerations (force / mass; 0 for bodies with inv_mass 0) the forces give
+// `bodies` into out[0..2], padded_size() each: Stepper::accelerations at a fixed time.
 template <class T>
-StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces,
-                                     double t = 0, int iterations = 120,
-                                     StepperOptions options = on_calling_thread());
+using AccelerationFn = std::function<void(const ParticleSet<T>& bodies, T* const out[3])>;
+
+// Restarted Arnoldi with Jacobian-vector products by finite differences of the accelerations:
+// no matrix is formed. Cycles of up to 20 products build a Krylov basis and J's projection on
+// it; the projection's dominant eigenvalue or pair (real or complex: an oscillation's
+// +-i omega) comes from fitting H^2 u = p H u + q u, the roots of x^2 - p x - q. Positions are
+// first scaled by a rough |lambda| from 8 power steps, so that J is close to normal. Costs
+// `iterations` + 17 calls of `accelerations`, in T, and up to 21 vectors of 6 doubles per body
+// (fewer past 512 MiB). For a force model, estimate_stiffness(bodies, forces, ...) in
+// kinema/stepper.hpp does this with a stepper's accelerations.
+template <class T>
+StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
+                                     const std::type_identity_t<AccelerationFn<T>>& accelerations,
+                                     int iterations = 120);
 
 // The largest h > 0 up to which every step is stable for the estimate's mode (0: none, as
 // for Euler on an undamped oscillation; infinity when the estimate's magnitude is 0).
@@ -57,9 +61,7 @@ struct StabilityLimits {
 };
 StabilityLimits stability_limits(const Method& method);
 
-extern template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double,
-                                                     int, StepperOptions);
-extern template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double,
-                                                     int, StepperOptions);
+extern template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const AccelerationFn<float>&, int);
+extern template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const AccelerationFn<double>&, int);
 
 }  // namespace kinema

@@ -13,11 +13,13 @@
 #include <limits>
 #include <memory>
 
+#include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/isa.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
+#include "kinema/stability.hpp"
 
 namespace kinema {
 
@@ -73,33 +75,6 @@ inline StepperOptions on_calling_thread(StepperOptions options = {}) {
   options.jobs = &calling_thread_jobs();
   return options;
 }
-
-// Error control for Stepper::advance_to. A step is accepted when the weighted RMS norm of
-// its error estimate is at most 1: the mean over every body's position and velocity
-// components of (e / (atol + rtol max(|y_old|, |y_new|)))^2, square-rooted, as SUNDIALS
-// defines it (e the difference of the pair's two solutions).
-struct Tolerances {
-  double rtol = 1e-6;          // finite, >= 0
-  double atol = 1e-6;          // finite, >= 0 (length and velocity units); not both 0
-  double initial_step = 0;     // 0: 0.01 |y| / |f(y)| in the same norm, at most t_end - t
-  double max_step = std::numeric_limits<double>::infinity();
-  // Also cap the steps at the method's largest stable step for the bodies at the call's start
-  // (estimate_stiffness, kinema/stability.hpp, in T: about 60 force evaluations, so once per
-  // run rather than once per frame).
-  bool limit_to_stable_step = false;
-};
-
-struct AdaptiveStats {
-  std::uint64_t accepted = 0, rejected = 0;
-  std::uint64_t evaluations = 0;  // force evaluations (stages; a reused one is not counted)
-  double smallest_step = 0, largest_step = 0;  // of the accepted steps
-  double next_step = 0;  // the controller's proposal: a good initial_step for a next call
-};
-
-// Bodies per block: the unit of work handed to the job system. Fixed, so the partition
-// (and every result) is the same for any number of threads. 1024 bodies is 4 KiB per
-// float array, 8 KiB per double array: a block's stage state stays in L1/L2.
-inline constexpr std::size_t kBlockBodies = 1024;
 
 template <class T>
 class Stepper {
@@ -179,7 +154,17 @@ class Stepper {
   std::unique_ptr<Impl> impl_;
 };
 
+// The dominant eigenvalue of a force model's Jacobian at the bodies' state and time t
+// (kinema/stability.hpp), from the accelerations of a stepper made with `options`.
+template <class T>
+StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t = 0,
+                                     int iterations = 120, StepperOptions options = on_calling_thread());
+
 extern template class Stepper<float>;
 extern template class Stepper<double>;
+extern template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double,
+                                                     int, StepperOptions);
+extern template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double,
+                                                     int, StepperOptions);
 
 }  // namespace kinema

@@ -6,7 +6,7 @@
 #include <limits>
 #include <map>
 
-#include "force_terms.hpp"
+#include "forces/force_terms.hpp"
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"

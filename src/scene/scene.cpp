@@ -12,8 +12,8 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
-#include "force_lowering.hpp"
-#include "force_terms.hpp"
+#include "core/text.hpp"
+#include "forces/force_terms.hpp"
 #include "scene/json_node.hpp"
 #include "scene/networks.hpp"
 #include "kinema/error.hpp"

@@ -1,12 +1,14 @@
-// The sums of squares the error norm of the error-controlled driver takes, cloned per
-// instruction set with the same operations in each (see weighted_squares).
+// The reductions of reductions.hpp, cloned per instruction set with the same operations in
+// each.
+#include "kernels/reductions.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 
-#include "cloned.hpp"
-#include "error_control.hpp"
+#include "kernels/cloned.hpp"
 #include "kinema/methods.hpp"
 
 namespace kinema {
@@ -47,7 +49,8 @@ template <int S, class T>
 
 template <class T>
 [[gnu::always_inline]] inline double weighted_squares(const T* y0, const T* y1, const T* const* k, const double* w,
-                                                      int stages, double rtol, double atol, std::size_t n) {
+                                                      
+                                   int stages, double rtol, double atol, std::size_t n) {
   static_assert(kMaxStages == 7);
   switch (stages) {  // a stage count known at compile time unrolls the sum over stages
     case 1: return squares_of<1>(y0, y1, k, w, rtol, atol, n);
@@ -62,19 +65,14 @@ template <class T>
 
 }  // namespace
 
-KINEMA_CLONED double error_squares(const float* y0, const float* y1,
-                                                                         const float* const* k, const double* w,
-                                                                         int stages, double rtol, double atol,
-                                                                         std::size_t n) {
+KINEMA_CLONED double error_squares(const float* y0, const float* y1, const float* const* k, const double* w,
+                                   int stages, double rtol, double atol, std::size_t n) {
   return weighted_squares(y0, y1, k, w, stages, rtol, atol, n);
 }
-KINEMA_CLONED double error_squares(const double* y0, const double* y1,
-                                                                         const double* const* k, const double* w,
-                                                                         int stages, double rtol, double atol,
-                                                                         std::size_t n) {
+KINEMA_CLONED double error_squares(const double* y0, const double* y1, const double* const* k, const double* w,
+                                   int stages, double rtol, double atol, std::size_t n) {
   return weighted_squares(y0, y1, k, w, stages, rtol, atol, n);
 }
-
 
 namespace {
 
@@ -99,14 +97,34 @@ template <class T>
 
 }  // namespace
 
-KINEMA_CLONED double scaled_squares(const float* a, const float* w, double scale,
-                                                                          double rtol, double atol, std::size_t n) {
+KINEMA_CLONED double scaled_squares(const float* a, const float* w,
+                                   double scale, double rtol, double atol, std::size_t n) {
   return scaled_squares_of(a, w, scale, rtol, atol, n);
 }
 KINEMA_CLONED double scaled_squares(const double* a, const double* w,
-                                                                          double scale, double rtol, double atol,
-                                                                          std::size_t n) {
+                                   double scale, double rtol, double atol, std::size_t n) {
   return scaled_squares_of(a, w, scale, rtol, atol, n);
+}
+
+// A value is not finite when its exponent bits are all ones; adding the exponent's lowest
+// bit then carries into the sign bit. The OR of those sums over an array says whether any
+// value is not finite, in a loop that vectorizes: cloned per instruction set (the answer is
+// the same on each), since the scan runs after every call of a guarded stepper. The bits are
+// read through types allowed to alias float and double.
+using FloatBits [[gnu::may_alias]] = std::uint32_t;
+using DoubleBits [[gnu::may_alias]] = std::uint64_t;
+
+KINEMA_CLONED bool any_not_finite(const float* values, std::size_t n) {
+  const auto* a = reinterpret_cast<const FloatBits*>(values);
+  std::uint32_t carries = 0;
+  for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7F800000u) + 0x00800000u;
+  return (carries >> 31) != 0;
+}
+KINEMA_CLONED bool any_not_finite(const double* values, std::size_t n) {
+  const auto* a = reinterpret_cast<const DoubleBits*>(values);
+  std::uint64_t carries = 0;
+  for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7FF0000000000000ull) + 0x0010000000000000ull;
+  return (carries >> 63) != 0;
 }
 
 }  // namespace kinema

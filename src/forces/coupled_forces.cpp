@@ -1,4 +1,4 @@
-#include "coupled_forces.hpp"
+#include "forces/coupled_forces.hpp"
 
 #include <algorithm>
 #include <array>
@@ -6,7 +6,7 @@
 #include <limits>
 #include <string>
 
-#include "force_lowering.hpp"
+#include "core/text.hpp"
 #include "kinema/error.hpp"
 
 namespace kinema {

@@ -1,11 +1,10 @@
-#include "force_lowering.hpp"
+#include "forces/force_lowering.hpp"
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
-#include "force_terms.hpp"
+#include "core/text.hpp"
+#include "forces/force_terms.hpp"
 #include "kinema/error.hpp"
 
 namespace kinema {
@@ -62,16 +61,6 @@ kernels::RotationalForces<T> lower_rotational(const LocalSums& s) {
 }
 
 }  // namespace
-
-std::string shortest_text(double x, int digits, bool as_float) {
-  char text[32];
-  for (int p = 1; p <= digits; ++p) {
-    std::snprintf(text, sizeof text, "%.*g", p, x);
-    const double back = std::strtod(text, nullptr);
-    if (as_float ? float(back) == float(x) : back == x) break;
-  }
-  return text;
-}
 
 template <class T>
 LoweredForces<T> lower_forces(std::span<const LocalTerm> terms) {

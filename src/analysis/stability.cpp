@@ -5,6 +5,7 @@
 #include <cmath>
 #include <complex>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <utility>
 #include <vector>
@@ -148,12 +149,12 @@ std::pair<std::complex<double>, std::vector<double>> dominant_of(const std::vect
   return {root, u};
 }
 
-// f(y) = (v, a(x, v, t)) of a set, y = (x, v) in six component blocks of `n` each.
+// f(y) = (v, a(x, v)) of a set, y = (x, v) in six component blocks of `n` each.
 template <class T>
 class Derivative {
  public:
-  Derivative(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t, StepperOptions options)
-      : work_(bodies), stepper_(forces, euler, options), t_(t), n_(bodies.size()) {
+  Derivative(const ParticleSet<T>& bodies, const AccelerationFn<T>& accelerations)
+      : work_(bodies), accelerations_(accelerations), n_(bodies.size()) {
     for (auto& a : acc_) a.resize(work_.padded_size());
   }
 
@@ -170,7 +171,7 @@ class Derivative {
       for (std::size_t i = 0; i < n_; ++i) arrays[c][i] = T(y[c * n_ + i]);
     }
     T* out[3] = {acc_[0].data(), acc_[1].data(), acc_[2].data()};
-    stepper_.accelerations(work_, t_, out);
+    accelerations_(work_, out);
     ++evaluations;
     std::vector<double> f(size());
     for (int d = 0; d < 3; ++d) {
@@ -182,8 +183,7 @@ class Derivative {
 
  private:
   ParticleSet<T> work_;
-  Stepper<T> stepper_;
-  double t_;
+  const AccelerationFn<T>& accelerations_;
   std::size_t n_;
   std::array<std::vector<T>, 3> acc_;
 };
@@ -191,10 +191,10 @@ class Derivative {
 }  // namespace
 
 template <class T>
-StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t,
-                                     int iterations, StepperOptions options) {
+StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
+                                     const std::type_identity_t<AccelerationFn<T>>& accelerations, int iterations) {
   if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
-  Derivative<T> f(bodies, forces, t, options);
+  Derivative<T> f(bodies, accelerations);
   StiffnessEstimate e;
   if (f.size() == 0) return e;
   const std::vector<double> y = f.state(), f0 = f(y);
@@ -309,9 +309,7 @@ StabilityLimits stability_limits(const Method& method) {
   return {stable_edge(method, 1, 0, -1), stable_edge(method, 1, -1, 0)};
 }
 
-template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double, int,
-                                              StepperOptions);
-template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double, int,
-                                              StepperOptions);
+template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const AccelerationFn<float>&, int);
+template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const AccelerationFn<double>&, int);
 
 }  // namespace kinema

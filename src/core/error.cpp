@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <utility>
 
-#include "force_lowering.hpp"
+#include "core/text.hpp"
 
 namespace kinema {
 

@@ -1,4 +1,4 @@
-#include "worker_tuner.hpp"
+#include "parallel/worker_tuner.hpp"
 
 #include <algorithm>
 #include <chrono>

@@ -8,7 +8,6 @@
 #include <exception>
 
 #include "kinema/job_system.hpp"
-#include "kinema/stepper.hpp"
 
 namespace kinema {
 

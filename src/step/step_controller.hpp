@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstddef>
 
 namespace kinema {
 
@@ -43,15 +42,5 @@ class StepController {
   double err_prev_ = 1e-4;
   bool rejected_ = false;
 };
-
-// sum over i < n of (e_i / (atol + rtol max(|y0_i|, |y1_i|)))^2 with e_i = sum over the
-// stages of w_s k_s[i], in double; the same bits on every instruction set.
-double error_squares(const float* y0, const float* y1, const float* const* k, const double* w, int stages,
-                     double rtol, double atol, std::size_t n);
-double error_squares(const double* y0, const double* y1, const double* const* k, const double* w, int stages,
-                     double rtol, double atol, std::size_t n);
-// sum over i < n of (a_i scale / (atol + rtol |w_i|))^2, in double, likewise.
-double scaled_squares(const float* a, const float* w, double scale, double rtol, double atol, std::size_t n);
-double scaled_squares(const double* a, const double* w, double scale, double rtol, double atol, std::size_t n);
 
 }  // namespace kinema

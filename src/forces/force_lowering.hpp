@@ -3,9 +3,8 @@
 // converted to the stepper's precision, once per stepper.
 
 #include <span>
-#include <string>
 
-#include "coupled_forces.hpp"
+#include "forces/coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/forces.hpp"
 
@@ -27,19 +26,5 @@ LoweredForces<T> lower_forces(std::span<const LocalTerm> terms);
 // kernels::acceleration_scale) times a parameter overflows T; `h` only names the step.
 template <class T>
 void check_scaled_forces(const kernels::LocalForces<T>& forces, T scale, T h);
-
-// "float" or "double".
-template <class T>
-std::string type_name() {
-  return sizeof(T) == 4 ? "float" : "double";
-}
-
-// The shortest text, of at most `digits` significant digits, that reads back as the same
-// value (as a float when `as_float`): "1e+39", not "9.9999999999999994e+38" nor "0.000000".
-std::string shortest_text(double x, int digits = 17, bool as_float = false);
-template <class T>
-std::string shortest_text(T x) {
-  return sizeof(T) == 4 ? shortest_text(double(x), 9, true) : shortest_text(double(x), 17);
-}
 
 }  // namespace kinema

@@ -4,8 +4,8 @@
 #include <utility>
 #include <vector>
 
-#include "coupled_forces.hpp"
-#include "force_terms.hpp"
+#include "forces/coupled_forces.hpp"
+#include "forces/force_terms.hpp"
 
 namespace kinema {
 namespace {

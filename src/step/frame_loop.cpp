@@ -5,7 +5,7 @@
 
 #include "kernels/kernels.hpp"
 #include "kinema/error.hpp"
-#include "step_context.hpp"
+#include "step/step_context.hpp"
 
 namespace kinema {
 

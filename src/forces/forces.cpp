@@ -7,7 +7,7 @@
 #include <utility>
 #include <vector>
 
-#include "force_terms.hpp"
+#include "forces/force_terms.hpp"
 #include "kinema/error.hpp"
 
 namespace kinema {

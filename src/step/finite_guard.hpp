@@ -8,9 +8,9 @@
 #include <cstddef>
 #include <optional>
 
-#include "blocks.hpp"
+#include "parallel/blocks.hpp"
 #include "kinema/bodies.hpp"
-#include "kinema/diagnostics.hpp"
+#include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
 
 namespace kinema {

@@ -8,14 +8,14 @@
 #include <cstddef>
 #include <vector>
 
-#include "blocks.hpp"
-#include "coupled_forces.hpp"
+#include "parallel/blocks.hpp"
+#include "forces/coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
-#include "step_context.hpp"
+#include "step/step_context.hpp"
 
 namespace kinema {
 

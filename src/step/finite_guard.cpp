@@ -1,4 +1,4 @@
-#include "finite_guard.hpp"
+#include "step/finite_guard.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -8,8 +8,8 @@
 #include <cstring>
 #include <limits>
 
-#include "blocks.hpp"
-#include "cloned.hpp"
+#include "kernels/reductions.hpp"
+#include "parallel/blocks.hpp"
 
 namespace kinema {
 namespace {
@@ -23,27 +23,6 @@ void keep_lowest(std::atomic<std::size_t>& lowest, std::size_t k) {
   std::size_t seen = lowest.load(std::memory_order_relaxed);
   while (k < seen && !lowest.compare_exchange_weak(seen, k, std::memory_order_relaxed)) {
   }
-}
-
-// A value is not finite when its exponent bits are all ones; adding the exponent's lowest
-// bit then carries into the sign bit. The OR of those sums over an array says whether any
-// value is not finite, in a loop that vectorizes: cloned per instruction set (the answer is
-// the same on each), since the scan runs after every call of a guarded stepper. The bits are
-// read through types allowed to alias float and double.
-using FloatBits [[gnu::may_alias]] = std::uint32_t;
-using DoubleBits [[gnu::may_alias]] = std::uint64_t;
-
-KINEMA_CLONED bool any_not_finite(const float* values, std::size_t n) {
-  const auto* a = reinterpret_cast<const FloatBits*>(values);
-  std::uint32_t carries = 0;
-  for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7F800000u) + 0x00800000u;
-  return (carries >> 31) != 0;
-}
-KINEMA_CLONED bool any_not_finite(const double* values, std::size_t n) {
-  const auto* a = reinterpret_cast<const DoubleBits*>(values);
-  std::uint64_t carries = 0;
-  for (std::size_t i = 0; i < n; ++i) carries |= (a[i] & 0x7FF0000000000000ull) + 0x0010000000000000ull;
-  return (carries >> 63) != 0;
 }
 
 // The first index in [begin, end) whose value is not finite, or end.

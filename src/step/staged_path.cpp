@@ -1,6 +1,6 @@
-#include "staged_path.hpp"
+#include "step/staged_path.hpp"
 
-#include "error_control.hpp"
+#include "kernels/reductions.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -4,7 +4,7 @@
 
 #include <cstddef>
 
-#include "blocks.hpp"
+#include "parallel/blocks.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
 
@@ -14,6 +14,14 @@ namespace kinema {
 template <class T>
 kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
   return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass()};
+}
+
+// The centres of mass of rigid bodies, likewise.
+template <class T>
+kernels::BodyArrays<T> center_arrays(RigidBodySet<T>& b) {
+  return {{b.position_data(0), b.position_data(1), b.position_data(2)},
+          {b.velocity_data(0), b.velocity_data(1), b.velocity_data(2)},
+          b.centers().inv_mass()};
 }
 
 template <class T>

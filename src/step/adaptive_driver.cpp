@@ -1,0 +1,129 @@
+#include "step/adaptive_driver.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "core/text.hpp"
+#include "kernels/reductions.hpp"
+#include "kinema/error.hpp"
+#include "step/step_controller.hpp"
+
+namespace kinema {
+namespace {
+
+template <class T>
+class AdaptiveRun {
+ public:
+  AdaptiveRun(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies, const Tolerances& tolerances)
+      : core_(core), staged_(*core.paths.staged), workers_(workers), bodies_(bodies), tol_(tolerances) {}
+
+  AdaptiveStats to(double t_end, double max_step) {
+    staged_.reserve(bodies_.padded_size());
+    double t = core_.clock.time();
+    if (t_end == t) return stats_;
+    const Method& method = core_.method;
+    StepController controller(std::min(method.order, method.embedded_order));
+    double h = tol_.initial_step > 0 ? tol_.initial_step : first_step(t_end - t);
+    while (t < t_end) {
+      h = std::min(h, max_step);
+      // No sliver of a last step: one within 1% of the end takes it, if max_step allows.
+      const bool last = t + 1.01 * h >= t_end && t_end - t <= max_step;
+      const T size = T(last ? t_end - t : h);
+      if (!(size > 0) || t + double(size) == t) {
+        throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
+                    "; the tolerances cannot be met in " + type_name<T>());
+      }
+      const StepContext<T> c = start_attempt(size);
+      const double err = staged_.attempt(c, {tol_.rtol, tol_.atol, reuse_scale(c)});
+      stats_.evaluations += std::uint64_t(method.tableau.stages - (kept_scale_ > 0 ? 1 : 0));
+      const bool accepted = err <= 1;
+      if (accepted) {
+        accept(size, last, t_end, c);
+        t = core_.clock.time();
+      } else {
+        reject(c);
+      }
+      h = controller.next(double(size), err, accepted);
+    }
+    stats_.next_step = h;
+    return stats_;
+  }
+
+ private:
+  StepContext<T> start_attempt(T size) {
+    StepContext<T> c = core_.start(bodies_, size, core_.lowered().particle, workers_);
+    c.t0 = core_.clock.time();
+    return c;
+  }
+
+  // Stage 0's kept accelerations, rescaled to this step's acceleration scale; 0: none kept.
+  T reuse_scale(const StepContext<T>& c) const { return kept_scale_ > 0 ? c.accel_scale / kept_scale_ : T(0); }
+
+  void accept(T size, bool last, double t_end, const StepContext<T>& c) {
+    ++core_.clock.steps;
+    if (last) core_.clock.set(t_end);
+    ++stats_.accepted;
+    stats_.smallest_step = stats_.accepted == 1 ? double(size) : std::min(stats_.smallest_step, double(size));
+    stats_.largest_step = std::max(stats_.largest_step, double(size));
+    const bool fsal = core_.method.tableau.first_same_as_last();
+    if (fsal) staged_.keep_last_stage();
+    kept_scale_ = fsal ? c.accel_scale : T(0);
+  }
+
+  void reject(const StepContext<T>& c) {
+    staged_.take_back(c);
+    ++stats_.rejected;
+    kept_scale_ = c.accel_scale;  // stage 0 was evaluated at the state kept
+  }
+
+  // 0.01 |y| / |f(y)| in the error norm's weights (Hairer and Wanner's first guess), from
+  // stage 0's accelerations, which the first attempt then reuses.
+  double first_step(double span) {
+    const T probe = T(std::min(span, 1.0));
+    core_.check_step_size(probe, core_.lowered().particle);
+    const StepContext<T> c{bodies_, probe, core_.accel_scale(probe), core_.clock.time(), workers_};
+    staged_.evaluate_first_stage(c);
+    ++stats_.evaluations;
+    kept_scale_ = c.accel_scale;
+    const auto acc = staged_.first_stage();
+    const ParticleSet<T>& b = bodies_;
+    const T* x[3] = {b.px(), b.py(), b.pz()};
+    const T* v[3] = {b.vx(), b.vy(), b.vz()};
+    const double rtol = tol_.rtol, atol = tol_.atol;
+    double y2 = 0, f2 = 0;
+    for (int d = 0; d < 3; ++d) {
+      const std::size_t n = b.size();
+      y2 += scaled_squares(x[d], x[d], 1, rtol, atol, n) + scaled_squares(v[d], v[d], 1, rtol, atol, n);
+      f2 += scaled_squares(v[d], x[d], 1, rtol, atol, n) +
+            scaled_squares(acc[d], v[d], 1 / double(c.accel_scale), rtol, atol, n);
+    }
+    const double components = 6.0 * double(std::max<std::size_t>(b.size(), 1));
+    const double d0 = std::sqrt(y2 / components), d1 = std::sqrt(f2 / components);  // RMS, as the norm
+    const double h = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
+    return std::min(h, span);
+  }
+
+  StepperCore<T>& core_;
+  StagedPath<T>& staged_;
+  const Workers& workers_;
+  ParticleSet<T>& bodies_;
+  const Tolerances& tol_;
+  AdaptiveStats stats_;
+  T kept_scale_ = 0;  // the acceleration scale stage 0's kept accelerations carry; 0: none
+};
+
+}  // namespace
+
+template <class T>
+AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
+                                 double t_end, const Tolerances& tolerances, double max_step) {
+  return AdaptiveRun<T>(core, workers, bodies, tolerances).to(t_end, max_step);
+}
+
+template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, ParticleSet<float>&, double,
+                                          const Tolerances&, double);
+template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, ParticleSet<double>&, double,
+                                          const Tolerances&, double);
+
+}  // namespace kinema

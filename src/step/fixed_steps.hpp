@@ -1,0 +1,59 @@
+#pragma once
+// The fixed-step driver: `steps` steps of one size on the fused or the staged path, with the
+// finiteness guard's work (StepperOptions::guard) around them.
+
+#include <cstdint>
+#include <optional>
+
+#include "kinema/bodies.hpp"
+#include "kinema/error.hpp"
+#include "parallel/blocks.hpp"
+#include "step/finite_guard.hpp"
+#include "step/stepper_core.hpp"
+
+namespace kinema {
+
+template <class T>
+class FixedSteps {
+ public:
+  explicit FixedSteps(StepperCore<T>& core) : core_(core) {}
+
+  // Advances the set on `workers`. Under a guard, a step that leaves a value that is not
+  // finite puts the bodies and the clock back to the step before it and throws
+  // NonFiniteError.
+  void advance(const Workers& workers, ParticleSet<T>& bodies, T h, std::uint64_t steps);
+  void advance(const Workers& workers, RigidBodySet<T>& bodies, T h, std::uint64_t steps);
+
+  std::size_t checkpoint_bytes() const { return checkpoint_.bytes(); }
+
+ private:
+  // What the guard does inside a call: save each block before its steps, clamp after every
+  // step, scan each block after its last (on the fused path while the block is in cache).
+  struct Guard {
+    const StateArrays<T>& state;
+    Checkpoint<T>& checkpoint;
+    FiniteScan<T> scan;
+    bool clamp;
+  };
+
+  template <class Set>
+  void guarded_advance(const Workers& w, Set& b, T h, std::uint64_t steps);
+  template <class Set>
+  std::optional<NonFinite> guarded_run(const Workers& w, Set& b, T h, std::uint64_t steps,
+                                       const StateArrays<T>& state);
+  template <class Set, class Step>
+  void run_block(Set& b, Block block, std::uint64_t steps, Guard* guard, Step&& step);
+  void run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard);
+  void run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps, Guard* guard);
+  void run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard);
+  void clamp(ParticleSet<T>& b, Block block) const;
+  void clamp(RigidBodySet<T>& b, Block block) const;
+
+  StepperCore<T>& core_;
+  Checkpoint<T> checkpoint_;  // the state a guarded call starts from
+};
+
+extern template class FixedSteps<float>;
+extern template class FixedSteps<double>;
+
+}  // namespace kinema

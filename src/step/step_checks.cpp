@@ -1,0 +1,74 @@
+#include "step/step_checks.hpp"
+
+#include <cmath>
+#include <string>
+#include <utility>
+
+#include "core/text.hpp"
+#include "forces/force_lowering.hpp"
+#include "kinema/error.hpp"
+
+namespace kinema {
+
+template <class T>
+void check_step_size(T h, T accel_scale, const kernels::LocalForces<T>& local, const CoupledForces<T>& coupled) {
+  if (!(std::isfinite(h) && h > 0)) {
+    throw Error("step size h must be positive and finite in " + type_name<T>() + ", got " + shortest_text(h));
+  }
+  check_scaled_forces(local, accel_scale, h);
+  if (coupled.nbody && !std::isfinite(accel_scale * T(coupled.nbody->G))) {
+    throw Error("step size h = " + shortest_text(h) + " times nbody.G overflows " + type_name<T>() +
+                "; take a smaller step");
+  }
+}
+
+template <class T>
+void check_reach(const CoupledForces<T>& coupled, const ParticleSet<T>& bodies) {
+  const std::size_t covered = coupled.springs.covered;
+  if (covered > bodies.size()) {
+    throw Error("springs: a pair joins body " + std::to_string(covered - 1) + ", but the set has " +
+                std::to_string(bodies.size()) + " bodies");
+  }
+}
+
+template <class T>
+void check_clamp_limits(const StepperOptions& o) {
+  if (o.guard != FiniteGuard::clamp) return;
+  for (const auto& [name, value] : {std::pair{"max_speed", o.max_speed},
+                                    std::pair{"max_angular_speed", o.max_angular_speed}}) {
+    // Its square too: the clamp compares squared speeds.
+    if (!(value > 0 && std::isfinite(T(value) * T(value)))) {
+      throw Error(std::string("stepper options: ") + name + " must be > 0 and finite in " + type_name<T>() +
+                  ", got " + shortest_text(value));
+    }
+  }
+}
+
+void check_adaptive(const Method& method, double t_end, const Tolerances& tol, double now) {
+  if (method.embedded_order == 0) {
+    throw Error("advance_to needs a method with an embedded pair (bs3, dopri5); " + std::string(method.name) +
+                " has none");
+  }
+  const auto nonnegative = [](double x) { return std::isfinite(x) && x >= 0; };
+  if (!nonnegative(tol.rtol) || !nonnegative(tol.atol) || (tol.rtol == 0 && tol.atol == 0)) {
+    throw Error("tolerances: rtol and atol must be finite and >= 0, not both 0; got rtol " +
+                shortest_text(tol.rtol) + ", atol " + shortest_text(tol.atol));
+  }
+  if (!nonnegative(tol.initial_step) || !(tol.max_step > 0)) {
+    throw Error("tolerances: initial_step must be finite and >= 0, max_step > 0");
+  }
+  if (!std::isfinite(t_end) || t_end < now) {
+    throw Error("advance_to: t_end " + shortest_text(t_end) + " must be finite and not before time() = " +
+                shortest_text(now));
+  }
+}
+
+#define KINEMA_STEP_CHECKS(T)                                                                                   \
+  template void check_step_size(T, T, const kernels::LocalForces<T>&, const CoupledForces<T>&);                 \
+  template void check_reach(const CoupledForces<T>&, const ParticleSet<T>&);                                    \
+  template void check_clamp_limits<T>(const StepperOptions&);
+KINEMA_STEP_CHECKS(float)
+KINEMA_STEP_CHECKS(double)
+#undef KINEMA_STEP_CHECKS
+
+}  // namespace kinema

@@ -1,0 +1,30 @@
+#pragma once
+// What a stepper refuses before any body moves: each check throws kinema::Error naming the
+// value and the limit it breaks.
+
+#include "forces/coupled_forces.hpp"
+#include "kernels/kernels.hpp"
+#include "kinema/adaptive.hpp"
+#include "kinema/bodies.hpp"
+#include "kinema/methods.hpp"
+#include "kinema/stepper.hpp"
+
+namespace kinema {
+
+// A step of size h (positive and finite in T) whose acceleration scale `accel_scale`, times
+// the local and N-body force parameters, stays finite in T.
+template <class T>
+void check_step_size(T h, T accel_scale, const kernels::LocalForces<T>& local, const CoupledForces<T>& coupled);
+
+// Springs must not reach past the set.
+template <class T>
+void check_reach(const CoupledForces<T>& coupled, const ParticleSet<T>& bodies);
+
+// The clamp's speed limits, and their squares, finite and > 0 in T.
+template <class T>
+void check_clamp_limits(const StepperOptions& options);
+
+// advance_to's request: a method with a pair, sane tolerances, t_end not before `now`.
+void check_adaptive(const Method& method, double t_end, const Tolerances& tolerances, double now);
+
+}  // namespace kinema

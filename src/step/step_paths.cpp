@@ -1,0 +1,42 @@
+#include "step/step_paths.hpp"
+
+namespace kinema {
+
+template <class T>
+StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const kernels::KernelTable<T>& table,
+                         bool force_staged, std::size_t staged_capacity) {
+  StepPaths<T> paths;
+  paths.lowered = std::make_unique<LoweredForces<T>>(lower_forces<T>(f.local_terms()));
+  paths.lowered->coupled = lower_coupled<T>(f);
+  const LoweredForces<T>& l = *paths.lowered;
+  const int quad = l.particle.has_quadratic(), central = l.particle.has_central();
+  const int builtin = builtin_index(method);
+  if (builtin >= 0 && f.fusable()) paths.rigid = table.rigid[builtin][quad][central];
+  if (builtin >= 0 && f.fusable() && !force_staged) {
+    paths.fused = table.fused[builtin][quad][central];
+  } else {
+    paths.staged = std::make_unique<StagedPath<T>>(f, method, table, l.particle, l.coupled);
+    paths.staged->reserve(staged_capacity);
+  }
+  return paths;
+}
+
+template <class T>
+StagedPath<T>& acceleration_probe(StepPaths<T>& paths, const ForceModel<T>& forces,
+                                  const kernels::KernelTable<T>& table) {
+  if (!paths.probe) {
+    const LoweredForces<T>& l = *paths.lowered;
+    paths.probe = std::make_unique<StagedPath<T>>(forces, euler, table, l.particle, l.coupled);
+  }
+  return *paths.probe;
+}
+
+#define KINEMA_STEP_PATHS(T)                                                                                    \
+  template StepPaths<T> build_paths(const ForceModel<T>&, const Method&, const kernels::KernelTable<T>&, bool,  \
+                                    std::size_t);                                                               \
+  template StagedPath<T>& acceleration_probe(StepPaths<T>&, const ForceModel<T>&, const kernels::KernelTable<T>&);
+KINEMA_STEP_PATHS(float)
+KINEMA_STEP_PATHS(double)
+#undef KINEMA_STEP_PATHS
+
+}  // namespace kinema

@@ -1,0 +1,38 @@
+#pragma once
+// The path a force model and a method take: the fused kernels (one pass per step, every
+// stage in registers) when every term is local and the method built in, else the staged
+// path (one pass per stage).
+
+#include <cstddef>
+#include <memory>
+
+#include "forces/force_lowering.hpp"
+#include "kernels/kernels.hpp"
+#include "kinema/forces.hpp"
+#include "kinema/methods.hpp"
+#include "step/staged_path.hpp"
+
+namespace kinema {
+
+template <class T>
+struct StepPaths {
+  std::unique_ptr<LoweredForces<T>> lowered;  // a fixed address: the staged paths keep references
+  kernels::FusedFn<T> fused = nullptr;        // particles, when the fused path applies
+  kernels::RigidFn<T> rigid = nullptr;        // rigid bodies (fused path only)
+  std::unique_ptr<StagedPath<T>> staged;      // particles, when the fused path does not apply
+  std::unique_ptr<StagedPath<T>> probe;       // evaluates accelerations alone (made on demand)
+};
+
+// Lowers `forces` and picks their kernels. The staged path, if taken, keeps references to
+// `forces`, `method` and `table`, and gets scratch for `staged_capacity` bodies. Throws
+// kinema::Error for parameters that overflow T.
+template <class T>
+StepPaths<T> build_paths(const ForceModel<T>& forces, const Method& method, const kernels::KernelTable<T>& table,
+                         bool force_staged, std::size_t staged_capacity);
+
+// The paths' probe for accelerations, made at the first call.
+template <class T>
+StagedPath<T>& acceleration_probe(StepPaths<T>& paths, const ForceModel<T>& forces,
+                                  const kernels::KernelTable<T>& table);
+
+}  // namespace kinema

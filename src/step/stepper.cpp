@@ -1,0 +1,211 @@
+// The Stepper facade: it owns what lives across calls (the core: model, paths, clock), the
+// worker choice and the drivers, and hands each call to the driver it belongs to, timed on
+// the workers measured fastest for it.
+#include "kinema/stepper.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+
+#include "kinema/error.hpp"
+#include "kinema/stability.hpp"
+#include "parallel/measured_workers.hpp"
+#include "step/adaptive_driver.hpp"
+#include "step/fixed_steps.hpp"
+#include "step/step_checks.hpp"
+#include "step/stepper_core.hpp"
+
+namespace kinema {
+
+template <class T>
+struct Stepper<T>::Impl {
+  using Call = MeasuredWorkers::Call;
+
+  Impl(std::shared_ptr<const ForceModel<T>> forces, const Method& method, const StepperOptions& options)
+      : core(std::move(forces), method, options),
+        workers(options.jobs != nullptr ? *options.jobs : default_job_system(options.threads),
+                options.workers == WorkerChoice::all, options.inline_below),
+        fixed(core) {}
+
+  Call kind_of(const ParticleSet<T>&) const { return core.paths.fused ? Call::fused : Call::staged; }
+  Call kind_of(const RigidBodySet<T>&) const { return Call::rigid; }
+
+  template <class Set>
+  void advance(Set& bodies, T h, std::uint64_t steps) {
+    workers.run(kind_of(bodies), bodies.size(), steps, [&](const Workers& w) {
+      fixed.advance(w, bodies, h, steps);
+      return double(bodies.size()) * double(steps);
+    });
+  }
+
+  AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances) {
+    check_adaptive(core.method, t_end, tolerances, core.clock.time());
+    check_reach(core.lowered().coupled, bodies);
+    const double max_step = step_cap(bodies, t_end, tolerances);
+    AdaptiveStats stats;
+    workers.run(Call::adaptive, bodies.size(), 2, [&](const Workers& w) {
+      stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step);
+      return double(bodies.size()) * double(stats.evaluations);
+    });
+    return stats;
+  }
+
+  // The tolerances' max_step, capped at the method's largest stable step for the bodies now
+  // when asked to (and when there is a step to take).
+  double step_cap(const ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances) {
+    const double t = core.clock.time();
+    if (!tolerances.limit_to_stable_step || t_end == t) return tolerances.max_step;
+    const auto accelerations_now = [&](const ParticleSet<T>& set, T* const out[3]) { accelerations(set, t, out); };
+    const double stable = largest_stable_step(core.method, estimate_stiffness<T>(bodies, accelerations_now, 40));
+    return stable > 0 ? std::min(tolerances.max_step, stable) : tolerances.max_step;
+  }
+
+  // Euler's stage 0 carries accelerations times h; with h = 1 they are the accelerations.
+  // The stage reads the bodies and writes scratch only.
+  void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]) {
+    check_reach(core.lowered().coupled, bodies);
+    StagedPath<T>& probe = acceleration_probe(core.paths, core.forces(), *core.table);
+    probe.reserve(bodies.padded_size());
+    workers.run(Call::accelerations, bodies.size(), 1, [&](const Workers& w) {
+      const StepContext<T> c{const_cast<ParticleSet<T>&>(bodies), T(1), T(1), t, w};
+      probe.evaluate_first_stage(c);
+      return double(bodies.size());
+    });
+    const auto acc = probe.first_stage();
+    for (int d = 0; d < 3; ++d) std::copy(acc[d], acc[d] + bodies.padded_size(), out[d]);
+  }
+
+  StepperCore<T> core;
+  MeasuredWorkers workers;
+  FixedSteps<T> fixed;
+};
+
+template <class T>
+Stepper<T>::Stepper(ForceModel<T> forces, const Method& method, StepperOptions options)
+    : Stepper(std::make_shared<const ForceModel<T>>(std::move(forces)), method, options) {}
+
+template <class T>
+Stepper<T>::Stepper(std::shared_ptr<const ForceModel<T>> forces, const Method& method,
+                    StepperOptions options)
+    : impl_(std::make_unique<Impl>(std::move(forces), method, options)) {}
+
+template <class T>
+Stepper<T>::~Stepper() = default;
+template <class T>
+Stepper<T>::Stepper(Stepper&&) noexcept = default;
+template <class T>
+Stepper<T>& Stepper<T>::operator=(Stepper&&) noexcept = default;
+
+template <class T>
+void Stepper<T>::step(ParticleSet<T>& io_bodies, T h) {
+  impl_->advance(io_bodies, h, 1);
+}
+
+template <class T>
+void Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps) {
+  impl_->advance(io_bodies, h, steps);
+}
+
+template <class T>
+AdaptiveStats Stepper<T>::advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances) {
+  return impl_->advance_to(io_bodies, t_end, tolerances);
+}
+
+template <class T>
+void Stepper<T>::step(RigidBodySet<T>& io_bodies, T h) {
+  impl_->advance(io_bodies, h, 1);
+}
+
+template <class T>
+void Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps) {
+  impl_->advance(io_bodies, h, steps);
+}
+
+template <class T>
+void Stepper<T>::check_step_size(T h) const {
+  const StepperCore<T>& core = impl_->core;
+  core.check_step_size(h, core.lowered().particle);
+  core.check_step_size(h, core.lowered().rigid);
+}
+
+template <class T>
+void Stepper<T>::accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]) {
+  impl_->accelerations(bodies, t, out);
+}
+
+template <class T>
+void Stepper<T>::prepare() {
+  impl_->workers.prepare();
+}
+
+template <class T>
+void Stepper<T>::reserve(std::size_t bodies) {
+  if (impl_->core.paths.staged) impl_->core.paths.staged->reserve(padded_count<T>(bodies));
+}
+
+template <class T>
+std::size_t Stepper<T>::scratch_bytes() const {
+  const StepperCore<T>& core = impl_->core;
+  const std::size_t staged = core.paths.staged ? core.paths.staged->bytes() : 0;
+  return staged + core.lowered().coupled.springs.bytes() + impl_->fixed.checkpoint_bytes();
+}
+
+template <class T>
+void Stepper<T>::set_forces(ForceModel<T> forces) {
+  impl_->core.use(std::make_shared<const ForceModel<T>>(std::move(forces)));
+}
+
+template <class T>
+double Stepper<T>::time() const {
+  return impl_->core.clock.time();
+}
+
+template <class T>
+void Stepper<T>::set_time(double t) {
+  if (!std::isfinite(t)) throw Error("time must be finite");
+  impl_->core.clock.set(t);
+}
+
+template <class T>
+const Method& Stepper<T>::method() const {
+  return impl_->core.method;
+}
+template <class T>
+const ForceModel<T>& Stepper<T>::forces() const {
+  return impl_->core.forces();
+}
+template <class T>
+Isa Stepper<T>::isa() const {
+  return impl_->core.table->isa;
+}
+template <class T>
+bool Stepper<T>::fused() const {
+  return impl_->core.paths.fused != nullptr;
+}
+template <class T>
+unsigned Stepper<T>::threads() const {
+  return impl_->workers.jobs().worker_count();
+}
+
+template <class T>
+unsigned Stepper<T>::chosen_workers() const {
+  return impl_->workers.favoured();
+}
+
+template <class T>
+StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t,
+                                     int iterations, StepperOptions options) {
+  if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
+  Stepper<T> stepper(forces, euler, options);
+  const auto accelerations = [&](const ParticleSet<T>& set, T* const out[3]) { stepper.accelerations(set, t, out); };
+  return estimate_stiffness<T>(bodies, accelerations, iterations);
+}
+
+template class Stepper<float>;
+template class Stepper<double>;
+template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double, int,
+                                              StepperOptions);
+template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double, int,
+                                              StepperOptions);
+
+}  // namespace kinema

@@ -1,0 +1,48 @@
+#include "step/stepper_core.hpp"
+
+#include "kinema/error.hpp"
+#include "step/step_checks.hpp"
+
+namespace kinema {
+
+template <class T>
+StepperCore<T>::StepperCore(std::shared_ptr<const ForceModel<T>> f, const Method& m, const StepperOptions& o)
+    : method(m), options(o) {
+  validate(method);
+  check_clamp_limits<T>(options);
+  table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
+  use(std::move(f));
+}
+
+template <class T>
+void StepperCore<T>::use(std::shared_ptr<const ForceModel<T>> f) {
+  if (!f) throw Error("stepper: null force model");
+  const std::size_t capacity = paths.staged ? paths.staged->capacity() : 0;
+  StepPaths<T> fresh = build_paths(*f, method, *table, options.force_staged, capacity);
+  paths = std::move(fresh);
+  forces_ = std::move(f);
+}
+
+template <class T>
+T StepperCore<T>::accel_scale(T h) const {
+  if (method.kind != MethodKind::runge_kutta) return 1;
+  return T(kernels::acceleration_scale(method.tableau)) * h;
+}
+
+template <class T>
+void StepperCore<T>::check_step_size(T h, const kernels::LocalForces<T>& local) const {
+  kinema::check_step_size(h, accel_scale(h), local, paths.lowered->coupled);
+}
+
+template <class T>
+StepContext<T> StepperCore<T>::start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local,
+                                     const Workers& workers) {
+  check_step_size(h, local);
+  clock.use(h);
+  return {bodies, h, accel_scale(h), 0, workers};
+}
+
+template class StepperCore<float>;
+template class StepperCore<double>;
+
+}  // namespace kinema

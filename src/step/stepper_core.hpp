@@ -1,0 +1,56 @@
+#pragma once
+// What a stepper keeps across calls, shared by its fixed-step and adaptive drivers: the
+// force model and the paths it takes, the method, the options, the clock.
+
+#include <memory>
+
+#include "kernels/kernels.hpp"
+#include "kinema/bodies.hpp"
+#include "kinema/forces.hpp"
+#include "kinema/methods.hpp"
+#include "kinema/stepper.hpp"
+#include "parallel/blocks.hpp"
+#include "step/clock.hpp"
+#include "step/step_context.hpp"
+#include "step/step_paths.hpp"
+
+namespace kinema {
+
+template <class T>
+class StepperCore {
+ public:
+  // Throws kinema::Error for an invalid method, options or model, or an unavailable ISA.
+  StepperCore(std::shared_ptr<const ForceModel<T>> forces, const Method& method, const StepperOptions& options);
+  StepperCore(const StepperCore&) = delete;  // the paths keep references to the members
+  StepperCore& operator=(const StepperCore&) = delete;
+
+  // Takes a new model. Everything it needs is built first (lowering, kernels, scratch as
+  // large as the last), so whatever throws leaves the core as it was.
+  void use(std::shared_ptr<const ForceModel<T>> forces);
+
+  // What the stage accelerations are multiplied by: sigma h for Runge-Kutta methods (see
+  // kernels::acceleration_scale), 1 for kicks, which scale by their own weight.
+  T accel_scale(T h) const;
+  // Throws what a step of size h would throw to a set feeling `local` (the particles' or the
+  // rigid bodies' terms, which add the point forces' push).
+  void check_step_size(T h, const kernels::LocalForces<T>& local) const;
+  // A call's context, after checking h; a new h moves the clock's origin to now.
+  StepContext<T> start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local, const Workers& workers);
+
+  const ForceModel<T>& forces() const { return *forces_; }
+  const LoweredForces<T>& lowered() const { return *paths.lowered; }
+
+  Method method;
+  StepperOptions options;
+  const kernels::KernelTable<T>* table = nullptr;
+  StepPaths<T> paths;
+  Clock<T> clock;
+
+ private:
+  std::shared_ptr<const ForceModel<T>> forces_;
+};
+
+extern template class StepperCore<float>;
+extern template class StepperCore<double>;
+
+}  // namespace kinema
