@@ -402,6 +402,125 @@ void consider_float(const Scene& pilot_scene, double duration, double tolerance,
   }
 }
 
+// The search of choose_method: every candidate tried in turn against the cheapest so far,
+// each one's cost (in force evaluations) written into the reason.
+class MethodSearch {
+ public:
+  MethodSearch(const Scene& scene, double tolerance)
+      : duration_(scene.dt * double(scene.steps)), tolerance_(tolerance), pilot_scene_(sample_bodies(scene, 64)) {
+    check_reachable(pilot_scene_, tolerance);
+    stiffness_ = stiffness_of(pilot_scene_);
+    start_ = std::clamp<std::uint64_t>(scene.steps / 16, 8, kMostPilotSteps);
+    choice_.precision = scene.precision;
+  }
+
+  // Fixed steps with every method that may take them, highest order first: it usually sets
+  // the budget the others must beat. Rigid bodies take the fused kernels only: the built-in
+  // methods. False when the search budget ran out.
+  bool try_fixed_steps() {
+    std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
+    if (pilot_scene_.rigid_bodies.empty()) order.insert(order.end(), staged_methods.begin(), staged_methods.end());
+    std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
+    for (const Method* m : order) {
+      if (!try_fixed_steps(*m)) return false;
+    }
+    return true;
+  }
+
+  // Error-controlled steps (particles only), within the stable step.
+  void try_error_control() {
+    if (!pilot_scene_.rigid_bodies.empty()) return;
+    for (const Method* m : {&dopri5, &bs3}) {
+      if (!try_error_control(*m)) return;
+    }
+  }
+
+  MethodChoice result(const Scene& scene) {
+    if (choice_.method == nullptr) refuse(scene);
+    choice_.evaluations = best_cost_;
+    if (!choice_.step_tolerance) choice_.dt = duration_ / double(choice_.steps);
+    char head[96];
+    std::snprintf(head, sizeof head, "for error <= %g over %g s, in force evaluations: ", tolerance_, duration_);
+    char tail[96];
+    std::snprintf(tail, sizeof tail, "; picked %s%s (%.0f evaluations)", std::string(choice_.method->name).c_str(),
+                  choice_.step_tolerance ? " with error control" : "", best_cost_);
+    choice_.reason = head + reason_ + tail;
+    const double stable = largest_stable_step(*choice_.method, stiffness_);
+    consider_float(pilot_scene_, duration_, tolerance_, stable > 0 ? stable : std::numeric_limits<double>::infinity(),
+                   choice_);
+    return choice_;
+  }
+
+ private:
+  void note(const std::string& text) { reason_ += (reason_.empty() ? "" : ", ") + text; }
+
+  bool try_fixed_steps(const Method& m) {
+    const double stable = largest_stable_step(m, stiffness_);
+    if (!(stable > 0)) return note(std::string(m.name) + " unstable here"), true;
+    const std::uint64_t least = std::isfinite(stable) ? std::uint64_t(std::ceil(duration_ / stable)) : 1;
+    Pilot pilot(pilot_scene_, m, duration_, spent_);
+    std::optional<std::uint64_t> steps;
+    try {
+      steps = steps_needed(pilot, m, start_, tolerance_, best_cost_, least);
+    } catch (const SearchSpent&) {
+      // The best so far meets the tolerance; it may not be the cheapest.
+      return note(std::string(m.name) + " not tried (search budget spent)"), false;
+    }
+    if (!steps) return note(std::string(m.name) + (std::isfinite(best_cost_) ? " costlier" : " cannot")), true;
+    const double cost = double(*steps) * m.evaluations();
+    note(std::string(m.name) + " " + std::to_string(std::uint64_t(cost)) + " (" + std::to_string(*steps) +
+         " steps)");
+    choice_.candidates.push_back({&m, *steps});
+    if (cost < best_cost_) {
+      best_cost_ = cost;
+      choice_.method = &m;
+      choice_.steps = *steps;
+      choice_.estimated_error = pilot.estimate(*steps);
+    }
+    return true;
+  }
+
+  bool try_error_control(const Method& m) {
+    const double stable = largest_stable_step(m, stiffness_);
+    if (!(stable > 0)) return true;
+    std::optional<AdaptivePick> pick;
+    try {
+      pick = adaptive_pick(pilot_scene_, m, duration_, tolerance_, stable, best_cost_, spent_);
+    } catch (const SearchSpent&) {
+      return false;
+    }
+    if (!pick) return true;
+    char text[120];
+    std::snprintf(text, sizeof text, "%s with error control (rtol = atol = %g) %.0f", std::string(m.name).c_str(),
+                  pick->step_tolerance, pick->evaluations);
+    note(text);
+    if (pick->evaluations < best_cost_) {
+      best_cost_ = pick->evaluations;
+      choice_.method = &m;
+      choice_.step_tolerance = pick->step_tolerance;
+      choice_.estimated_error = pick->estimated_error;
+    }
+    return true;
+  }
+
+  [[noreturn]] void refuse(const Scene& scene) const {
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "auto: no method reaches tolerance %g within 2^22 steps or 2^28 body-steps of "
+                  "pilot runs (give --method and --dt, or a larger tolerance%s)", tolerance_,
+                  scene.precision == Precision::single ? "; in float, try double" : "");
+    throw Error(text);
+  }
+
+  double duration_, tolerance_;
+  Scene pilot_scene_;
+  StiffnessEstimate stiffness_;
+  std::uint64_t start_ = 0;
+  MethodChoice choice_;
+  double best_cost_ = std::numeric_limits<double>::infinity(), spent_ = 0;
+  std::string reason_;
+};
+
 }  // namespace
 
 MethodChoice choose_method(const Scene& scene, double tolerance) {
@@ -409,93 +528,9 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
     throw Error("tolerance must be positive and finite");
   }
   if (scene.steps == 0) throw Error("auto: the scene has no steps to choose a step size for");
-  const double duration = scene.dt * double(scene.steps);
-  const Scene pilot_scene = sample_bodies(scene, 64);
-  check_reachable(pilot_scene, tolerance);
-  const StiffnessEstimate stiffness = stiffness_of(pilot_scene);
-  const std::uint64_t start = std::clamp<std::uint64_t>(scene.steps / 16, 8, kMostPilotSteps);
-  MethodChoice choice;
-  choice.precision = scene.precision;
-  double best_cost = std::numeric_limits<double>::infinity(), spent = 0;
-  std::string reason;
-  // Highest order first: it usually sets the budget the others must beat.
-  std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
-  // Rigid bodies take the fused kernels only: the built-in methods.
-  if (pilot_scene.rigid_bodies.empty()) order.insert(order.end(), staged_methods.begin(), staged_methods.end());
-  std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
-  bool spent_out = false;
-  for (const Method* m : order) {
-    const double stable = largest_stable_step(*m, stiffness);
-    if (!(stable > 0)) {
-      reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " unstable here";
-      continue;
-    }
-    const std::uint64_t least = std::isfinite(stable) ? std::uint64_t(std::ceil(duration / stable)) : 1;
-    Pilot pilot(pilot_scene, *m, duration, spent);
-    std::optional<std::uint64_t> steps;
-    try {
-      steps = steps_needed(pilot, *m, start, tolerance, best_cost, least);
-    } catch (const SearchSpent&) {
-      reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " not tried (search budget spent)";
-      spent_out = true;
-      break;  // the best so far meets the tolerance; it may not be the cheapest
-    }
-    reason += (reason.empty() ? "" : ", ") + std::string(m->name) + " ";
-    if (!steps) {
-      reason += std::isfinite(best_cost) ? "costlier" : "cannot";
-      continue;
-    }
-    reason += std::to_string(*steps) + " steps";
-    choice.candidates.push_back({m, *steps});
-    const double cost = double(*steps) * m->evaluations();
-    if (cost < best_cost) {
-      best_cost = cost;
-      choice.method = m;
-      choice.steps = *steps;
-      choice.estimated_error = pilot.estimate(*steps);
-    }
-  }
-  // Error-controlled steps (particles only), within the stable step.
-  for (const Method* m : {&dopri5, &bs3}) {
-    if (spent_out || !pilot_scene.rigid_bodies.empty()) break;
-    const double stable = largest_stable_step(*m, stiffness);
-    if (!(stable > 0)) continue;
-    std::optional<AdaptivePick> pick;
-    try {
-      pick = adaptive_pick(pilot_scene, *m, duration, tolerance, stable, best_cost, spent);
-    } catch (const SearchSpent&) {
-      break;
-    }
-    if (!pick) continue;
-    char text[120];
-    std::snprintf(text, sizeof text, ", %s with error control (rtol = atol = %g) %.0f evaluations",
-                  std::string(m->name).c_str(), pick->step_tolerance, pick->evaluations);
-    reason += text;
-    if (pick->evaluations < best_cost) {
-      best_cost = pick->evaluations;
-      choice.method = m;
-      choice.step_tolerance = pick->step_tolerance;
-      choice.estimated_error = pick->estimated_error;
-    }
-  }
-  if (choice.method == nullptr) {
-    char text[256];
-    std::snprintf(text, sizeof text,
-                  "auto: no method reaches tolerance %g within 2^22 steps or 2^28 body-steps of "
-                  "pilot runs (give --method and --dt, or a larger tolerance%s)", tolerance,
-                  scene.precision == Precision::single ? "; in float, try double" : "");
-    throw Error(text);
-  }
-  choice.evaluations = best_cost;
-  if (!choice.step_tolerance) choice.dt = duration / double(choice.steps);
-  char head[96];
-  std::snprintf(head, sizeof head, "for error <= %g over %g s: ", tolerance, duration);
-  choice.reason = head + reason + "; picked " + std::string(choice.method->name) +
-                  (choice.step_tolerance ? " with error control" : "") + " (" +
-                  std::to_string(choice.method->evaluations()) + " force evaluations per step)";
-  const double stable = largest_stable_step(*choice.method, stiffness);
-  consider_float(pilot_scene, duration, tolerance, stable > 0 ? stable : std::numeric_limits<double>::infinity(), choice);
-  return choice;
+  MethodSearch search(scene, tolerance);
+  if (search.try_fixed_steps()) search.try_error_control();
+  return search.result(scene);
 }
 
 }  // namespace kinema

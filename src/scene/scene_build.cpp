@@ -1,0 +1,80 @@
+// Bodies and forces from a parsed scene: listed bodies first, then generated ones.
+#include "kinema/scene.hpp"
+
+#include <string>
+
+#include "kinema/error.hpp"
+#include "scene/generators.hpp"
+#include "scene/scene_checks.hpp"
+
+namespace kinema {
+namespace {
+
+template <class T>
+Vec3<T> converted(const Vec3<double>& v) {
+  return {T(v[0]), T(v[1]), T(v[2])};
+}
+
+}  // namespace
+
+template <class T>
+RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
+  check_generated<T>(scene);
+  RigidBodySet<T> set;
+  const bool generated = scene.generate && scene.generate->rigid;
+  set.reserve(scene.rigid_bodies.size() + (generated ? scene.generate->count : 0));
+  auto add = [&](const RigidSpec& b) {
+    set.add({converted<T>(b.position), converted<T>(b.velocity),
+             {T(b.orientation[0]), T(b.orientation[1]), T(b.orientation[2]), T(b.orientation[3])},
+             converted<T>(b.angular_momentum), T(b.mass), converted<T>(b.inertia)});
+  };
+  for (const RigidSpec& b : scene.rigid_bodies) add(b);
+  if (generated) for_each_generated_rigid_body(*scene.generate, add);
+  return set;
+}
+
+template <class T>
+ParticleSet<T> make_particles(const Scene& scene) {
+  check_generated<T>(scene);
+  auto v3 = [](const Vec3<double>& v) { return converted<T>(v); };
+  ParticleSet<T> set;
+  const std::size_t generated = scene.generate && !scene.generate->rigid ? scene.generate->count : 0;
+  set.reserve(scene.particles.size() + generated);
+  for (const BodySpec& b : scene.particles) {
+    if (b.kinematic) {
+      set.add_kinematic(v3(b.position), v3(b.velocity));
+    } else {
+      set.add(v3(b.position), v3(b.velocity), T(b.mass));
+    }
+  }
+  add_generated_particles(scene, set);
+  return set;
+}
+
+template <class T>
+ForceModel<T> make_forces(const Scene& scene) {
+  ForceModel<T> model;
+  for (std::size_t i = 0; i < scene.forces.size(); ++i) {
+    try {
+      model.add(scene.forces[i]);
+    } catch (const Error& e) {
+      throw Error("forces[" + std::to_string(i) + "]: " + e.what());
+    }
+  }
+  try {
+    if (scene.nbody) model.add(*scene.nbody);
+    for (const Springs& network : scene.springs) model.add(network);
+  } catch (const Error& e) {
+    throw Error(std::string("forces: ") + e.what());
+  }
+  return model;
+}
+
+template RigidBodySet<float> make_rigid_bodies<float>(const Scene&);
+template RigidBodySet<double> make_rigid_bodies<double>(const Scene&);
+template ParticleSet<float> make_particles<float>(const Scene&);
+template ParticleSet<double> make_particles<double>(const Scene&);
+template ForceModel<float> make_forces<float>(const Scene&);
+template ForceModel<double> make_forces<double>(const Scene&);
+
+}  // namespace kinema

@@ -1,0 +1,161 @@
+#include "scene/scene_checks.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <optional>
+#include <string>
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include "core/text.hpp"
+#include "kinema/error.hpp"
+#include "kinema/methods.hpp"
+#include "kinema/stepper.hpp"
+
+namespace kinema {
+namespace {
+
+// Arrays per body: px py pz vx vy vz inv_mass; rigid bodies add q (4), L (3) and the
+// inverse principal moments (3).
+constexpr double kParticleArrays = 7, kRigidArrays = 17;
+
+std::string gib(double bytes) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1 << 30));
+  return text;
+}
+
+template <class T>
+bool holds(double x) {
+  return std::isfinite(T(x));
+}
+
+template <class T>
+bool holds(const Vec3<double>& v) {
+  return holds<T>(v[0]) && holds<T>(v[1]) && holds<T>(v[2]);
+}
+
+double largest(const Vec3<double>& v) {
+  return std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])});
+}
+
+// Listed masses that T cannot invert (1e-50 is 0 in float), named by their JSON path.
+template <class T>
+void check_listed_masses(const Scene& scene) {
+  auto check = [](const char* list, std::size_t i, double mass) {
+    const T inverse = T(1) / T(mass);
+    if (!(std::isfinite(inverse) && inverse > 0)) {
+      char text[160];
+      std::snprintf(text, sizeof text, "%s[%zu].mass: %g has no finite nonzero inverse in %s", list,
+                    i, mass, type_name<T>().c_str());
+      throw Error(text);
+    }
+  };
+  for (std::size_t i = 0; i < scene.particles.size(); ++i) {
+    if (!scene.particles[i].kinematic) check("particles", i, scene.particles[i].mass);
+  }
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) check("rigid_bodies", i, scene.rigid_bodies[i].mass);
+}
+
+}  // namespace
+
+template <class T>
+void check_generated(const Scene& scene) {
+  if (!scene.generate) return;
+  const GenerateSpec& g = *scene.generate;
+  const std::string type = type_name<T>();
+  auto fail = [&](const std::string& key, const std::string& what) {
+    throw Error(printable("generate." + key + ": " + what));
+  };
+  const double need = state_bytes<T>(scene), have = usable_memory_bytes();
+  if (need > have) {
+    fail("count", std::to_string(g.count) + (g.rigid ? " rigid bodies" : " particles") + " in " +
+                      type + " need " + gib(need) + " of state, more than the " + gib(have) +
+                      " this process may use");
+  }
+  const T inv_mass = T(1) / T(g.mass);
+  if (!(std::isfinite(inv_mass) && inv_mass > 0)) {
+    fail("mass", "has no finite nonzero inverse in " + type);
+  }
+  const std::pair<const char*, const Vec3<double>*> boxes[] = {
+      {"position_min", &g.position_min}, {"position_max", &g.position_max},
+      {"velocity_min", &g.velocity_min}, {"velocity_max", &g.velocity_max},
+      {"angular_velocity_min", &g.angular_velocity_min},
+      {"angular_velocity_max", &g.angular_velocity_max}};
+  for (const auto& [key, box] : boxes) {
+    if (!holds<T>(*box)) fail(key, "overflows " + type);
+  }
+  if (g.plummer_radius > 0) {
+    if (!holds<T>(40 * g.plummer_radius)) fail("radius", "overflows " + type);
+    const double GM = (scene.nbody ? scene.nbody->G : 1) * g.mass * double(g.count);
+    if (!holds<T>(std::sqrt(2 * GM / g.plummer_radius))) {
+      fail("mass", "the cluster's escape speed overflows " + type);
+    }
+  }
+  if (!g.rigid) return;
+  for (int d = 0; d < 3; ++d) {
+    const T inverse = T(1) / T(g.inertia[d]);
+    if (!(std::isfinite(inverse) && inverse > 0)) fail("inertia", "a moment has no finite inverse in " + type);
+  }
+  // |L| <= max moment x |omega| <= max moment x sqrt(3) x largest component.
+  const double omega = std::max(largest(g.angular_velocity_min), largest(g.angular_velocity_max));
+  if (!holds<T>(largest(g.inertia) * std::sqrt(3.0) * omega)) {
+    fail("angular_velocity_max", "the angular momentum it gives overflows " + type);
+  }
+}
+
+double usable_memory_bytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  double bytes = pages > 0 && page > 0 ? double(pages) * double(page) : HUGE_VAL;
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
+    bytes = std::min(bytes, double(limit.rlim_cur));
+  }
+  // cgroup v2 ("max" when unlimited, then the read fails and nothing changes).
+  std::ifstream cgroup("/sys/fs/cgroup/memory.max");
+  double cgroup_bytes = 0;
+  if (cgroup >> cgroup_bytes && cgroup_bytes > 0) bytes = std::min(bytes, cgroup_bytes);
+  return bytes;
+}
+
+template <class T>
+double state_bytes(const Scene& scene) {
+  const bool rigid = scene.generate && scene.generate->rigid;
+  const double generated = scene.generate ? double(scene.generate->count) : 0;
+  const double particles = double(scene.particles.size()) + (rigid ? 0 : generated);
+  const double rigid_bodies = double(scene.rigid_bodies.size()) + (rigid ? generated : 0);
+  return (particles * kParticleArrays + rigid_bodies * kRigidArrays) * double(sizeof(T));
+}
+
+template <class T>
+void check_scene(const Scene& scene) {
+  check_listed_masses<T>(scene);
+  check_generated<T>(scene);
+  const ForceModel<T> forces = make_forces<T>(scene);
+  // Lowering the forces to T checks their sums; auto picks its own dt later.
+  const Method& method = scene.method == "auto" ? rk4 : method_by_name(scene.method);
+  std::optional<Stepper<T>> stepper;
+  try {
+    stepper.emplace(forces, method, on_calling_thread());
+  } catch (const Error& e) {
+    throw Error(std::string("forces: ") + e.what());
+  }
+  if (scene.method == "auto") return;
+  try {
+    stepper->check_step_size(T(scene.dt));
+  } catch (const Error& e) {
+    throw Error(std::string("dt: ") + e.what());
+  }
+}
+
+template void check_generated<float>(const Scene&);
+template void check_generated<double>(const Scene&);
+template void check_scene<float>(const Scene&);
+template void check_scene<double>(const Scene&);
+template double state_bytes<float>(const Scene&);
+template double state_bytes<double>(const Scene&);
+
+}  // namespace kinema

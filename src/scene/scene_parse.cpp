@@ -1,0 +1,306 @@
+// Scene files: the JSON document read into a Scene, every value checked where it stands.
+#include "kinema/scene.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <initializer_list>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "forces/force_terms.hpp"
+#include "kinema/error.hpp"
+#include "kinema/methods.hpp"
+#include "scene/generators.hpp"
+#include "scene/json_document.hpp"
+#include "scene/json_node.hpp"
+#include "scene/networks.hpp"
+
+namespace kinema {
+
+std::string_view precision_name(Precision p) { return p == Precision::single ? "float" : "double"; }
+
+namespace {
+
+using scene_json::json;
+using scene_json::Node;
+
+// A term from its home's fields: the keys it knows, vectors and numbers >= 0.
+template <class Term, class Info>
+Term parse_term(const Node& n, Info info) {
+  std::vector<std::string_view> keys{"type"};
+  for_each_field(info, [&](const auto& field) { keys.push_back(field.key); });
+  n.expect_object(keys);
+  Term term;
+  for_each_field(info, [&](const auto& field) {
+    if (!field.required && !n.has(field.key)) return;
+    const Node value = n.child(field.key);
+    if constexpr (std::decay_t<decltype(field)>::is_vector) {
+      term.*field.member = value.vec3();
+    } else {
+      term.*field.member = value.non_negative();
+    }
+  });
+  return term;
+}
+
+LocalTerm parse_force(const Node& n) {
+  if (!n.value.is_object()) n.fail("expected an object");
+  const std::string type = n.required("type").string();
+  std::optional<LocalTerm> term;
+  std::string known;
+  for_each_term([&]<class Term>() {
+    constexpr TermInfo<Term> info;
+    known += (known.empty() ? "" : ", ") + std::string(info.name);
+    if (type == info.name) term = parse_term<Term>(n, info);
+  });
+  if (!term) n.child("type").fail("unknown force '" + type + "' (known: " + known + ")");
+  return *term;
+}
+
+BodySpec parse_body(const Node& n) {
+  n.expect_object({"position", "velocity", "mass", "kinematic"});
+  BodySpec b;
+  b.position = n.required("position").vec3();
+  if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
+  if (n.has("kinematic")) b.kinematic = n.child("kinematic").boolean();
+  if (n.has("mass")) b.mass = n.child("mass").positive();
+  return b;
+}
+
+// Either bound may be left out (it is then 0): the error names one the scene gave.
+void check_box(const Node& n, const char* lo_key, const char* hi_key, const Vec3<double>& lo,
+               const Vec3<double>& hi) {
+  for (int d = 0; d < 3; ++d) {
+    if (lo[d] <= hi[d]) continue;
+    if (n.has(hi_key)) n.child(hi_key).fail(std::string("must not be below ") + lo_key + " in any component");
+    n.child(lo_key).fail(std::string("must not be above ") + hi_key + " (0 when left out) in any component");
+  }
+}
+
+// Principal moments, from [Ixx, Iyy, Izz] or a symmetric 3x3 matrix; the rotation from the
+// principal frame to the given body frame comes back through out_turn.
+Vec3<double> parse_inertia(const Node& n, Quat<double>& out_turn) {
+  out_turn = {1, 0, 0, 0};
+  if (n.value.is_array() && n.value.size() == 3 && n.value[0].is_array()) {
+    std::array<std::array<double, 3>, 3> tensor;
+    for (std::size_t i = 0; i < 3; ++i) {
+      const Node row = n.element(i);
+      tensor[i] = row.vec3();
+    }
+    try {
+      const PrincipalFrame frame = principal_frame(tensor);
+      out_turn = frame.rotation;
+      return frame.moments;
+    } catch (const Error& e) {
+      n.fail(std::string(e.what()).substr(9));  // drop the "inertia: " prefix
+    }
+  }
+  if (!n.value.is_array() || n.value.size() != 3) {
+    n.fail("expected [Ixx, Iyy, Izz] or a 3x3 matrix");
+  }
+  const Vec3<double> moments = n.vec3();
+  for (std::size_t i = 0; i < 3; ++i) {
+    if (!(moments[i] > 0)) n.element(i).fail("expected a number > 0");
+  }
+  return moments;
+}
+
+Quat<double> parse_orientation(const Node& n) {
+  if (!n.value.is_array() || n.value.size() != 4) n.fail("expected [w, x, y, z]");
+  Quat<double> q;
+  double largest = 0;
+  for (std::size_t k = 0; k < 4; ++k) q[k] = n.element(k).number(), largest = std::max(largest, std::abs(q[k]));
+  if (!(largest > 0)) n.fail("the quaternion is zero");
+  // Scaled by the largest component first, so neither tiny nor huge ones under- or overflow.
+  double norm = 0;
+  for (double& c : q) c /= largest, norm += c * c;
+  for (double& c : q) c /= std::sqrt(norm);
+  return q;
+}
+
+RigidSpec parse_rigid(const Node& n) {
+  n.expect_object({"position", "velocity", "orientation", "angular_velocity",
+                   "angular_momentum", "mass", "inertia"});
+  RigidSpec b;
+  b.position = n.required("position").vec3();
+  if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
+  if (n.has("mass")) b.mass = n.child("mass").positive();
+  Quat<double> given{1, 0, 0, 0}, turn{1, 0, 0, 0};
+  if (n.has("orientation")) given = parse_orientation(n.child("orientation"));
+  if (n.has("inertia")) b.inertia = parse_inertia(n.child("inertia"), turn);
+  b.orientation = multiply(given, turn);
+  if (n.has("angular_velocity") && n.has("angular_momentum")) {
+    n.child("angular_momentum").fail("give angular_velocity or angular_momentum, not both");
+  }
+  if (n.has("angular_momentum")) b.angular_momentum = n.child("angular_momentum").vec3();
+  if (n.has("angular_velocity")) {
+    b.angular_momentum =
+        momentum_from_velocity(b.orientation, b.inertia, n.child("angular_velocity").vec3());
+  }
+  return b;
+}
+
+// The keys of the Plummer form: no boxes, no rigid bodies.
+void parse_plummer(const Node& n, GenerateSpec& g) {
+  const Node d = n.child("distribution");
+  if (d.string() != "plummer") d.fail("expected \"box\" or \"plummer\"");
+  if (g.rigid) d.fail("a Plummer sphere is made of particles");
+  for (const char* key : {"position_min", "position_max", "velocity_min", "velocity_max", "inertia",
+                          "angular_velocity_min", "angular_velocity_max"}) {
+    if (n.has(key)) n.child(key).fail("only for \"distribution\": \"box\"");
+  }
+  g.plummer_radius = n.required("radius").positive();
+}
+
+GenerateSpec parse_generate(const Node& n) {
+  n.expect_object({"count", "seed", "position_min", "position_max", "velocity_min",
+                   "velocity_max", "mass", "kind", "inertia", "angular_velocity_min",
+                   "angular_velocity_max", "distribution", "radius"});
+  GenerateSpec g;
+  g.count = n.required("count").count(true);
+  // 2^32 bodies of 7 double arrays is 240 GB: far past any machine this runs on.
+  if (g.count > (std::uint64_t(1) << 32)) n.child("count").fail("expected at most 2^32 bodies");
+  if (n.has("seed")) g.seed = n.child("seed").count(true);
+  if (n.has("mass")) g.mass = n.child("mass").positive();
+  if (n.has("kind")) {
+    const Node kind = n.child("kind");
+    const std::string name = kind.string();
+    if (name != "particle" && name != "rigid") kind.fail("expected \"particle\" or \"rigid\"");
+    g.rigid = name == "rigid";
+  }
+  const bool plummer = n.has("distribution") && n.child("distribution").string() != "box";
+  if (plummer) {
+    parse_plummer(n, g);
+    return g;
+  }
+  if (n.has("radius")) n.child("radius").fail("only for \"distribution\": \"plummer\"");
+  g.position_min = n.required("position_min").vec3();
+  g.position_max = n.required("position_max").vec3();
+  if (n.has("velocity_min")) g.velocity_min = n.child("velocity_min").vec3();
+  if (n.has("velocity_max")) g.velocity_max = n.child("velocity_max").vec3();
+  for (const char* key : {"inertia", "angular_velocity_min", "angular_velocity_max"}) {
+    if (n.has(key) && !g.rigid) n.child(key).fail("only for \"kind\": \"rigid\"");
+  }
+  if (n.has("inertia")) {
+    Quat<double> turn;
+    const Node inertia = n.child("inertia");
+    g.inertia = parse_inertia(inertia, turn);
+    if (turn != Quat<double>{1, 0, 0, 0}) inertia.fail("expected principal moments [Ixx, Iyy, Izz]");
+  }
+  if (n.has("angular_velocity_min")) g.angular_velocity_min = n.child("angular_velocity_min").vec3();
+  if (n.has("angular_velocity_max")) g.angular_velocity_max = n.child("angular_velocity_max").vec3();
+  check_box(n, "position_min", "position_max", g.position_min, g.position_max);
+  check_box(n, "velocity_min", "velocity_max", g.velocity_min, g.velocity_max);
+  check_box(n, "angular_velocity_min", "angular_velocity_max", g.angular_velocity_min,
+            g.angular_velocity_max);
+  return g;
+}
+
+// Everything but the bodies and the forces: name, precision, method, steps, tolerances.
+void parse_settings(const Node& root, Scene& s) {
+  if (root.has("name")) s.name = root.child("name").string();
+  if (root.has("precision")) {
+    const Node p = root.child("precision");
+    const std::string name = p.string();
+    if (name == "float") {
+      s.precision = Precision::single;
+    } else if (name == "double") {
+      s.precision = Precision::dual;
+    } else {
+      p.fail("expected \"float\" or \"double\"");
+    }
+  }
+  if (root.has("method")) {
+    const Node m = root.child("method");
+    s.method = m.string();
+    try {
+      if (s.method != "auto") method_by_name(s.method);
+    } catch (const Error& e) {
+      m.fail(std::string(e.what()) + " or auto");
+    }
+  }
+  if (root.has("dt")) s.dt = root.child("dt").positive();
+  if (root.has("steps")) s.steps = root.child("steps").count(true);
+  if (root.has("tolerance")) s.tolerance = root.child("tolerance").positive();
+  if (root.has("rtol")) s.rtol = root.child("rtol").positive();
+  if (root.has("atol")) s.atol = root.child("atol").positive();
+}
+
+// A list of bodies under `key`, each read by `parse`.
+template <class Spec, class Parse>
+void parse_list(const Node& root, const char* key, std::vector<Spec>& out, Parse&& parse) {
+  if (!root.has(key)) return;
+  const Node list = root.child(key);
+  if (!list.value.is_array()) list.fail("expected an array");
+  for (std::size_t i = 0; i < list.value.size(); ++i) out.push_back(parse(list.element(i)));
+}
+
+void parse_bodies(const Node& root, Scene& s) {
+  parse_list(root, "particles", s.particles, parse_body);
+  parse_list(root, "rigid_bodies", s.rigid_bodies, parse_rigid);
+  if (root.has("generate")) s.generate = parse_generate(root.child("generate"));
+}
+
+// Local terms, then the coupled ones (N-body, spring networks), checked together at the end.
+void parse_forces(const Node& root, Scene& s) {
+  std::vector<Node> spring_terms;
+  if (root.has("forces")) {
+    const Node list = root.child("forces");
+    if (!list.value.is_array()) list.fail("expected an array");
+    for (std::size_t i = 0; i < list.value.size(); ++i) {
+      const Node term = list.element(i);
+      const std::string type = term.value.is_object() && term.has("type") ? term.child("type").string() : "";
+      if (!is_coupled_force(type)) {
+        s.forces.push_back(parse_force(term));
+        continue;
+      }
+      if (type == "nbody" && (!s.rigid_bodies.empty() || (s.generate && s.generate->rigid))) {
+        term.fail("nbody acts on particles only; the scene has rigid bodies");
+      }
+      parse_coupled_force(term, type, s);
+      if (type == "springs") spring_terms.push_back(term);
+    }
+  }
+  check_coupled(s, spring_terms);
+}
+
+}  // namespace
+
+Scene parse_scene(std::string_view text, std::string_view origin) {
+  const json doc = scene_json::parse_json(text, origin);
+  const Node root{doc, "", origin};
+  root.expect_object({"name", "precision", "method", "tolerance", "rtol", "atol", "dt", "steps", "particles",
+                      "rigid_bodies", "generate", "forces"});
+  Scene s;
+  parse_settings(root, s);
+  parse_bodies(root, s);
+  parse_forces(root, s);
+  if (s.particles.empty() && s.rigid_bodies.empty() && (!s.generate || s.generate->count == 0)) {
+    root.fail("the scene has no bodies (give 'particles', 'rigid_bodies' or 'generate')");
+  }
+  return s;
+}
+
+Scene load_scene(const std::filesystem::path& path) {
+  const std::string name = printable(path.string());
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) throw Error(name + ": is a directory, not a scene file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(name + ": cannot open the file");
+  // In chunks, up to one byte past the cap: a device or a pipe may never end.
+  std::string text;
+  char chunk[1 << 16];
+  while (text.size() <= kMaxSceneBytes && in.read(chunk, sizeof chunk).gcount() > 0) {
+    text.append(chunk, std::size_t(in.gcount()));
+  }
+  if (in.bad()) throw Error(name + ": cannot read the file");
+  if (text.size() > kMaxSceneBytes) {
+    throw Error(name + ": larger than " + std::to_string(kMaxSceneBytes >> 20) +
+                " MiB, the limit for a scene file (use \"generate\" for large scenes)");
+  }
+  return parse_scene(text, path.string());
+}
+
+}  // namespace kinema
