@@ -188,6 +188,104 @@ class Derivative {
   std::array<std::vector<T>, 3> acc_;
 };
 
+// J u ~ (f(y + eps u) - f(y)) / eps at the bodies' state y, with positions scaled by
+// `position_scale` (D J D^-1, D = diag(s, 1): see balance). eps is scaled so that the largest
+// component of eps u moves y by about sqrt(machine epsilon) of its size: the usual balance of
+// truncation and rounding, for every component that matters.
+template <class T>
+class JacobianProducts {
+ public:
+  explicit JacobianProducts(Derivative<T>& f) : f_(f), y_(f.state()), f0_(f(y_)) {
+    for (double c : y_) y_scale_ = std::max(y_scale_, std::abs(c));
+  }
+
+  std::size_t size() const { return y_.size(); }
+  std::vector<double> times(const std::vector<double>& u) {
+    double largest = 0;
+    for (double c : u) largest = std::max(largest, std::abs(c));
+    const double eps = std::sqrt(double(std::numeric_limits<T>::epsilon())) * y_scale_ / std::max(largest, 1e-300);
+    std::vector<double> shifted = y_;
+    for (std::size_t i = 0; i < y_.size(); ++i) shifted[i] += eps * u[i];
+    std::vector<double> ju = f_(shifted);
+    for (std::size_t i = 0; i < y_.size(); ++i) ju[i] = (ju[i] - f0_[i]) / eps;
+    return ju;
+  }
+  std::vector<double> balanced_times(std::vector<double> u) {
+    const std::size_t positions = y_.size() / 2;
+    for (std::size_t i = 0; i < positions; ++i) u[i] /= position_scale;
+    std::vector<double> w = times(u);
+    for (std::size_t i = 0; i < positions; ++i) w[i] *= position_scale;
+    return w;
+  }
+
+  double position_scale = 1;
+
+ private:
+  Derivative<T>& f_;
+  std::vector<double> y_, f0_;
+  double y_scale_ = 1;
+};
+
+// Positions and velocities differ in scale by the frequencies themselves, which makes J
+// far from normal ([0 I; -w^2 0]) and Krylov estimates erratic. Scaling positions by a
+// first guess s of |lambda| (a few power steps) balances it: D J D^-1 with D = diag(s, 1)
+// has J's eigenvalues and, for an oscillation, is nearly skew-symmetric.
+template <class T>
+void balance(JacobianProducts<T>& jacobian) {
+  std::vector<double> u(jacobian.size());
+  for (std::size_t i = 0; i < u.size(); ++i) u[i] = start_component(i);
+  for (int k = 0; k < 8; ++k) {
+    const double un = norm(u);
+    if (!(un > 0) || !std::isfinite(un)) break;
+    for (double& c : u) c /= un;
+    const std::vector<double> w1 = jacobian.times(u), w2 = jacobian.times(w1);
+    const double guess = std::abs(dominant_root(u, w1, w2));
+    if (guess > 0 && std::isfinite(guess)) jacobian.position_scale = guess;
+    u = w2;
+  }
+}
+
+// One cycle of restarted Arnoldi: up to m products from v build an orthonormal Krylov basis
+// and the projection H = V^T J V, whose dominant eigenvalue approaches J's far faster than
+// plain power iteration does where the top of the spectrum is dense (a cloth's modes). `done`
+// counts the products, at most `budget` of them. Returns H's dominant eigenvalue; v becomes
+// the basis combination in H's dominant subspace, the next cycle's start.
+template <class T>
+std::complex<double> arnoldi_cycle(JacobianProducts<T>& jacobian, std::vector<double>& v, int m, int& done,
+                                   int budget) {
+  std::vector<std::vector<double>> basis{v};
+  std::vector<double> h(std::size_t(m * m), 0.0);
+  int k = 0;
+  while (k < m && done < budget) {
+    std::vector<double> w = jacobian.balanced_times(basis[std::size_t(k)]);
+    ++done;
+    const double before = norm(w);
+    for (int pass = 0; pass < 2; ++pass) {  // Gram-Schmidt twice: orthogonal to rounding
+      for (int i = 0; i <= k; ++i) {
+        const double c = dot(basis[std::size_t(i)], w);
+        h[std::size_t(i * m + k)] += c;
+        for (std::size_t j = 0; j < w.size(); ++j) w[j] -= c * basis[std::size_t(i)][j];
+      }
+    }
+    const double beta = norm(w);
+    ++k;
+    if (!(beta > 1e-10 * before) || k == m) break;  // an invariant subspace, or the basis is full
+    h[std::size_t(k * m + k - 1)] = beta;
+    for (double& c : w) c /= beta;
+    basis.push_back(std::move(w));
+  }
+  std::vector<double> hk(std::size_t(k * k));
+  for (int i = 0; i < k; ++i) {
+    for (int j = 0; j < k; ++j) hk[std::size_t(i * k + j)] = h[std::size_t(i * m + j)];
+  }
+  const auto [root, combination] = dominant_of(hk, std::size_t(k));
+  std::fill(v.begin(), v.end(), 0.0);
+  for (int i = 0; i < k; ++i) {
+    for (std::size_t j = 0; j < v.size(); ++j) v[j] += combination[std::size_t(i)] * basis[std::size_t(i)][j];
+  }
+  return root;
+}
+
 }  // namespace
 
 template <class T>
@@ -197,92 +295,21 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
   Derivative<T> f(bodies, accelerations);
   StiffnessEstimate e;
   if (f.size() == 0) return e;
-  const std::vector<double> y = f.state(), f0 = f(y);
-  double y_scale = 1;
-  for (double c : y) y_scale = std::max(y_scale, std::abs(c));
-  // J u ~ (f(y + eps u) - f(y)) / eps, eps scaled so that the largest component of eps u
-  // moves y by about sqrt(machine epsilon) of its size: the usual balance of truncation
-  // and rounding, for every component that matters.
-  const auto jacobian_times = [&](const std::vector<double>& u) {
-    double largest = 0;
-    for (double c : u) largest = std::max(largest, std::abs(c));
-    const double eps = std::sqrt(double(std::numeric_limits<T>::epsilon())) * y_scale / std::max(largest, 1e-300);
-    std::vector<double> shifted = y;
-    for (std::size_t i = 0; i < y.size(); ++i) shifted[i] += eps * u[i];
-    std::vector<double> ju = f(shifted);
-    for (std::size_t i = 0; i < y.size(); ++i) ju[i] = (ju[i] - f0[i]) / eps;
-    return ju;
-  };
-  // Positions and velocities differ in scale by the frequencies themselves, which makes J
-  // far from normal ([0 I; -w^2 0]) and Krylov estimates erratic. Scaling positions by a
-  // first guess s of |lambda| (a few power steps) balances it: D J D^-1 with D = diag(s, 1)
-  // has J's eigenvalues and, for an oscillation, is nearly skew-symmetric.
-  const std::size_t positions = y.size() / 2;
-  double s_scale = 1;
-  {
-    std::vector<double> u(y.size());
-    for (std::size_t i = 0; i < u.size(); ++i) u[i] = start_component(i);
-    for (int k = 0; k < 8; ++k) {
-      const double un = norm(u);
-      if (!(un > 0) || !std::isfinite(un)) break;
-      for (double& c : u) c /= un;
-      const std::vector<double> w1 = jacobian_times(u), w2 = jacobian_times(w1);
-      const double guess = std::abs(dominant_root(u, w1, w2));
-      if (guess > 0 && std::isfinite(guess)) s_scale = guess;
-      u = w2;
-    }
-  }
-  const auto balanced_times = [&](std::vector<double> u) {
-    for (std::size_t i = 0; i < positions; ++i) u[i] /= s_scale;
-    std::vector<double> w = jacobian_times(u);
-    for (std::size_t i = 0; i < positions; ++i) w[i] *= s_scale;
-    return w;
-  };
-  // Restarted Arnoldi: m Jacobian products build an orthonormal Krylov basis V and the
-  // projection H = V^T J V, whose dominant eigenvalue approaches J's far faster than plain
-  // power iteration does where the top of the spectrum is dense (a cloth's modes); each
-  // cycle restarts from the basis combination in H's dominant subspace.
+  JacobianProducts<T> jacobian(f);
+  balance(jacobian);
+  // Krylov bases of up to 20 vectors, fewer when they would pass 512 MiB.
   const std::size_t memory_cap = std::size_t(512) << 20;
   const int most = std::min(iterations, 20);
-  const int m = int(std::clamp<std::size_t>(memory_cap / (8 * y.size()), std::size_t(std::min(2, most)), std::size_t(most)));
-  std::vector<double> v(y.size());
+  const int m = int(std::clamp<std::size_t>(memory_cap / (8 * jacobian.size()), std::size_t(std::min(2, most)),
+                                            std::size_t(most)));
+  std::vector<double> v(jacobian.size());
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = start_component(i);
   std::complex<double> dominant = 0;
   for (int done = 0; done < iterations;) {
     const double vn = norm(v);
     if (!(vn > 0) || !std::isfinite(vn)) break;
     for (double& c : v) c /= vn;
-    std::vector<std::vector<double>> basis{v};
-    std::vector<double> h(std::size_t(m * m), 0.0);
-    int k = 0;
-    while (k < m && done < iterations) {
-      std::vector<double> w = balanced_times(basis[std::size_t(k)]);
-      ++done;
-      const double before = norm(w);
-      for (int pass = 0; pass < 2; ++pass) {  // Gram-Schmidt twice: orthogonal to rounding
-        for (int i = 0; i <= k; ++i) {
-          const double c = dot(basis[std::size_t(i)], w);
-          h[std::size_t(i * m + k)] += c;
-          for (std::size_t j = 0; j < w.size(); ++j) w[j] -= c * basis[std::size_t(i)][j];
-        }
-      }
-      const double beta = norm(w);
-      ++k;
-      if (!(beta > 1e-10 * before) || k == m) break;  // an invariant subspace, or the basis is full
-      h[std::size_t(k * m + k - 1)] = beta;
-      for (double& c : w) c /= beta;
-      basis.push_back(std::move(w));
-    }
-    std::vector<double> hk(std::size_t(k * k));
-    for (int i = 0; i < k; ++i) {
-      for (int j = 0; j < k; ++j) hk[std::size_t(i * k + j)] = h[std::size_t(i * m + j)];
-    }
-    const auto [root, combination] = dominant_of(hk, std::size_t(k));
-    dominant = root;
-    std::fill(v.begin(), v.end(), 0.0);
-    for (int i = 0; i < k; ++i) {
-      for (std::size_t j = 0; j < v.size(); ++j) v[j] += combination[std::size_t(i)] * basis[std::size_t(i)][j];
-    }
+    dominant = arnoldi_cycle(jacobian, v, m, done, iterations);
   }
   e.evaluations = f.evaluations;
   e.magnitude = std::abs(dominant);
