@@ -45,10 +45,9 @@ void AlignedArray<T>::Free::operator()(T* p) const {
 namespace {
 
 // Arrays of a page or more start at one of eight offsets within a page, 512 bytes apart,
-// taken in turn: the arrays of a set, allocated together, then sit at distinct offsets.
-// Measured on Zen 4 (rk4, AVX-512, 1 thread, ns per body-step), against the offsets the heap
-// happens to hand out: particles double 100k 2.19 -> 2.09, 4M 2.7 -> 2.4; rigid bodies
-// double 100k 19.9 -> 19.5. All arrays at one offset: particles 2.05, 4M 2.8, rigid 21.5.
+// taken in turn: the arrays of a set, allocated together, then sit at distinct offsets, so
+// that the kernels' many streams do not evict one another in the cache sets (faster than the
+// offsets the heap happens to hand out: bench/README.md, "Measured while building the kernels").
 constexpr std::size_t kPageBytes = 4096, kSlotBytes = 512;
 std::atomic<std::size_t> next_slot{0};
 

@@ -108,9 +108,7 @@ KINEMA_INLINE Vec<V> linear_part(const B& body, const Vec<V>& xr) {
 
 // The linear part at a Runge-Kutta stage position x + step * sum, from its value at x:
 // p + (-k / m) step sum. Exact in real arithmetic, it skips forming the stage position (one
-// fma per component instead of two, and a shorter chain from one stage to the next):
-// rk4, 100k bodies, 1 thread, AVX-512, Zen 4, best of 7: double 1.86 -> 1.67, float 0.94 ->
-// 0.835 ns per body-step.
+// fma per component instead of two, and a shorter chain from one stage to the next).
 template <class V, class B>
 KINEMA_INLINE Vec<V> linear_part_at(const B& body, value_t<V> step, const Vec<V>& sum,
                                     const Vec<V>& p) {
@@ -233,8 +231,7 @@ KINEMA_INLINE Vec<V> stage_linear_part(value_t<V> h, const B& body, const Vec<V>
 }
 
 // Asks for the state 1 KiB ahead, once per cache line: with 13 streams in flight the
-// hardware prefetcher alone leaves DRAM latency exposed (measured: 4M bodies, rk4 float,
-// AVX-512, 1.69 -> 1.46 ns per body-step on Zen 4).
+// hardware prefetcher alone leaves DRAM latency exposed.
 template <class V, class T>
 KINEMA_INLINE void prefetch(const BodyArrays<T>& b, std::size_t i) {
   constexpr std::size_t ahead = 1024 / sizeof(T), line = 64 / sizeof(T);

@@ -18,8 +18,8 @@
 #include "kernels/exact_fma.hpp"
 
 // Kernel helpers must melt into the kernel loops: GCC's heuristics stop inlining the
-// larger ones once several kernels share them (measured: rk4 float 1.2 -> 2.2 ns per
-// body-step when `advanced` became a call).
+// larger ones once several kernels share them, and a helper left as a call costs the kernel
+// most of its speed.
 #ifndef KINEMA_INLINE
 #define KINEMA_INLINE inline __attribute__((always_inline))
 #endif
@@ -120,8 +120,7 @@ KINEMA_INLINE T mul_add(T a, T b, T c) {
   return std::fma(a, b, c);
 }
 
-// SSE2 float: four lanes emulated at once (exact_fma.hpp), 1.5x faster than four libm
-// calls (measured: rk4, 100k bodies, 86 against 127 ns per body-step, Zen 4).
+// SSE2 float: four lanes emulated at once (exact_fma.hpp), faster than four libm calls.
 KINEMA_INLINE xsimd::batch<float, xsimd::sse2> mul_add(const xsimd::batch<float, xsimd::sse2>& a,
                                               const xsimd::batch<float, xsimd::sse2>& b,
                                               const xsimd::batch<float, xsimd::sse2>& c) {
