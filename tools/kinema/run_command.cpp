@@ -176,74 +176,118 @@ struct RunContext {
   std::optional<nlohmann::ordered_json> auto_choice;
 };
 
-template <class T>
-int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
+StepperOptions stepper_options(const RunOptions& o) {
   StepperOptions options;
   options.isa = o.isa;
   // More threads than the machine has would only wait on each other (and make oneTBB warn).
   options.threads = std::min(o.threads == 0 ? hardware_threads() : o.threads, hardware_threads());
   options.relaxed_fma = o.relaxed_fma;
-  World<T> world = [&] {
-    try {
-      return World<T>(scene, method_by_name(scene.method), options);
-    } catch (const Error& e) {  // bodies or forces the precision cannot hold: name the file
-      throw Error(o.scene_path + ": " + e.what());
-    }
-  }();
-  // Opened once the world stands (a scene that fails leaves no file behind), before the run.
-  ReportFile summary_file(o.summary_path, "summary");
-  const StiffnessEstimate stiffness = stiffness_at_start(scene, options);
-  const double stable_step = largest_stable_step(method_by_name(scene.method), stiffness);
-  std::optional<Tolerances> tolerances = tolerances_of(scene);
-  if (tolerances && stable_step > 0) tolerances->max_step = stable_step;  // error control never goes past it
-  if (!tolerances) check_stable_step(scene, o, stiffness, stable_step);
-  std::optional<TrajectoryWriter> trajectory;
-  if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
-  const T h = T(scene.dt);
-  const double initial_energy = world.total_energy();
-  const std::size_t bodies = world.particles.size() + world.rigid.size();
+  return options;
+}
 
-  // In chunks, for the progress bar, the trajectory and signals: the same bits as one call.
-  // Error-controlled steps land on each chunk's end, so their chunks are longer: a sixteenth
-  // of the run or more.
-  const std::uint64_t per_chunk = std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1))));
-  const std::uint64_t chunk = tolerances ? std::max<std::uint64_t>({1, scene.steps / 16, per_chunk})
-                                         : std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), per_chunk);
+template <class T>
+World<T> build_world(const Scene& scene, const RunOptions& o, const StepperOptions& options) {
+  try {
+    return World<T>(scene, method_by_name(scene.method), options);
+  } catch (const Error& e) {  // bodies or forces the precision cannot hold: name the file
+    throw Error(o.scene_path + ": " + e.what());
+  }
+}
+
+template <class T>
+std::size_t body_count(const World<T>& world) {
+  return world.particles.size() + world.rigid.size();
+}
+
+// What the run knows about its steps before the first: the scene's stiffness at the start,
+// the method's largest stable step there, and the error control if any.
+struct StepPlan {
+  StiffnessEstimate stiffness;
+  double stable_step = 0;
+  std::optional<Tolerances> tolerances;
+};
+
+StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOptions& options) {
+  StepPlan plan;
+  plan.stiffness = stiffness_at_start(scene, options);
+  plan.stable_step = largest_stable_step(method_by_name(scene.method), plan.stiffness);
+  plan.tolerances = tolerances_of(scene);
+  // Error control never goes past the stable step; fixed steps are checked against it.
+  if (plan.tolerances && plan.stable_step > 0) plan.tolerances->max_step = plan.stable_step;
+  if (!plan.tolerances) check_stable_step(scene, o, plan.stiffness, plan.stable_step);
+  return plan;
+}
+
+// Steps per advance call: for the progress bar, the trajectory and signals (the same bits as
+// one call). Error-controlled steps land on each call's end, so their calls are longer: a
+// sixteenth of the run or more.
+std::uint64_t steps_per_call(const Scene& scene, std::size_t bodies, bool adaptive) {
+  const auto bounded = std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1))));
+  return adaptive ? std::max<std::uint64_t>({1, scene.steps / 16, bounded})
+                  : std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), bounded);
+}
+
+// What stepping did.
+struct Stepped {
+  std::uint64_t done = 0;   // steps of dt completed (error control: their span)
   double wall_seconds = 0;  // stepping only: loading, checking and writing are not timed
-  Progress progress("kinema run", o.quiet);
-  std::uint64_t done = 0;
-  if (trajectory) trajectory->write(0, world.time(), world.particles, world.rigid);
   std::optional<BlowUp> blow_up;
   AdaptiveStats adaptive;
-  while (done < scene.steps && interrupting_signal() == 0) {
-    std::uint64_t n = std::min(chunk, scene.steps - done);
-    if (trajectory) n = std::min(n, o.every - done % o.every);  // stop at each K-th step
-    const auto start = Clock::now();
-    if (tolerances) {
-      advance_adaptive(world, double(done + n) * scene.dt, *tolerances, adaptive);
-    } else {
-      world.advance(h, n);
-    }
-    wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
+};
+
+// Steps from `done` to done + n (error control: over that span), timed.
+template <class T>
+void advance_timed(World<T>& world, const Scene& scene, const std::optional<Tolerances>& tolerances,
+                   std::uint64_t n, Stepped& s) {
+  const auto start = Clock::now();
+  if (tolerances) {
+    advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive);
+  } else {
+    world.advance(T(scene.dt), n);
+  }
+  s.wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Every K-th step, the last, and the one that stopped being finite.
+bool trajectory_due(const Scene& scene, const RunOptions& o, std::uint64_t done, bool finite) {
+  return done % o.every == 0 || done == scene.steps || !finite;
+}
+
+template <class T>
+Stepped step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const StepperOptions& options,
+                   const std::optional<Tolerances>& tolerances, std::optional<TrajectoryWriter>& trajectory) {
+  const std::uint64_t chunk = steps_per_call(scene, body_count(world), tolerances.has_value());
+  Progress progress("kinema run", o.quiet);
+  Stepped s;
+  if (trajectory) trajectory->write(0, world.time(), world.particles, world.rigid);
+  while (s.done < scene.steps && interrupting_signal() == 0) {
+    std::uint64_t n = std::min(chunk, scene.steps - s.done);
+    if (trajectory) n = std::min(n, o.every - s.done % o.every);  // stop at each K-th step
+    advance_timed(world, scene, tolerances, n, s);
     const bool finite = world.finite();
-    if (!finite) blow_up = find_blow_up<T>(scene, options, world, done, n);
-    done += n;
-    progress.update(double(done) / double(scene.steps));
-    if (trajectory && (done % o.every == 0 || done == scene.steps || !finite)) {
-      trajectory->write(done, world.time(), world.particles, world.rigid);
+    if (!finite) s.blow_up = find_blow_up<T>(scene, options, world, s.done, n);
+    s.done += n;
+    progress.update(double(s.done) / double(scene.steps));
+    if (trajectory && trajectory_due(scene, o, s.done, finite)) {
+      trajectory->write(s.done, world.time(), world.particles, world.rigid);
     }
     if (!finite) break;
   }
   if (trajectory) trajectory->close();
   progress.finish();
+  return s;
+}
 
+// What ran: the scene, the bodies, the method and where it ran.
+template <class T>
+void describe_setup(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene,
+                    const RunOptions& o, const Stepped& s) {
   const Stepper<T>& stepper = world.main_stepper();
-  nlohmann::ordered_json summary;
   summary["scene"] = scene.name;
-  summary["bodies"] = bodies;
+  summary["bodies"] = body_count(world);
   summary["particles"] = world.particles.size();
   summary["rigid_bodies"] = world.rigid.size();
-  summary["steps"] = done;
+  summary["steps"] = s.done;
   summary["method"] = std::string(stepper.method().name);
   summary["path"] = stepper.fused() ? "fused" : "staged";
   summary["dt"] = scene.dt;
@@ -253,58 +297,104 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
   summary["workers_used"] = stepper.chosen_workers();  // what the measurements favoured (0: the calling thread)
-  if (tolerances) {
-    summary["rtol"] = tolerances->rtol;
-    summary["atol"] = tolerances->atol;
-    summary["accepted_steps"] = adaptive.accepted;
-    summary["rejected_steps"] = adaptive.rejected;
-    summary["smallest_step"] = adaptive.smallest_step;
-    summary["largest_step"] = adaptive.largest_step;
-  }
-  summary["stiffness"] = stiffness.magnitude;
-  if (std::isfinite(stable_step)) summary["largest_stable_step"] = stable_step;
-  summary["force_evaluations"] = tolerances ? adaptive.evaluations
-                                            : done * std::uint64_t(stepper.method().evaluations());
-  summary["wall_seconds"] = wall_seconds;
-  summary["body_steps_per_second"] = wall_seconds > 0 ? double(bodies) * double(done) / wall_seconds : 0.0;
+}
+
+void describe_error_control(nlohmann::ordered_json& summary, const Tolerances& tolerances, const AdaptiveStats& a) {
+  summary["rtol"] = tolerances.rtol;
+  summary["atol"] = tolerances.atol;
+  summary["accepted_steps"] = a.accepted;
+  summary["rejected_steps"] = a.rejected;
+  summary["smallest_step"] = a.smallest_step;
+  summary["largest_step"] = a.largest_step;
+}
+
+// The stiffness, the work done, its speed and the energy.
+template <class T>
+void describe_cost(nlohmann::ordered_json& summary, const World<T>& world, const StepPlan& plan, const Stepped& s,
+                   double initial_energy) {
+  summary["stiffness"] = plan.stiffness.magnitude;
+  if (std::isfinite(plan.stable_step)) summary["largest_stable_step"] = plan.stable_step;
+  summary["force_evaluations"] = plan.tolerances ? s.adaptive.evaluations
+                                                 : s.done * std::uint64_t(world.main_stepper().method().evaluations());
+  summary["wall_seconds"] = s.wall_seconds;
+  summary["body_steps_per_second"] =
+      s.wall_seconds > 0 ? double(body_count(world)) * double(s.done) / s.wall_seconds : 0.0;
   summary["energy_initial"] = initial_energy;
   summary["energy_final"] = world.total_energy();
-  summary["finite"] = !blow_up;
-  if (blow_up) {
+}
+
+void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const Stepped& s) {
+  summary["finite"] = !s.blow_up;
+  if (s.blow_up) {
     auto& where = summary["first_non_finite"];
-    if (blow_up->first == blow_up->last) {
-      where["step"] = blow_up->last;
+    if (s.blow_up->first == s.blow_up->last) {
+      where["step"] = s.blow_up->last;
     } else {
-      where["between_steps"] = {blow_up->first, blow_up->last};
+      where["between_steps"] = {s.blow_up->first, s.blow_up->last};
     }
-    where.update({{"t", blow_up->t}, {"body", blow_up->body}, {"field", blow_up->field}});
+    where.update({{"t", s.blow_up->t}, {"body", s.blow_up->body}, {"field", s.blow_up->field}});
   }
   const int signal = interrupting_signal();
-  if (signal != 0 && done < scene.steps) {
+  if (signal != 0 && s.done < scene.steps) {
     summary["interrupted"] = signal_name(signal);
     summary["steps_requested"] = scene.steps;
   }
-  if (context.auto_choice) summary["auto"] = *context.auto_choice;
+}
 
-  summary_file.write(summary);
-  if (!o.quiet) print_summary(summary);
-  if (blow_up) {
-    const std::string steps = blow_up->first == blow_up->last
-        ? "after step " + std::to_string(blow_up->last)
-        : "between steps " + std::to_string(blow_up->first) + " and " + std::to_string(blow_up->last);
-    std::fprintf(stderr,
-                 "kinema: error: the state is no longer finite %s (t = %g): body %zu, %s (try a "
-                 "smaller dt or a more stable method)\n",
-                 steps.c_str(), blow_up->t, blow_up->body, blow_up->field.c_str());
+template <class T>
+nlohmann::ordered_json summarize(const World<T>& world, const Scene& scene, const RunOptions& o,
+                                 const StepPlan& plan, const Stepped& s, double initial_energy,
+                                 const RunContext& context) {
+  nlohmann::ordered_json summary;
+  describe_setup(summary, world, scene, o, s);
+  if (plan.tolerances) describe_error_control(summary, *plan.tolerances, s.adaptive);
+  describe_cost(summary, world, plan, s, initial_energy);
+  describe_end(summary, scene, s);
+  if (context.auto_choice) summary["auto"] = *context.auto_choice;
+  return summary;
+}
+
+void report_blow_up(const BlowUp& b) {
+  const std::string steps = b.first == b.last
+      ? "after step " + std::to_string(b.last)
+      : "between steps " + std::to_string(b.first) + " and " + std::to_string(b.last);
+  std::fprintf(stderr,
+               "kinema: error: the state is no longer finite %s (t = %g): body %zu, %s (try a "
+               "smaller dt or a more stable method)\n",
+               steps.c_str(), b.t, b.body, b.field.c_str());
+}
+
+// The exit code, with a line on stderr when the run did not end as asked.
+int finish(const nlohmann::ordered_json& summary, const Scene& scene, const Stepped& s) {
+  if (s.blow_up) {
+    report_blow_up(*s.blow_up);
     return 3;
   }
   if (summary.contains("interrupted")) {
+    const int signal = interrupting_signal();
     std::fprintf(stderr, "kinema: stopped by %s after step %llu of %llu; outputs are complete to there\n",
-                 signal_name(signal).c_str(), static_cast<unsigned long long>(done),
+                 signal_name(signal).c_str(), static_cast<unsigned long long>(s.done),
                  static_cast<unsigned long long>(scene.steps));
     return 128 + signal;
   }
   return 0;
+}
+
+template <class T>
+int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
+  const StepperOptions options = stepper_options(o);
+  World<T> world = build_world<T>(scene, o, options);
+  // Opened once the world stands (a scene that fails leaves no file behind), before the run.
+  ReportFile summary_file(o.summary_path, "summary");
+  const StepPlan plan = plan_steps(scene, o, options);
+  std::optional<TrajectoryWriter> trajectory;
+  if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
+  const double initial_energy = world.total_energy();
+  const Stepped stepped = step_scene(world, scene, o, options, plan.tolerances, trajectory);
+  const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);
+  summary_file.write(summary);
+  if (!o.quiet) print_summary(summary);
+  return finish(summary, scene, stepped);
 }
 
 }  // namespace
