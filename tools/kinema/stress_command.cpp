@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "interrupt.hpp"
+#include "numbers.hpp"
 #include "progress.hpp"
 #include "report_file.hpp"
 #include "stress_scene.hpp"
@@ -347,8 +348,9 @@ Json stress_report(const StressOptions& o, const StressSetup<T>& setup, const st
   j["guard"] = guard_name(o.guard);
   j["dt"] = setup.dt;
   j["steps"] = out.done;  // completed by every group
-  j["wall_seconds"] = out.stepping_seconds;
-  j["body_steps_per_second"] = out.stepping_seconds > 0 ? double(setup.bodies) * double(out.done) / out.stepping_seconds : 0.0;
+  j["wall_seconds"] = number(measured(out.stepping_seconds));
+  j["body_steps_per_second"] =
+      number(out.stepping_seconds > 0 ? measured(double(setup.bodies) * double(out.done) / out.stepping_seconds) : 0.0);
   j["throughput"] = throughput_report(out.intervals);
   j["memory"] = memory_report(setup, out, at_start);
   j["groups"] = Json::array();
