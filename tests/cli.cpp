@@ -444,6 +444,24 @@ TEST_CASE("run: workers_used comes with what the stepper measured", "[cli]") {
   }
 }
 
+TEST_CASE("--version prints the library's version", "[cli]") {
+  const Result r = kinema_cli("--version");
+  CHECK(r.code == 0);
+  CHECK(r.out == std::string("kinema ") + KINEMA_VERSION_STRING + "\n");
+  CHECK(r.out == "kinema " + std::to_string(KINEMA_VERSION_MAJOR) + "." + std::to_string(KINEMA_VERSION_MINOR) + "." +
+                     std::to_string(KINEMA_VERSION_PATCH) + "\n");
+  CHECK(kinema_cli("--help").out.find("--version") != std::string::npos);
+}
+
+TEST_CASE("a usage error points to the help of the command it is in", "[cli]") {
+  CHECK(kinema_cli("run").err.find("scene is required (see kinema run --help)") != std::string::npos);
+  CHECK(kinema_cli("run " + scene("damped_spring.json") + " --steps x").err.find("(see kinema run --help)") != std::string::npos);
+  CHECK(kinema_cli("stress --bodies 0").err.find("(see kinema stress --help)") != std::string::npos);
+  CHECK(kinema_cli("chart").err.find("(see kinema chart --help)") != std::string::npos);
+  CHECK(kinema_cli("stability").err.find("(see kinema stability --help)") != std::string::npos);
+  CHECK(kinema_cli("").err.find("(see kinema --help)") != std::string::npos);
+}
+
 TEST_CASE("run -q: the stable-step warning still prints", "[cli]") {
   // Euler on v' = -30 v at h = 0.1: past its largest stable step (2/30), growing twofold a step.
   const fs::path path = write("unstable.json", R"({"precision": "double", "method": "euler", "dt": 0.1, "steps": 20,
