@@ -416,8 +416,9 @@ int stress_exit_code(const StressOptions& o, const StressOutcome& out) {
     return 3;
   }
   if (const int signal = interrupting_signal()) {
-    std::fprintf(stderr, "kinema: stopped by %s after step %llu; the report is complete to there\n",
-                 signal_name(signal).c_str(), static_cast<unsigned long long>(out.done));
+    std::fprintf(stderr, "kinema: stopped by %s after step %llu%s\n", signal_name(signal).c_str(),
+                 static_cast<unsigned long long>(out.done),
+                 o.report_path.empty() ? "" : "; the report is complete to there");
     return 128 + signal;
   }
   return 0;
