@@ -505,3 +505,31 @@ TEST_CASE("run --method auto: one readable line for its choice, costs in force e
   }
 }
 
+TEST_CASE("stability: a table of predicted and measured steps, and where an orbit breaks the linear bound", "[cli][stability]") {
+  const fs::path out = work_dir() / "stability_table";
+  const Result orbit = kinema_cli("stability " + scene("kepler_circular.json") + " --methods euler,rk4 --out " + out.string());
+  REQUIRE(orbit.code == 0);
+  const auto limits = csv_rows(out / "step_limits.csv");
+  REQUIRE(limits.size() == 2);
+  CHECK(orbit.out.find("  method              predicted   measured   measured/predicted\n") != std::string::npos);
+  for (const auto& row : limits) {
+    INFO(row.at("method"));
+    const double predicted = number(row, "predicted_step"), measured = number(row, "measured_step");
+    char line[160];
+    std::snprintf(line, sizeof line, "  %-18s %10.4g %10.4g   %.2f *\n", row.at("method").c_str(), predicted, measured,
+                  measured / predicted);
+    CHECK(measured < 0.8 * predicted);  // the orbit breaks the bound for both
+    CHECK(orbit.out.find(line) != std::string::npos);
+  }
+  CHECK(orbit.out.find("(|lambda| = 1.414 /s)") != std::string::npos);  // sqrt(2): the radial mode at r = 1
+  CHECK(orbit.out.find("On an orbit that mode is not the\n  orbit's turning") != std::string::npos);
+
+  // A linear scene: the prediction holds, and there is nothing to explain.
+  const Result spring = kinema_cli("stability " + scene("damped_spring.json") + " --methods rk4,velocity_verlet --out " + out.string());
+  REQUIRE(spring.code == 0);
+  for (const auto& row : csv_rows(out / "step_limits.csv")) {
+    CHECK(number(row, "measured_step") == Approx(number(row, "predicted_step")).epsilon(0.05));
+  }
+  CHECK(spring.out.find(" *\n") == std::string::npos);
+  CHECK(spring.out.find("breaks the linear bound") == std::string::npos);
+}
