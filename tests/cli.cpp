@@ -444,7 +444,7 @@ TEST_CASE("run: workers_used comes with what the stepper measured", "[cli]") {
   }
 }
 
-TEST_CASE("--version prints the library's version", "[cli]") {
+TEST_CASE("kinema --version prints the library's version", "[cli]") {
   const Result r = kinema_cli("--version");
   CHECK(r.code == 0);
   CHECK(r.out == std::string("kinema ") + KINEMA_VERSION_STRING + "\n");
