@@ -154,7 +154,9 @@ TEST_CASE("run --rtol: dopri5 chooses its steps over the scene's duration and re
   const auto j = nlohmann::json::parse(read(summary));
   CHECK(j["t_final"] == 4.0);  // the last step lands on dt x steps
   CHECK(j["rtol"] == 1e-10);
-  const auto accepted = j["accepted_steps"].get<std::uint64_t>(), rejected = j["rejected_steps"].get<std::uint64_t>();
+  // The steps taken (accepted), not the scene's nominal 4000 of dt.
+  const auto accepted = j["steps"].get<std::uint64_t>(), rejected = j["rejected_steps"].get<std::uint64_t>();
+  CHECK_FALSE(j.contains("dt"));
   CHECK(accepted > 50);
   CHECK(accepted < 1000);  // far fewer than the scene's 4000 fixed steps
   // Six evaluations per attempt (the seventh is the next step's first), plus one for the
@@ -166,7 +168,7 @@ TEST_CASE("run --rtol: dopri5 chooses its steps over the scene's duration and re
   const Result fixed = kinema_cli("run " + scene("kepler_eccentric.json") + " -q --summary " + summary.string());
   REQUIRE(fixed.code == 0);
   CHECK(nlohmann::json::parse(read(summary))["force_evaluations"] == 4 * 4000);  // rk4, every run reports it
-  CHECK_FALSE(nlohmann::json::parse(read(summary)).contains("accepted_steps"));
+  CHECK_FALSE(nlohmann::json::parse(read(summary)).contains("rejected_steps"));
 
   const Result refused = kinema_cli("run " + scene("kepler_eccentric.json") + " --method rk4 --rtol 1e-6");
   CHECK(refused.code == 1);
@@ -306,7 +308,7 @@ TEST_CASE("run --method auto reports its choice and meets the tolerance", "[cli]
   CHECK(j["precision"] == j["auto"]["precision"]);
   if (j["auto"].contains("rtol")) {  // error-controlled steps
     CHECK(j["rtol"] == j["auto"]["rtol"]);
-    CHECK(j["accepted_steps"].get<int>() > 0);
+    CHECK(j["steps"].get<int>() > 0);
   } else {
     CHECK(j["steps"] == j["auto"]["steps"]);
   }
@@ -314,4 +316,220 @@ TEST_CASE("run --method auto reports its choice and meets the tolerance", "[cli]
   CHECK(j["auto"]["estimated_error"].get<double>() <= 1e-6);
   CHECK(kinema_cli("run " + scene("damped_spring.json") + " --method auto").err.find("needs a tolerance") !=
         std::string::npos);
+}
+
+namespace {
+
+// The value a printed summary shows for `key` (the text after the key, unit included).
+std::string printed(const std::string& out, const std::string& key) {
+  std::istringstream in(out);
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream words(line);
+    std::string first;
+    words >> first;
+    if (first != key) continue;
+    std::string rest;
+    std::getline(words >> std::ws, rest);
+    return rest;
+  }
+  return "(no " + key + ")";
+}
+
+// A JSON value as the printed summary shows it.
+std::string shown(const nlohmann::json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); }
+
+}  // namespace
+
+TEST_CASE("run under error control: the summary's steps and throughput are the stepper's own", "[cli][adaptive]") {
+  // 3000 bodies in float, a single advance_to call over the run (a call covers 2^26 body-steps'
+  // worth of dt; this run has 3000 x 600), so the library run below is the very same call.
+  const fs::path path = write("adaptive_field.json", R"({"precision": "float", "method": "bs3", "dt": 0.016666666666666666,
+      "steps": 600, "generate": {"count": 3000, "seed": 3, "position_min": [-10,-10,-10], "position_max": [10,10,10],
+                                 "velocity_min": [-1,-1,-1], "velocity_max": [1,1,1]},
+      "forces": [{"type": "gravity", "g": [0,-9.81,0]}, {"type": "linear_drag", "k": 0.5},
+                 {"type": "spring", "anchor": [0,0,0], "k": 2}]})");
+  const fs::path summary = work_dir() / "adaptive_field_summary.json";
+  const Result r = kinema_cli("run " + path.string() + " --rtol 1e-6 --summary " + summary.string());
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(read(summary));
+
+  // The library, as the program calls it: error control capped at the largest stable step
+  // estimated (in double, on a sample of 1024 bodies) at the start.
+  const Scene s = load_scene(path);
+  const StiffnessEstimate e = estimate_stiffness(make_particles<double>(sample_bodies(s, 1024)), make_forces<double>(s), 0, 40);
+  Tolerances tolerances;
+  tolerances.rtol = tolerances.atol = 1e-6;
+  tolerances.max_step = largest_stable_step(bs3, e);
+  ParticleSet<float> bodies = make_particles<float>(s);
+  Stepper<float> stepper(make_forces<float>(s), bs3);
+  const AdaptiveStats a = stepper.advance_to(bodies, s.dt * double(s.steps), tolerances);
+
+  CHECK(j["steps"] == a.accepted);
+  CHECK(j["rejected_steps"] == a.rejected);
+  CHECK(j["force_evaluations"] == a.evaluations);
+  CHECK(a.accepted < s.steps);  // not the nominal steps, so the checks below mean something
+  CHECK_FALSE(j.contains("dt"));  // no nominal step presented as taken
+  CHECK(j["t_final"] == 10);
+  CHECK(j["mean_step"].get<double>() == Approx(10.0 / double(a.accepted)).epsilon(1e-8));
+  CHECK(j["smallest_step"].get<double>() <= j["mean_step"].get<double>());
+  CHECK(j["largest_step"].get<double>() >= j["mean_step"].get<double>());
+  // Throughput from the body-steps taken, each figure to four digits.
+  const double body_steps = 3000.0 * double(a.accepted);
+  CHECK(j["body_steps_per_second"].get<double>() == Approx(body_steps / j["wall_seconds"].get<double>()).epsilon(1e-3));
+  CHECK(j["units"]["mean_step"] == "s");
+  CHECK(j["units"]["stiffness"] == "1/s");
+  CHECK(j["units"]["largest_stable_step"] == "s");
+  // What people read is what the file holds.
+  for (const char* key : {"steps", "rejected_steps", "body_steps_per_second", "wall_seconds", "rtol", "force_evaluations"}) {
+    INFO(key);
+    CHECK(printed(r.out, key) == shown(j[key]));
+  }
+  CHECK(printed(r.out, "mean_step") == shown(j["mean_step"]) + " s");
+  CHECK(printed(r.out, "stiffness") == shown(j["stiffness"]) + " 1/s");
+}
+
+TEST_CASE("run: fixed steps are shown as the precision holds them, numbers without binary noise", "[cli]") {
+  const fs::path summary = work_dir() / "float_steps.json";
+  // dt 1/60 in float is 0.016666668: 600 of them end at 10.0000005, not at 10.
+  const fs::path path = write("float_steps.json", R"({"precision": "float", "dt": 0.016666666666666666, "steps": 600,
+      "particles": [{"position": [1,0,0]}], "forces": [{"type": "spring", "anchor": [0,0,0], "k": 2}]})");
+  const Result r = kinema_cli("run " + path.string() + " --summary " + summary.string());
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(read(summary));
+  CHECK(j["steps"] == 600);
+  CHECK(j["dt"].dump() == "0.016666668");
+  CHECK(float(j["dt"].get<double>()) == float(1.0 / 60));
+  CHECK(j["t_final"].dump() == "10.0000005");
+  CHECK(j["t_final"].get<double>() == Approx(600 * double(float(1.0 / 60))).epsilon(1e-8));
+  CHECK(j["body_steps_per_second"].get<double>() == Approx(600 / j["wall_seconds"].get<double>()).epsilon(1e-3));
+  CHECK(printed(r.out, "dt") == "0.016666668 s");
+  CHECK(printed(r.out, "t_final") == "10.0000005 s");
+  CHECK(printed(r.out, "stiffness") == shown(j["stiffness"]) + " 1/s");
+  CHECK(printed(r.out, "largest_stable_step") == shown(j["largest_stable_step"]) + " s");
+  // Measured figures to four significant digits.
+  for (const char* key : {"wall_seconds", "body_steps_per_second", "stiffness", "largest_stable_step"}) {
+    INFO(key << " " << j[key].dump());
+    const double v = j[key].get<double>();
+    char text[40];
+    std::snprintf(text, sizeof text, "%.4g", v);
+    CHECK(std::strtod(text, nullptr) == v);
+  }
+  // rtol as the user wrote it; a double run's time without the product's last bits.
+  const Result adaptive = kinema_cli("run " + scene("kepler_eccentric.json") + " --method dopri5 --rtol 1e-6 -q --summary " + summary.string());
+  REQUIRE(adaptive.code == 0);
+  CHECK(nlohmann::json::parse(read(summary))["rtol"].dump() == "1e-06");
+  REQUIRE(kinema_cli("run " + scene("kepler_circular.json") + " -q --summary " + summary.string()).code == 0);
+  CHECK(nlohmann::json::parse(read(summary))["t_final"].dump() == "62.83");  // 6283 x 0.01
+}
+
+TEST_CASE("run: workers_used comes with what the stepper measured", "[cli]") {
+  const fs::path summary = work_dir() / "workers_summary.json";
+  const fs::path path = write("workers.json", R"({"steps": 200,
+      "generate": {"count": 20000, "position_min": [0,0,0], "position_max": [1,1,1]}, "forces": [{"type": "linear_drag", "k": 1}]})");
+  for (const char* threads : {"1", "2"}) {
+    INFO("threads " << threads);
+    REQUIRE(kinema_cli("run " + path.string() + " -q --threads " + threads + " --summary " + summary.string()).code == 0);
+    const auto j = nlohmann::json::parse(read(summary));
+    const std::string note = j["workers_note"];
+    const unsigned used = j["workers_used"];
+    if (j["threads"] == 1) {
+      CHECK(used == 1);
+      CHECK(note.find("one worker takes every call") != std::string::npos);
+    } else if (used == 0) {
+      CHECK(note.find("the calling thread alone was as fast as") != std::string::npos);
+      CHECK(note.find("(100 calls of") != std::string::npos);  // steps / 100 per call
+    } else {
+      CHECK(note.find(std::to_string(used) + " of " + j["threads"].dump() + " workers were fastest") != std::string::npos);
+    }
+  }
+}
+
+TEST_CASE("kinema --version prints the library's version", "[cli]") {
+  const Result r = kinema_cli("--version");
+  CHECK(r.code == 0);
+  CHECK(r.out == std::string("kinema ") + KINEMA_VERSION_STRING + "\n");
+  CHECK(r.out == "kinema " + std::to_string(KINEMA_VERSION_MAJOR) + "." + std::to_string(KINEMA_VERSION_MINOR) + "." +
+                     std::to_string(KINEMA_VERSION_PATCH) + "\n");
+  CHECK(kinema_cli("--help").out.find("--version") != std::string::npos);
+}
+
+TEST_CASE("a usage error points to the help of the command it is in", "[cli]") {
+  CHECK(kinema_cli("run").err.find("scene is required (see kinema run --help)") != std::string::npos);
+  CHECK(kinema_cli("run " + scene("damped_spring.json") + " --steps x").err.find("(see kinema run --help)") != std::string::npos);
+  CHECK(kinema_cli("stress --bodies 0").err.find("(see kinema stress --help)") != std::string::npos);
+  CHECK(kinema_cli("chart").err.find("(see kinema chart --help)") != std::string::npos);
+  CHECK(kinema_cli("stability").err.find("(see kinema stability --help)") != std::string::npos);
+  CHECK(kinema_cli("").err.find("(see kinema --help)") != std::string::npos);
+}
+
+TEST_CASE("run -q: the stable-step warning still prints", "[cli]") {
+  // Euler on v' = -30 v at h = 0.1: past its largest stable step (2/30), growing twofold a step.
+  const fs::path path = write("unstable.json", R"({"precision": "double", "method": "euler", "dt": 0.1, "steps": 20,
+      "particles": [{"position": [0,0,0], "velocity": [1,0,0]}], "forces": [{"type": "linear_drag", "k": 30}]})");
+  const Result finite = kinema_cli("run " + path.string() + " -q");
+  CHECK(finite.code == 0);  // 2^20: still finite
+  CHECK(finite.out.empty());
+  CHECK(finite.err.find("kinema: warning: dt 0.1 is past the largest stable step of euler") != std::string::npos);
+  const Result blown = kinema_cli("run " + path.string() + " -q --steps 2000");
+  CHECK(blown.code == 3);
+  CHECK(blown.err.find("kinema: warning: dt 0.1 is past the largest stable step") != std::string::npos);
+  CHECK(blown.err.find("no longer finite") != std::string::npos);
+  // A stable step: -q is silent.
+  const Result stable = kinema_cli("run " + path.string() + " -q --dt 0.01");
+  CHECK(stable.code == 0);
+  CHECK(stable.err.empty());
+}
+
+TEST_CASE("run --method auto: one readable line for its choice, costs in force evaluations", "[cli][auto]") {
+  const fs::path summary = work_dir() / "auto_line.json";
+  const Result r = kinema_cli("run " + scene("kepler_eccentric.json") + " --method auto --tolerance 1e-6 --summary " +
+                              summary.string());
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(read(summary));
+  const std::string line = printed(r.out, "auto");
+  CHECK(line == j["auto"]["choice"]);
+  CHECK(line.find('{') == std::string::npos);  // no JSON on stdout
+  CHECK(line.rfind(j["method"].get<std::string>(), 0) == 0);  // starts with the method
+  CHECK(line.find(j["auto"]["force_evaluations"].dump() + " force evaluations, the fewest") != std::string::npos);
+  CHECK(line.find("under 1e-06 over 4 s") != std::string::npos);
+  if (j["auto"].contains("rtol")) {
+    CHECK(line.find("with error control (rtol = atol = " + j["auto"]["rtol"].dump()) != std::string::npos);
+  } else {
+    CHECK(line.find("(" + j["auto"]["steps"].dump() + " steps)") != std::string::npos);
+  }
+  CHECK_FALSE(j["auto"].contains("reason"));
+  // Every candidate's cost is its steps times the method's evaluations per step.
+  REQUIRE_FALSE(j["auto"]["candidates"].empty());
+  for (const auto& c : j["auto"]["candidates"]) {
+    CHECK(c["force_evaluations"] == c["steps"].get<std::uint64_t>() * std::uint64_t(method_by_name(c["method"].get<std::string>()).evaluations()));
+  }
+}
+
+TEST_CASE("stability: a table of predicted and measured steps, and where an orbit breaks the linear bound", "[cli][stability]") {
+  const fs::path out = work_dir() / "stability_table";
+  const Result orbit = kinema_cli("stability " + scene("kepler_circular.json") + " --methods euler,rk4 --out " + out.string());
+  REQUIRE(orbit.code == 0);
+  const auto limits = csv_rows(out / "step_limits.csv");
+  REQUIRE(limits.size() == 2);
+  CHECK(orbit.out.find("  method              predicted   measured   measured/predicted\n") != std::string::npos);
+  for (const auto& row : limits) {
+    INFO(row.at("method"));
+    const double predicted = number(row, "predicted_step"), measured = number(row, "measured_step");
+    char line[160];
+    std::snprintf(line, sizeof line, "  %-18s %10.4g %10.4g   %.2f *\n", row.at("method").c_str(), predicted, measured,
+                  measured / predicted);
+    CHECK(measured < 0.8 * predicted);  // the orbit breaks the bound for both
+    CHECK(orbit.out.find(line) != std::string::npos);
+  }
+  CHECK(orbit.out.find("(|lambda| = 1.414 /s)") != std::string::npos);  // sqrt(2): the radial mode at r = 1
+  CHECK(orbit.out.find("On an orbit that mode is not the\n  orbit's turning") != std::string::npos);
+
+  // A linear scene: the prediction holds, and there is nothing to explain.
+  const Result spring = kinema_cli("stability " + scene("damped_spring.json") + " --methods rk4,velocity_verlet --out " + out.string());
+  REQUIRE(spring.code == 0);
+  for (const auto& row : csv_rows(out / "step_limits.csv")) {
+    CHECK(number(row, "measured_step") == Approx(number(row, "predicted_step")).epsilon(0.05));
+  }
+  CHECK(spring.out.find(" *\n") == std::string::npos);
+  CHECK(spring.out.find("breaks the linear bound") == std::string::npos);
 }

@@ -350,6 +350,7 @@ TEST_CASE("a signal stops a run at a step boundary: whole lines, a complete last
     CHECK(r.code == 128 + signal);
     CHECK(r.err.find(signal == SIGINT ? "stopped by SIGINT after step" : "stopped by SIGTERM after step") !=
           std::string::npos);
+    CHECK(r.err.find("; the outputs are complete to there") != std::string::npos);
     std::istringstream in(read(csv));
     std::string line;
     std::getline(in, line);
@@ -370,6 +371,18 @@ TEST_CASE("a signal stops a run at a step boundary: whole lines, a complete last
     CHECK(j["steps_requested"] == 10000000);
     CHECK(j["finite"] == true);
   }
+}
+
+TEST_CASE("a signal with no output asked for: the message claims none", "[cli][hostile][signals]") {
+  const fs::path scene = write("long_quiet.json", R"({"dt": 0.001, "steps": 100000000,
+      "generate": {"count": 1000, "position_min": [0,0,0], "position_max": [1,1,1]}})");
+  const Result r = run_kinema({"run", scene.string(), "-q"}, {}, [](pid_t pid) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+    ::kill(pid, SIGINT);
+  });
+  CHECK(r.code == 128 + SIGINT);
+  CHECK(r.err.find("kinema: stopped by SIGINT after step") == 0);
+  CHECK(r.err.find("complete") == std::string::npos);
 }
 
 TEST_CASE("more threads than cores: silent with -q, and the summary says what ran", "[cli][hostile]") {

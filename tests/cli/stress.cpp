@@ -142,12 +142,24 @@ TEST_CASE("stress: SIGINT stops the run between steps and the report is written"
   CHECK_FALSE(r.killed);
   CHECK(r.code == 128 + SIGINT);
   CHECK(r.err.find("stopped by SIGINT after step") != std::string::npos);
+  CHECK(r.err.find("; the report is complete to there") != std::string::npos);
   REQUIRE(fs::exists(report));
   const Json j = Json::parse(read(report));
   CHECK(j["interrupted"] == "SIGINT");
   CHECK(j["finite"] == true);
   CHECK(j["steps"].get<long>() > 0);
   CHECK(j["wall_seconds"].get<double>() < 60);
+}
+
+TEST_CASE("stress: SIGINT without --report speaks of no report", "[cli][stress][signals]") {
+  const Result r = run_kinema({"stress", "-q", "--bodies", "20000", "--seconds", "300"}, {}, [](pid_t pid) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+    ::kill(pid, SIGINT);
+  });
+  CHECK_FALSE(r.killed);
+  CHECK(r.code == 128 + SIGINT);
+  CHECK(r.err.find("stopped by SIGINT after step") != std::string::npos);
+  CHECK(r.err.find("report") == std::string::npos);
 }
 
 TEST_CASE("stress: bad options are refused before any work", "[cli][stress][errors]") {

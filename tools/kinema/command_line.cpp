@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 
 #include "kinema/error.hpp"
+#include "kinema/version.hpp"
 
 namespace kinema::cli {
 namespace {
@@ -98,7 +99,9 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
                 "Scalar and SSE2 paths: multiply then add instead of an exact fused "
                 "multiply-add (faster without an FMA unit; results then differ in the last "
                 "bits from the AVX2 and AVX-512 paths)");
-  run->add_flag("--quiet,-q", o.quiet, "Print nothing on success");
+  run->add_flag("--quiet,-q", o.quiet,
+                "No summary and no progress bar (a warning that the step is past the stable one, "
+                "and errors, still go to stderr)");
   run->add_flag("--strict", o.strict,
                 "Refuse (exit 1) a dt past the method's largest stable step on this scene, which "
                 "otherwise is a warning");
@@ -186,11 +189,17 @@ std::unique_ptr<CLI::App> make_app(CommandLine& out) {
       "kinema: a data-oriented time integrator for particles and rigid bodies.\n"
       "Runs a scene (JSON) with a chosen method and reports speed and energy.");
   app->require_subcommand(1);
+  app->set_version_flag("--version", std::string("kinema ") + version, "Print the version and exit");
   add_run_command(*app, out.run, out.isa, out.precision);
   add_chart_command(*app, out.chart);
   add_stability_command(*app, out.stability);
   add_stress_command(*app, out.stress, out.isa, out.precision, out.guard);
   return app;
+}
+
+std::string help_command(const CLI::App& app) {
+  const std::vector<CLI::App*> parsed = app.get_subcommands();
+  return parsed.empty() ? "kinema --help" : "kinema " + parsed.front()->get_name() + " --help";
 }
 
 void parse_command_line(CLI::App& app, CommandLine& out, int argc, const char* const* argv) {

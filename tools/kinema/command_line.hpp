@@ -32,4 +32,8 @@ std::unique_ptr<CLI::App> make_app(CommandLine& out);
 // (get_exit_code() 0); kinema::Error never.
 void parse_command_line(CLI::App& app, CommandLine& out, int argc, const char* const* argv);
 
+// After parse_command_line threw: where the help for what was typed is, "kinema run --help"
+// for an error in `run`, "kinema --help" before any subcommand.
+std::string help_command(const CLI::App& app);
+
 }  // namespace kinema::cli

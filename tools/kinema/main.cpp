@@ -43,8 +43,9 @@ int main(int argc, char** argv) {
   try {
     kinema::cli::parse_command_line(*app, line, argc, argv);
   } catch (const CLI::ParseError& e) {
-    if (e.get_exit_code() == 0) return app->exit(e);  // --help
-    std::fprintf(stderr, "kinema: error: %s (see kinema --help)\n", kinema::printable(e.what(), kMessageBytes).c_str());
+    if (e.get_exit_code() == 0) return app->exit(e);  // --help, --version
+    std::fprintf(stderr, "kinema: error: %s (see %s)\n", kinema::printable(e.what(), kMessageBytes).c_str(),
+                 kinema::cli::help_command(*app).c_str());
     return 2;
   }
   kinema::cli::catch_interrupts();

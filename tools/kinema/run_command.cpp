@@ -10,9 +10,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include "auto_choice.hpp"
 #include "interrupt.hpp"
 #include "kinema/scenes.hpp"
 #include "kinema/stability.hpp"
+#include "numbers.hpp"
 #include "progress.hpp"
 #include "report_file.hpp"
 #include "trajectory.hpp"
@@ -59,12 +61,16 @@ Scene scene_with_overrides(const RunOptions& o) {
 
 namespace {
 
+// The summary for people: a line per field with its unit, auto's choice as its line.
 void print_summary(const nlohmann::ordered_json& summary) {
   std::printf("kinema run: %s\n", printable(summary["scene"].get<std::string>()).c_str());
+  const nlohmann::ordered_json& units = summary["units"];
   for (const auto& [key, value] : summary.items()) {
-    if (key == "scene") continue;
-    std::printf("  %-22s %s\n", key.c_str(),
-                printable(value.is_string() ? value.get<std::string>() : value.dump()).c_str());
+    if (key == "scene" || key == "units") continue;
+    const nlohmann::ordered_json& shown = key == "auto" ? value["choice"] : value;
+    std::string text = shown.is_string() ? shown.get<std::string>() : shown.dump();
+    if (units.contains(key)) text.append(" ").append(units[key].get<std::string>());
+    std::printf("  %-22s %s\n", key.c_str(), printable(text).c_str());
   }
 }
 
@@ -168,177 +174,301 @@ void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessE
                 scene.dt, scene.method.c_str(), stable, mode_name(e).c_str(), e.magnitude,
                 std::exp(std::min(log_growth, 700.0)));
   if (o.strict) throw Error(o.scene_path + ": " + text + " (--strict)");
-  if (!o.quiet) std::fprintf(stderr, "kinema: warning: %s\n", printable(text).c_str());
+  // Not silenced by --quiet: it says the result may be worthless.
+  std::fprintf(stderr, "kinema: warning: %s\n", printable(text).c_str());
 }
 
 // What happened before stepping that the summary reports.
 struct RunContext {
-  std::optional<nlohmann::ordered_json> auto_choice;
+  std::optional<nlohmann::ordered_json> auto_choice;  // AutoChoice::record
 };
 
-template <class T>
-int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
+StepperOptions stepper_options(const RunOptions& o) {
   StepperOptions options;
   options.isa = o.isa;
   // More threads than the machine has would only wait on each other (and make oneTBB warn).
   options.threads = std::min(o.threads == 0 ? hardware_threads() : o.threads, hardware_threads());
   options.relaxed_fma = o.relaxed_fma;
-  World<T> world = [&] {
-    try {
-      return World<T>(scene, method_by_name(scene.method), options);
-    } catch (const Error& e) {  // bodies or forces the precision cannot hold: name the file
-      throw Error(o.scene_path + ": " + e.what());
-    }
-  }();
-  // Opened once the world stands (a scene that fails leaves no file behind), before the run.
-  ReportFile summary_file(o.summary_path, "summary");
-  const StiffnessEstimate stiffness = stiffness_at_start(scene, options);
-  const double stable_step = largest_stable_step(method_by_name(scene.method), stiffness);
-  std::optional<Tolerances> tolerances = tolerances_of(scene);
-  if (tolerances && stable_step > 0) tolerances->max_step = stable_step;  // error control never goes past it
-  if (!tolerances) check_stable_step(scene, o, stiffness, stable_step);
-  std::optional<TrajectoryWriter> trajectory;
-  if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
-  const T h = T(scene.dt);
-  const double initial_energy = world.total_energy();
-  const std::size_t bodies = world.particles.size() + world.rigid.size();
+  return options;
+}
 
-  // In chunks, for the progress bar, the trajectory and signals: the same bits as one call.
-  // Error-controlled steps land on each chunk's end, so their chunks are longer: a sixteenth
-  // of the run or more.
-  const std::uint64_t per_chunk = std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1))));
-  const std::uint64_t chunk = tolerances ? std::max<std::uint64_t>({1, scene.steps / 16, per_chunk})
-                                         : std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), per_chunk);
+template <class T>
+World<T> build_world(const Scene& scene, const RunOptions& o, const StepperOptions& options) {
+  try {
+    return World<T>(scene, method_by_name(scene.method), options);
+  } catch (const Error& e) {  // bodies or forces the precision cannot hold: name the file
+    throw Error(o.scene_path + ": " + e.what());
+  }
+}
+
+template <class T>
+std::size_t body_count(const World<T>& world) {
+  return world.particles.size() + world.rigid.size();
+}
+
+// What the run knows about its steps before the first: the scene's stiffness at the start,
+// the method's largest stable step there, and the error control if any.
+struct StepPlan {
+  StiffnessEstimate stiffness;
+  double stable_step = 0;
+  std::optional<Tolerances> tolerances;
+};
+
+StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOptions& options) {
+  StepPlan plan;
+  plan.stiffness = stiffness_at_start(scene, options);
+  plan.stable_step = largest_stable_step(method_by_name(scene.method), plan.stiffness);
+  plan.tolerances = tolerances_of(scene);
+  // Error control never goes past the stable step; fixed steps are checked against it.
+  if (plan.tolerances && plan.stable_step > 0) plan.tolerances->max_step = plan.stable_step;
+  if (!plan.tolerances) check_stable_step(scene, o, plan.stiffness, plan.stable_step);
+  return plan;
+}
+
+// Steps per advance call: for the progress bar, the trajectory and signals (the same bits as
+// one call). Error-controlled steps land on each call's end, so their calls are longer: a
+// sixteenth of the run or more.
+std::uint64_t steps_per_call(const Scene& scene, std::size_t bodies, bool adaptive) {
+  const auto bounded = std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1))));
+  return adaptive ? std::max<std::uint64_t>({1, scene.steps / 16, bounded})
+                  : std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), bounded);
+}
+
+// What stepping did.
+struct Stepped {
+  std::uint64_t done = 0;   // steps of dt completed (error control: their span)
+  std::uint64_t calls = 0;  // advance or advance_to calls
   double wall_seconds = 0;  // stepping only: loading, checking and writing are not timed
-  Progress progress("kinema run", o.quiet);
-  std::uint64_t done = 0;
-  if (trajectory) trajectory->write(0, world.time(), world.particles, world.rigid);
   std::optional<BlowUp> blow_up;
   AdaptiveStats adaptive;
-  while (done < scene.steps && interrupting_signal() == 0) {
-    std::uint64_t n = std::min(chunk, scene.steps - done);
-    if (trajectory) n = std::min(n, o.every - done % o.every);  // stop at each K-th step
-    const auto start = Clock::now();
-    if (tolerances) {
-      advance_adaptive(world, double(done + n) * scene.dt, *tolerances, adaptive);
-    } else {
-      world.advance(h, n);
-    }
-    wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
+};
+
+// Steps from `done` to done + n (error control: over that span), timed.
+template <class T>
+void advance_timed(World<T>& world, const Scene& scene, const std::optional<Tolerances>& tolerances,
+                   std::uint64_t n, Stepped& s) {
+  const auto start = Clock::now();
+  if (tolerances) {
+    advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive);
+  } else {
+    world.advance(T(scene.dt), n);
+  }
+  s.wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
+  ++s.calls;
+}
+
+// Every K-th step, the last, and the one that stopped being finite.
+bool trajectory_due(const Scene& scene, const RunOptions& o, std::uint64_t done, bool finite) {
+  return done % o.every == 0 || done == scene.steps || !finite;
+}
+
+template <class T>
+Stepped step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const StepperOptions& options,
+                   const std::optional<Tolerances>& tolerances, std::optional<TrajectoryWriter>& trajectory) {
+  const std::uint64_t chunk = steps_per_call(scene, body_count(world), tolerances.has_value());
+  Progress progress("kinema run", o.quiet);
+  Stepped s;
+  if (trajectory) trajectory->write(0, world.time(), world.particles, world.rigid);
+  while (s.done < scene.steps && interrupting_signal() == 0) {
+    std::uint64_t n = std::min(chunk, scene.steps - s.done);
+    if (trajectory) n = std::min(n, o.every - s.done % o.every);  // stop at each K-th step
+    advance_timed(world, scene, tolerances, n, s);
     const bool finite = world.finite();
-    if (!finite) blow_up = find_blow_up<T>(scene, options, world, done, n);
-    done += n;
-    progress.update(double(done) / double(scene.steps));
-    if (trajectory && (done % o.every == 0 || done == scene.steps || !finite)) {
-      trajectory->write(done, world.time(), world.particles, world.rigid);
+    if (!finite) s.blow_up = find_blow_up<T>(scene, options, world, s.done, n);
+    s.done += n;
+    progress.update(double(s.done) / double(scene.steps));
+    if (trajectory && trajectory_due(scene, o, s.done, finite)) {
+      trajectory->write(s.done, world.time(), world.particles, world.rigid);
     }
     if (!finite) break;
   }
   if (trajectory) trajectory->close();
   progress.finish();
+  return s;
+}
 
+// The steps the state took: under error control the accepted ones, else every step of dt.
+std::uint64_t steps_taken(const StepPlan& plan, const Stepped& s) {
+  return plan.tolerances ? s.adaptive.accepted : s.done;
+}
+
+// Why the stepper used the workers it did. It times its calls with each worker count and
+// keeps the fastest for that kind and size of call.
+std::string workers_note(unsigned threads, unsigned used, const StepPlan& plan, const Stepped& s) {
+  if (threads <= 1) return "a job system of one worker takes every call";
+  std::string note = used == 0
+      ? "timed: the calling thread alone was as fast as " + std::to_string(threads) + " workers or faster"
+      : "timed: " + std::to_string(used) + " of " + std::to_string(threads) + " workers were fastest";
+  note += " for calls of this kind and size";
+  if (!plan.tolerances && s.calls > 0) {
+    char text[120];
+    std::snprintf(text, sizeof text, " (%llu calls of %.2g ms)", static_cast<unsigned long long>(s.calls),
+                  1e3 * s.wall_seconds / double(s.calls));
+    note += text;
+  }
+  return note + "; the results are the same bits on any count";
+}
+
+// What ran: the scene, the bodies, the method and where it ran.
+template <class T>
+void describe_setup(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene,
+                    const RunOptions& o, const StepPlan& plan, const Stepped& s, const RunContext& context) {
   const Stepper<T>& stepper = world.main_stepper();
-  nlohmann::ordered_json summary;
   summary["scene"] = scene.name;
-  summary["bodies"] = bodies;
+  summary["bodies"] = body_count(world);
   summary["particles"] = world.particles.size();
   summary["rigid_bodies"] = world.rigid.size();
-  summary["steps"] = done;
   summary["method"] = std::string(stepper.method().name);
+  if (context.auto_choice) summary["auto"] = *context.auto_choice;
   summary["path"] = stepper.fused() ? "fused" : "staged";
-  summary["dt"] = scene.dt;
-  summary["t_final"] = world.time();
   summary["precision"] = std::string(precision_name(scene.precision));
   summary["isa"] = std::string(isa_name(stepper.isa()));
   summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
-  summary["workers_used"] = stepper.chosen_workers();  // what the measurements favoured (0: the calling thread)
-  if (tolerances) {
-    summary["rtol"] = tolerances->rtol;
-    summary["atol"] = tolerances->atol;
-    summary["accepted_steps"] = adaptive.accepted;
-    summary["rejected_steps"] = adaptive.rejected;
-    summary["smallest_step"] = adaptive.smallest_step;
-    summary["largest_step"] = adaptive.largest_step;
+  summary["workers_used"] = stepper.chosen_workers();  // 0: the calling thread alone
+  summary["workers_note"] = workers_note(stepper.threads(), stepper.chosen_workers(), plan, s);
+}
+
+// The steps taken: a fixed dt (as the run's precision holds it), or error control's.
+template <class T>
+void describe_steps(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene,
+                    const StepPlan& plan, const Stepped& s) {
+  const Precision p = scene.precision;
+  if (plan.tolerances) {
+    const AdaptiveStats& a = s.adaptive;
+    summary["rtol"] = number(significant(plan.tolerances->rtol, 15));
+    summary["atol"] = number(significant(plan.tolerances->atol, 15));
+    summary["steps"] = a.accepted;
+    summary["rejected_steps"] = a.rejected;
+    // The time covered (the clock starts at 0) over the steps that covered it.
+    if (a.accepted > 0) summary["mean_step"] = number(in_precision(world.time() / double(a.accepted), p));
+    summary["smallest_step"] = number(in_precision(a.smallest_step, p));
+    summary["largest_step"] = number(in_precision(a.largest_step, p));
+  } else {
+    summary["steps"] = s.done;
+    summary["dt"] = number(in_precision(double(T(scene.dt)), p));
   }
-  summary["stiffness"] = stiffness.magnitude;
-  if (std::isfinite(stable_step)) summary["largest_stable_step"] = stable_step;
-  summary["force_evaluations"] = tolerances ? adaptive.evaluations
-                                            : done * std::uint64_t(stepper.method().evaluations());
-  summary["wall_seconds"] = wall_seconds;
-  summary["body_steps_per_second"] = wall_seconds > 0 ? double(bodies) * double(done) / wall_seconds : 0.0;
-  summary["energy_initial"] = initial_energy;
-  summary["energy_final"] = world.total_energy();
-  summary["finite"] = !blow_up;
-  if (blow_up) {
+  summary["t_final"] = number(in_precision(world.time(), p));
+}
+
+// The stiffness, the work done, its speed and the energy.
+template <class T>
+void describe_cost(nlohmann::ordered_json& summary, const World<T>& world, const StepPlan& plan, const Stepped& s,
+                   double initial_energy, Precision p) {
+  summary["force_evaluations"] = plan.tolerances ? s.adaptive.evaluations
+                                                 : s.done * std::uint64_t(world.main_stepper().method().evaluations());
+  summary["stiffness"] = number(measured(plan.stiffness.magnitude));
+  if (std::isfinite(plan.stable_step)) summary["largest_stable_step"] = number(measured(plan.stable_step));
+  summary["wall_seconds"] = number(measured(s.wall_seconds));
+  const double body_steps = double(body_count(world)) * double(steps_taken(plan, s));
+  summary["body_steps_per_second"] = number(s.wall_seconds > 0 ? measured(body_steps / s.wall_seconds) : 0.0);
+  summary["energy_initial"] = number(in_precision(initial_energy, p));
+  summary["energy_final"] = number(in_precision(world.total_energy(), p));
+}
+
+void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const StepPlan& plan, const Stepped& s) {
+  summary["finite"] = !s.blow_up;
+  if (s.blow_up) {
     auto& where = summary["first_non_finite"];
-    if (blow_up->first == blow_up->last) {
-      where["step"] = blow_up->last;
+    if (s.blow_up->first == s.blow_up->last) {
+      where["step"] = s.blow_up->last;
     } else {
-      where["between_steps"] = {blow_up->first, blow_up->last};
+      where["between_steps"] = {s.blow_up->first, s.blow_up->last};
     }
-    where.update({{"t", blow_up->t}, {"body", blow_up->body}, {"field", blow_up->field}});
+    where.update({{"t", number(in_precision(s.blow_up->t, scene.precision))}, {"body", s.blow_up->body},
+                  {"field", s.blow_up->field}});
   }
   const int signal = interrupting_signal();
-  if (signal != 0 && done < scene.steps) {
+  if (signal != 0 && s.done < scene.steps) {
     summary["interrupted"] = signal_name(signal);
-    summary["steps_requested"] = scene.steps;
+    if (plan.tolerances) {
+      summary["t_requested"] = number(significant(scene.dt * double(scene.steps), 15));
+    } else {
+      summary["steps_requested"] = scene.steps;
+    }
   }
-  if (context.auto_choice) summary["auto"] = *context.auto_choice;
+}
 
-  summary_file.write(summary);
-  if (!o.quiet) print_summary(summary);
-  if (blow_up) {
-    const std::string steps = blow_up->first == blow_up->last
-        ? "after step " + std::to_string(blow_up->last)
-        : "between steps " + std::to_string(blow_up->first) + " and " + std::to_string(blow_up->last);
-    std::fprintf(stderr,
-                 "kinema: error: the state is no longer finite %s (t = %g): body %zu, %s (try a "
-                 "smaller dt or a more stable method)\n",
-                 steps.c_str(), blow_up->t, blow_up->body, blow_up->field.c_str());
+// The unit of every field that has one and does not name it.
+nlohmann::ordered_json units_of(const nlohmann::ordered_json& summary) {
+  nlohmann::ordered_json units = nlohmann::ordered_json::object();
+  for (const char* key : {"dt", "mean_step", "smallest_step", "largest_step", "t_final", "t_requested",
+                          "largest_stable_step"}) {
+    if (summary.contains(key)) units[key] = "s";
+  }
+  if (summary.contains("stiffness")) units["stiffness"] = "1/s";
+  return units;
+}
+
+template <class T>
+nlohmann::ordered_json summarize(const World<T>& world, const Scene& scene, const RunOptions& o,
+                                 const StepPlan& plan, const Stepped& s, double initial_energy,
+                                 const RunContext& context) {
+  nlohmann::ordered_json summary;
+  describe_setup(summary, world, scene, o, plan, s, context);
+  describe_steps(summary, world, scene, plan, s);
+  describe_cost(summary, world, plan, s, initial_energy, scene.precision);
+  describe_end(summary, scene, plan, s);
+  summary["units"] = units_of(summary);
+  return summary;
+}
+
+void report_blow_up(const BlowUp& b) {
+  const std::string steps = b.first == b.last
+      ? "after step " + std::to_string(b.last)
+      : "between steps " + std::to_string(b.first) + " and " + std::to_string(b.last);
+  std::fprintf(stderr,
+               "kinema: error: the state is no longer finite %s (t = %g): body %zu, %s (try a "
+               "smaller dt or a more stable method)\n",
+               steps.c_str(), b.t, b.body, b.field.c_str());
+}
+
+// The outputs a signal leaves complete: those asked for.
+std::string complete_outputs(const RunOptions& o) {
+  if (!o.trajectory_path.empty()) return o.summary_path.empty() && o.quiet ? "the trajectory is" : "the outputs are";
+  return o.summary_path.empty() && o.quiet ? "" : "the summary is";
+}
+
+// The exit code, with a line on stderr when the run did not end as asked.
+int finish(const nlohmann::ordered_json& summary, const Scene& scene, const RunOptions& o, const Stepped& s) {
+  if (s.blow_up) {
+    report_blow_up(*s.blow_up);
     return 3;
   }
   if (summary.contains("interrupted")) {
-    std::fprintf(stderr, "kinema: stopped by %s after step %llu of %llu; outputs are complete to there\n",
-                 signal_name(signal).c_str(), static_cast<unsigned long long>(done),
-                 static_cast<unsigned long long>(scene.steps));
+    const int signal = interrupting_signal();
+    const std::string outputs = complete_outputs(o);
+    std::fprintf(stderr, "kinema: stopped by %s after step %llu of %llu%s\n", signal_name(signal).c_str(),
+                 static_cast<unsigned long long>(s.done), static_cast<unsigned long long>(scene.steps),
+                 outputs.empty() ? "" : ("; " + outputs + " complete to there").c_str());
     return 128 + signal;
   }
   return 0;
+}
+
+template <class T>
+int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
+  const StepperOptions options = stepper_options(o);
+  World<T> world = build_world<T>(scene, o, options);
+  // Opened once the world stands (a scene that fails leaves no file behind), before the run.
+  ReportFile summary_file(o.summary_path, "summary");
+  const StepPlan plan = plan_steps(scene, o, options);
+  std::optional<TrajectoryWriter> trajectory;
+  if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
+  const double initial_energy = world.total_energy();
+  const Stepped stepped = step_scene(world, scene, o, options, plan.tolerances, trajectory);
+  const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);
+  summary_file.write(summary);
+  if (!o.quiet) print_summary(summary);
+  return finish(summary, scene, o, stepped);
 }
 
 }  // namespace
 
 int run_scene(const RunOptions& o) {
   Scene scene = scene_with_overrides(o);
-  std::optional<nlohmann::ordered_json> choice;
-  if (scene.method == "auto") {
-    const auto start = Clock::now();
-    const MethodChoice c = [&] {
-      try {
-        return choose_method(scene, *scene.tolerance);
-      } catch (const Error& e) {
-        throw Error(o.scene_path + ": " + e.what());
-      }
-    }();
-    choice = nlohmann::ordered_json{{"method", std::string(c.method->name)}};
-    if (c.step_tolerance) {
-      (*choice)["rtol"] = *c.step_tolerance;  // the duration stays dt x steps
-      scene.rtol = scene.atol = *c.step_tolerance;
-    } else {
-      choice->update({{"dt", c.dt}, {"steps", c.steps}});
-      scene.dt = c.dt;
-      scene.steps = c.steps;
-    }
-    choice->update({{"precision", std::string(precision_name(c.precision))},
-                    {"force_evaluations", c.evaluations},
-                    {"tolerance", *scene.tolerance}, {"estimated_error", c.estimated_error},
-                    {"seconds", std::chrono::duration<double>(Clock::now() - start).count()},
-                    {"reason", c.reason}});
-    scene.method = std::string(c.method->name);
-    scene.precision = c.precision;
-  }
-  const RunContext context{choice};
+  RunContext context;
+  if (scene.method == "auto") context.auto_choice = apply_auto_choice(scene, o.scene_path).record;
   return with_precision(scene.precision, [&]<class T>() { return run_typed<T>(scene, o, context); });
 }
 

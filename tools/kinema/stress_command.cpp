@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "interrupt.hpp"
+#include "numbers.hpp"
 #include "progress.hpp"
 #include "report_file.hpp"
 #include "stress_scene.hpp"
@@ -140,237 +141,304 @@ std::string guard_name(FiniteGuard g) {
 double mib(double bytes) { return bytes / double(1 << 20); }
 double mib(const Json& bytes) { return mib(bytes.get<double>()); }
 
-// Everything one run needs and produces.
+// The groups to step and how far: from a scene file, or the built-in randomized scene.
 template <class T>
-class StressRun {
- public:
-  StressRun(const StressOptions& o, const Scene* scene) : o_(o), at_start_(memory_now()) {
-    StepperOptions options;
-    options.isa = o.isa;
-    options.threads = std::min(o.threads == 0 ? hardware_threads() : o.threads, hardware_threads());
-    options.guard = o.guard;
-    options.max_speed = o.max_speed, options.max_angular_speed = o.max_angular_speed;
-    const Method& method = method_by_name(scene ? scene->method : o.method.value_or("rk4"));
-    groups_ = scene ? scene_stress_groups<T>(*scene, method, options)
-                    : random_stress_groups<T>(o.bodies, o.seed, method, options);
-    if (groups_.empty()) throw Error("the scene has no bodies");
-    dt_ = o.dt ? *o.dt : scene ? scene->dt : kStressDt;
-    h_ = T(dt_);
-    for (const auto& g : groups_) {
-      g.stepper().check_step_size(h_);
-      bodies_ += g.size();
-    }
-    name_ = scene ? scene->name : "random (seed " + std::to_string(o.seed) + ")";
-    steps_ = o.seconds ? std::numeric_limits<std::uint64_t>::max()
-                       : o.steps ? *o.steps : scene ? scene->steps : 1000;
-  }
+struct StressSetup {
+  std::vector<StressGroup<T>> groups;
+  std::string name;
+  double dt = 0;
+  std::size_t bodies = 0;
+  std::uint64_t steps = 0;  // the most: a wall-clock budget may end the run first
+};
 
-  int run() {
-    ReportFile report(o_.report_path, "report");
-    for (const auto& g : groups_) conservation_.push_back(conservation_start(g));
-    step_until_done();
-    // The final drifts are those of the final state, whenever the last interval closed.
-    for (std::size_t k = 0; k < groups_.size(); ++k) conservation_update(groups_[k], conservation_[k]);
-    const Json summary = summarize();
-    report.write(summary);
-    if (!o_.quiet) print(summary);
-    return exit_code();
+StepperOptions stress_stepper_options(const StressOptions& o) {
+  StepperOptions options;
+  options.isa = o.isa;
+  options.threads = std::min(o.threads == 0 ? hardware_threads() : o.threads, hardware_threads());
+  options.guard = o.guard;
+  options.max_speed = o.max_speed, options.max_angular_speed = o.max_angular_speed;
+  return options;
+}
+
+template <class T>
+StressSetup<T> set_up(const StressOptions& o, const Scene* scene) {
+  const StepperOptions options = stress_stepper_options(o);
+  const Method& method = method_by_name(scene ? scene->method : o.method.value_or("rk4"));
+  StressSetup<T> s;
+  s.groups = scene ? scene_stress_groups<T>(*scene, method, options)
+                   : random_stress_groups<T>(o.bodies, o.seed, method, options);
+  if (s.groups.empty()) throw Error("the scene has no bodies");
+  s.dt = o.dt ? *o.dt : scene ? scene->dt : kStressDt;
+  for (const auto& g : s.groups) {
+    g.stepper().check_step_size(T(s.dt));
+    s.bodies += g.size();
+  }
+  s.name = scene ? scene->name : "random (seed " + std::to_string(o.seed) + ")";
+  s.steps = o.seconds ? std::numeric_limits<std::uint64_t>::max()
+                      : o.steps ? *o.steps : scene ? scene->steps : 1000;
+  return s;
+}
+
+// What stepping did.
+struct StressOutcome {
+  std::uint64_t done = 0;  // steps completed by every group
+  double stepping_seconds = 0;
+  std::vector<Interval> intervals;
+  std::optional<Failure> failure;
+};
+
+// Steps every group in chunks of about kChunkSeconds until the steps, the wall-clock budget,
+// a failure or a signal ends it, closing a throughput interval every o.interval seconds.
+template <class T>
+class StressLoop {
+ public:
+  StressLoop(const StressOptions& o, StressSetup<T>& setup, std::vector<Conservation<T>>& conservation)
+      : o_(o), setup_(setup), conservation_(conservation) {}
+
+  StressOutcome run() {
+    Progress progress("kinema stress", o_.quiet);
+    start_ = Clock::now();
+    std::uint64_t chunk = 1;
+    while (!stopped()) {
+      const std::uint64_t n = std::min(chunk, setup_.steps - out_.done);
+      chunk = next_chunk(n, timed_advance(n));
+      const double now = seconds_since(start_);
+      if (interval_due(now)) close_interval(now);
+      progress.update(o_.seconds ? std::min(1.0, now / *o_.seconds) : double(out_.done) / double(setup_.steps));
+    }
+    progress.finish();
+    return out_;
   }
 
  private:
-  void step_until_done() {
-    Progress progress("kinema stress", o_.quiet);
-    const bool lines = !o_.quiet && ::isatty(STDERR_FILENO) != 1;
-    const auto start = Clock::now();
-    std::uint64_t chunk = 1, interval_steps = 0;
-    double interval_stepping = 0, interval_start = 0;
-    while (!finished(start) && !failure_ && interrupting_signal() == 0) {
-      const std::uint64_t n = std::min(chunk, steps_ - done_);
-      const auto t0 = Clock::now();
-      advance(n);
-      const double took = seconds_since(t0);
-      stepping_seconds_ += took, interval_stepping += took, interval_steps += n;
-      chunk = std::clamp<std::uint64_t>(std::uint64_t(kChunkSeconds * double(n) / std::max(took, 1e-9)), 1, 2 * n);
-      const double now = seconds_since(start);
-      const bool last = finished(start) || failure_ || interrupting_signal() != 0;
-      if (now - interval_start >= o_.interval || (last && (intervals_.empty() || now - interval_start >= o_.interval / 2))) {
-        close_interval(now, interval_steps, interval_stepping);
-        if (lines) print_line(intervals_.back());
-        interval_start = now, interval_steps = 0, interval_stepping = 0;
-      }
-      progress.update(o_.seconds ? std::min(1.0, now / *o_.seconds) : double(done_) / double(steps_));
-    }
-    progress.finish();
+  // The steps done or the wall-clock budget spent.
+  bool finished() const {
+    return out_.done >= setup_.steps || (o_.seconds && seconds_since(start_) >= *o_.seconds);
+  }
+  bool stopped() const { return finished() || out_.failure || interrupting_signal() != 0; }
+
+  double timed_advance(std::uint64_t n) {
+    const auto t0 = Clock::now();
+    advance(n);
+    const double took = seconds_since(t0);
+    out_.stepping_seconds += took, open_.stepping += took, open_.steps += n;
+    return took;
   }
 
-  bool finished(Clock::time_point start) const {
-    return done_ >= steps_ || (o_.seconds && seconds_since(start) >= *o_.seconds);
+  // A chunk that takes about kChunkSeconds, growing at most twofold at a time.
+  static std::uint64_t next_chunk(std::uint64_t n, double took) {
+    return std::clamp<std::uint64_t>(std::uint64_t(kChunkSeconds * double(n) / std::max(took, 1e-9)), 1, 2 * n);
   }
 
   // n steps of every group; under a guard a group that fails stops at its last finite step.
   void advance(std::uint64_t n) {
-    for (auto& g : groups_) {
+    for (auto& g : setup_.groups) {
       try {
-        g.advance(h_, n);
+        g.advance(T(setup_.dt), n);
       } catch (const NonFiniteError& e) {
-        failure_ = Failure{g.name(), e.body, e.field, done_ + e.step, done_ + e.step};
+        out_.failure = Failure{g.name(), e.body, e.field, out_.done + e.step, out_.done + e.step};
         return;
       }
       if (o_.guard == FiniteGuard::off) {
         if (const auto bad = g.first_non_finite()) {
-          failure_ = Failure{g.name(), bad->body, bad->field, done_ + 1, done_ + n};
+          out_.failure = Failure{g.name(), bad->body, bad->field, out_.done + 1, out_.done + n};
           return;
         }
       }
     }
-    done_ += n;
+    out_.done += n;
   }
 
-  void close_interval(double now, std::uint64_t steps, double stepping) {
-    const double rate = stepping > 0 ? double(bodies_) * double(steps) / stepping : 0;
-    intervals_.push_back({now, steps, rate, memory_now().resident});
-    for (std::size_t k = 0; k < groups_.size(); ++k) conservation_update(groups_[k], conservation_[k]);
+  // Every o.interval seconds; at the end too, unless that interval would be shorter than half
+  // of one (and one has closed already).
+  bool interval_due(double now) const {
+    const double open = now - open_.start;
+    return open >= o_.interval || (stopped() && (out_.intervals.empty() || open >= o_.interval / 2));
   }
 
+  void close_interval(double now) {
+    const double rate = open_.stepping > 0 ? double(setup_.bodies) * double(open_.steps) / open_.stepping : 0;
+    out_.intervals.push_back({now, open_.steps, rate, memory_now().resident});
+    for (std::size_t k = 0; k < setup_.groups.size(); ++k) conservation_update(setup_.groups[k], conservation_[k]);
+    if (!o_.quiet && ::isatty(STDERR_FILENO) != 1) print_line(out_.intervals.back());
+    open_ = {now, 0, 0};
+  }
+
+  // Without a terminal (a log), a line per interval instead of the progress bar.
   void print_line(const Interval& i) const {
     std::fprintf(stderr, "kinema stress: %.1f s, step %llu: %.4g body-steps/s, %.1f MiB resident\n",
-                 i.end_seconds, static_cast<unsigned long long>(done_), i.body_steps_per_second,
+                 i.end_seconds, static_cast<unsigned long long>(out_.done), i.body_steps_per_second,
                  mib(i.resident));
   }
 
-  Json group_report(std::size_t k) const {
-    const StressGroup<T>& g = groups_[k];
-    Json j;
-    j["name"] = g.name();
-    j["bodies"] = g.size();
-    j["kind"] = g.rigid() ? "rigid" : "particles";
-    j["path"] = g.stepper().fused() ? "fused" : "staged";
-    if (g.conserves_energy()) {
-      j["energy_drift"] = {{"final", conservation_[k].energy.last}, {"worst", conservation_[k].energy.worst}};
-    }
-    if (g.conserves_momentum()) {
-      j["momentum_drift"] = {{"final", conservation_[k].momentum.last},
-                             {"worst", conservation_[k].momentum.worst}};
-    }
-    return j;
-  }
-
-  Json memory_report() const {
-    double state = 0, scratch = 0;
-    for (const auto& g : groups_) state += double(g.state_bytes()), scratch += double(g.stepper().scratch_bytes());
-    const Memory m = memory_now();
-    Json j;
-    j["state_bytes"] = state;
-    j["scratch_bytes"] = scratch;
-    j["resident_at_start_bytes"] = at_start_.resident;
-    j["peak_resident_bytes"] = m.peak;
-    j["peak_over_state_and_scratch"] = m.peak / (state + scratch);
-    if (!intervals_.empty()) {
-      j["resident_first_interval_bytes"] = intervals_.front().resident;
-      j["resident_last_interval_bytes"] = intervals_.back().resident;
-    }
-    return j;
-  }
-
-  Json summarize() const {
-    const Stepper<T>& s = groups_.front().stepper();
-    Json j;
-    j["scene"] = name_;
-    j["bodies"] = bodies_;
-    j["method"] = std::string(s.method().name);
-    j["precision"] = std::string(precision_name(sizeof(T) == 4 ? Precision::single : Precision::dual));
-    j["isa"] = std::string(isa_name(s.isa()));
-    j["threads"] = s.threads();
-    j["guard"] = guard_name(o_.guard);
-    j["dt"] = dt_;
-    j["steps"] = done_;  // completed by every group
-    j["wall_seconds"] = stepping_seconds_;
-    j["body_steps_per_second"] = stepping_seconds_ > 0 ? double(bodies_) * double(done_) / stepping_seconds_ : 0.0;
-    j["throughput"] = throughput_report(intervals_);
-    j["memory"] = memory_report();
-    j["groups"] = Json::array();
-    for (std::size_t k = 0; k < groups_.size(); ++k) j["groups"].push_back(group_report(k));
-    j["finite"] = !failure_;
-    if (failure_) {
-      Json& where = j["first_non_finite"];
-      where["group"] = failure_->group;
-      if (failure_->first == failure_->last) where["step"] = failure_->last;
-      else where["between_steps"] = {failure_->first, failure_->last};
-      where.update({{"body", failure_->body}, {"field", failure_->field}});
-      if (o_.guard != FiniteGuard::off) where["state_kept_at_step"] = failure_->last - 1;
-    }
-    if (interrupting_signal() != 0 && !failure_) j["interrupted"] = signal_name(interrupting_signal());
-    j["intervals"] = Json::array();
-    for (const Interval& i : intervals_) {
-      j["intervals"].push_back({{"end_seconds", i.end_seconds}, {"steps", i.steps},
-                                {"body_steps_per_second", i.body_steps_per_second},
-                                {"resident_bytes", i.resident}});
-    }
-    return j;
-  }
-
-  void print(const Json& j) const {
-    std::printf("kinema stress: %s\n", printable(j["scene"].get<std::string>()).c_str());
-    for (const char* key : {"bodies", "method", "precision", "isa", "threads", "guard", "dt", "steps",
-                            "wall_seconds", "body_steps_per_second", "finite"}) {
-      std::printf("  %-22s %s\n", key, printable(j[key].is_string() ? j[key].get<std::string>() : j[key].dump()).c_str());
-    }
-    const Json& t = j["throughput"];
-    if (t.contains("median")) {
-      std::printf("  %-22s min %.4g, median %.4g, max %.4g body-steps/s over %zu intervals", "throughput",
-                  t["min"].get<double>(), t["median"].get<double>(), t["max"].get<double>(),
-                  t["intervals"].get<std::size_t>());
-      if (t.contains("last_quarter_over_first")) {
-        std::printf("; last quarter / first %.3f", t["last_quarter_over_first"].get<double>());
-      }
-      std::printf("\n");
-    }
-    const Json& m = j["memory"];
-    std::printf("  %-22s peak %.1f MiB = %.3f x (state %.1f MiB + scratch %.1f MiB)\n", "memory",
-                mib(m["peak_resident_bytes"]), m["peak_over_state_and_scratch"].get<double>(),
-                mib(m["state_bytes"]), mib(m["scratch_bytes"]));
-    for (const Json& g : j["groups"]) {
-      std::printf("  group %-16s %zu %s, %s", g["name"].get<std::string>().c_str(), g["bodies"].get<std::size_t>(),
-                  g["kind"].get<std::string>().c_str(), g["path"].get<std::string>().c_str());
-      for (const char* drift : {"energy_drift", "momentum_drift"}) {
-        if (g.contains(drift)) std::printf(", %s %.3g (worst %.3g)", drift, g[drift]["final"].get<double>(), g[drift]["worst"].get<double>());
-      }
-      std::printf("\n");
-    }
-    if (j.contains("first_non_finite")) std::printf("  %-22s %s\n", "first_non_finite", j["first_non_finite"].dump().c_str());
-  }
-
-  int exit_code() const {
-    if (failure_) {
-      const std::string steps = failure_->first == failure_->last
-          ? "at step " + std::to_string(failure_->last)
-          : "between steps " + std::to_string(failure_->first) + " and " + std::to_string(failure_->last);
-      std::fprintf(stderr, "kinema: error: group %s is no longer finite %s: body %zu, %s%s\n",
-                   failure_->group.c_str(), steps.c_str(), failure_->body, failure_->field.c_str(),
-                   o_.guard == FiniteGuard::off ? "" : " (the state before that step is kept)");
-      return 3;
-    }
-    if (const int signal = interrupting_signal()) {
-      std::fprintf(stderr, "kinema: stopped by %s after step %llu; the report is complete to there\n",
-                   signal_name(signal).c_str(), static_cast<unsigned long long>(done_));
-      return 128 + signal;
-    }
-    return 0;
-  }
+  struct OpenInterval {
+    double start = 0;  // seconds since the stepping started
+    double stepping = 0;
+    std::uint64_t steps = 0;
+  };
 
   const StressOptions& o_;
-  Memory at_start_;
-  std::vector<StressGroup<T>> groups_;
-  std::vector<Conservation<T>> conservation_;
-  std::string name_;
-  double dt_ = 0;
-  T h_ = 0;
-  std::size_t bodies_ = 0;
-  std::uint64_t steps_ = 0, done_ = 0;
-  double stepping_seconds_ = 0;
-  std::vector<Interval> intervals_;
-  std::optional<Failure> failure_;
+  StressSetup<T>& setup_;
+  std::vector<Conservation<T>>& conservation_;
+  Clock::time_point start_;
+  OpenInterval open_;
+  StressOutcome out_;
 };
+
+template <class T>
+Json group_report(const StressGroup<T>& g, const Conservation<T>& c) {
+  Json j;
+  j["name"] = g.name();
+  j["bodies"] = g.size();
+  j["kind"] = g.rigid() ? "rigid" : "particles";
+  j["path"] = g.stepper().fused() ? "fused" : "staged";
+  if (g.conserves_energy()) j["energy_drift"] = {{"final", c.energy.last}, {"worst", c.energy.worst}};
+  if (g.conserves_momentum()) j["momentum_drift"] = {{"final", c.momentum.last}, {"worst", c.momentum.worst}};
+  return j;
+}
+
+template <class T>
+Json memory_report(const StressSetup<T>& setup, const StressOutcome& out, const Memory& at_start) {
+  double state = 0, scratch = 0;
+  for (const auto& g : setup.groups) state += double(g.state_bytes()), scratch += double(g.stepper().scratch_bytes());
+  const Memory m = memory_now();
+  Json j;
+  j["state_bytes"] = state;
+  j["scratch_bytes"] = scratch;
+  j["resident_at_start_bytes"] = at_start.resident;
+  j["peak_resident_bytes"] = m.peak;
+  j["peak_over_state_and_scratch"] = m.peak / (state + scratch);
+  if (!out.intervals.empty()) {
+    j["resident_first_interval_bytes"] = out.intervals.front().resident;
+    j["resident_last_interval_bytes"] = out.intervals.back().resident;
+  }
+  return j;
+}
+
+Json failure_report(const Failure& f, FiniteGuard guard) {
+  Json where;
+  where["group"] = f.group;
+  if (f.first == f.last) where["step"] = f.last;
+  else where["between_steps"] = {f.first, f.last};
+  where.update({{"body", f.body}, {"field", f.field}});
+  if (guard != FiniteGuard::off) where["state_kept_at_step"] = f.last - 1;
+  return where;
+}
+
+Json intervals_report(const std::vector<Interval>& intervals) {
+  Json j = Json::array();
+  for (const Interval& i : intervals) {
+    j.push_back({{"end_seconds", i.end_seconds}, {"steps", i.steps},
+                 {"body_steps_per_second", i.body_steps_per_second}, {"resident_bytes", i.resident}});
+  }
+  return j;
+}
+
+template <class T>
+Json stress_report(const StressOptions& o, const StressSetup<T>& setup, const std::vector<Conservation<T>>& conservation,
+                   const StressOutcome& out, const Memory& at_start) {
+  const Stepper<T>& s = setup.groups.front().stepper();
+  Json j;
+  j["scene"] = setup.name;
+  j["bodies"] = setup.bodies;
+  j["method"] = std::string(s.method().name);
+  j["precision"] = std::string(precision_name(sizeof(T) == 4 ? Precision::single : Precision::dual));
+  j["isa"] = std::string(isa_name(s.isa()));
+  j["threads"] = s.threads();
+  j["guard"] = guard_name(o.guard);
+  j["dt"] = setup.dt;
+  j["steps"] = out.done;  // completed by every group
+  j["wall_seconds"] = number(measured(out.stepping_seconds));
+  j["body_steps_per_second"] =
+      number(out.stepping_seconds > 0 ? measured(double(setup.bodies) * double(out.done) / out.stepping_seconds) : 0.0);
+  j["throughput"] = throughput_report(out.intervals);
+  j["memory"] = memory_report(setup, out, at_start);
+  j["groups"] = Json::array();
+  for (std::size_t k = 0; k < setup.groups.size(); ++k) j["groups"].push_back(group_report(setup.groups[k], conservation[k]));
+  j["finite"] = !out.failure;
+  if (out.failure) j["first_non_finite"] = failure_report(*out.failure, o.guard);
+  if (interrupting_signal() != 0 && !out.failure) j["interrupted"] = signal_name(interrupting_signal());
+  j["intervals"] = intervals_report(out.intervals);
+  return j;
+}
+
+std::string text_of(const Json& value) {
+  return printable(value.is_string() ? value.get<std::string>() : value.dump());
+}
+
+void print_throughput(const Json& t) {
+  if (!t.contains("median")) return;
+  std::printf("  %-22s min %.4g, median %.4g, max %.4g body-steps/s over %zu intervals", "throughput",
+              t["min"].get<double>(), t["median"].get<double>(), t["max"].get<double>(),
+              t["intervals"].get<std::size_t>());
+  if (t.contains("last_quarter_over_first")) {
+    std::printf("; last quarter / first %.3f", t["last_quarter_over_first"].get<double>());
+  }
+  std::printf("\n");
+}
+
+void print_memory(const Json& m) {
+  std::printf("  %-22s peak %.1f MiB = %.3f x (state %.1f MiB + scratch %.1f MiB)\n", "memory",
+              mib(m["peak_resident_bytes"]), m["peak_over_state_and_scratch"].get<double>(),
+              mib(m["state_bytes"]), mib(m["scratch_bytes"]));
+}
+
+void print_group(const Json& g) {
+  std::printf("  group %-16s %zu %s, %s", g["name"].get<std::string>().c_str(), g["bodies"].get<std::size_t>(),
+              g["kind"].get<std::string>().c_str(), g["path"].get<std::string>().c_str());
+  for (const char* drift : {"energy_drift", "momentum_drift"}) {
+    if (g.contains(drift)) std::printf(", %s %.3g (worst %.3g)", drift, g[drift]["final"].get<double>(), g[drift]["worst"].get<double>());
+  }
+  std::printf("\n");
+}
+
+void print_report(const Json& j) {
+  std::printf("kinema stress: %s\n", printable(j["scene"].get<std::string>()).c_str());
+  for (const char* key : {"bodies", "method", "precision", "isa", "threads", "guard", "dt", "steps",
+                          "wall_seconds", "body_steps_per_second", "finite"}) {
+    std::printf("  %-22s %s\n", key, text_of(j[key]).c_str());
+  }
+  print_throughput(j["throughput"]);
+  print_memory(j["memory"]);
+  for (const Json& g : j["groups"]) print_group(g);
+  if (j.contains("first_non_finite")) std::printf("  %-22s %s\n", "first_non_finite", j["first_non_finite"].dump().c_str());
+}
+
+// The exit code, with a line on stderr when the run did not end as asked.
+int stress_exit_code(const StressOptions& o, const StressOutcome& out) {
+  if (const auto& f = out.failure) {
+    const std::string steps = f->first == f->last
+        ? "at step " + std::to_string(f->last)
+        : "between steps " + std::to_string(f->first) + " and " + std::to_string(f->last);
+    std::fprintf(stderr, "kinema: error: group %s is no longer finite %s: body %zu, %s%s\n",
+                 f->group.c_str(), steps.c_str(), f->body, f->field.c_str(),
+                 o.guard == FiniteGuard::off ? "" : " (the state before that step is kept)");
+    return 3;
+  }
+  if (const int signal = interrupting_signal()) {
+    std::fprintf(stderr, "kinema: stopped by %s after step %llu%s\n", signal_name(signal).c_str(),
+                 static_cast<unsigned long long>(out.done),
+                 o.report_path.empty() ? "" : "; the report is complete to there");
+    return 128 + signal;
+  }
+  return 0;
+}
+
+template <class T>
+int run_stress(const StressOptions& o, const Scene* scene) {
+  const Memory at_start = memory_now();  // before any body is built
+  StressSetup<T> setup = set_up<T>(o, scene);
+  ReportFile report(o.report_path, "report");
+  std::vector<Conservation<T>> conservation;
+  for (const auto& g : setup.groups) conservation.push_back(conservation_start(g));
+  const StressOutcome out = StressLoop<T>(o, setup, conservation).run();
+  // The final drifts are those of the final state, whenever the last interval closed.
+  for (std::size_t k = 0; k < setup.groups.size(); ++k) conservation_update(setup.groups[k], conservation[k]);
+  const Json j = stress_report(o, setup, conservation, out, at_start);
+  report.write(j);
+  if (!o.quiet) print_report(j);
+  return stress_exit_code(o, out);
+}
 
 // The scene file with the command line's overrides, checked.
 std::optional<Scene> stress_scene(const StressOptions& o) {
@@ -414,10 +482,7 @@ int stress(const StressOptions& o) {
   const std::optional<Scene> scene = stress_scene(o);
   const Precision precision = scene ? scene->precision : o.precision.value_or(Precision::single);
   if (!scene) check_fits(o, precision);
-  return with_precision(precision, [&]<class T>() {
-    StressRun<T> run(o, scene ? &*scene : nullptr);
-    return run.run();
-  });
+  return with_precision(precision, [&]<class T>() { return run_stress<T>(o, scene ? &*scene : nullptr); });
 }
 
 }  // namespace kinema::cli

@@ -1,0 +1,52 @@
+#pragma once
+// Numbers as the summaries show them: to the digits they carry, so that a JSON summary and
+// the printed one read the same, without the noise of the last binary digits (a wall time
+// summed from chunks, a tolerance divided by ten) and without digits a float never had.
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include <nlohmann/json.hpp>
+
+#include "kinema/scene.hpp"
+
+namespace kinema::cli {
+
+// Measured or estimated quantities (times, rates, stiffness): four significant digits.
+inline constexpr int kMeasuredDigits = 4;
+
+// x rounded to `digits` significant decimal digits, as the nearest double (which JSON and
+// the summaries then print in shortest round-trip form: those digits at most).
+inline double significant(double x, int digits) {
+  if (!std::isfinite(x) || x == 0) return x;
+  char text[40];
+  std::snprintf(text, sizeof text, "%.*g", digits, x);
+  return std::strtod(text, nullptr);
+}
+
+inline double measured(double x) { return significant(x, kMeasuredDigits); }
+
+// A value of the simulation (a step, a time, an energy) to the digits its precision holds:
+// a float exactly as short as it round-trips (0.016666668 for 1/60 in float), other values
+// of a float run to 9 digits, values of a double run to 15 (the digits every double keeps
+// through a decimal text, so 0.1 x 3 shows as 0.3).
+inline double in_precision(double x, Precision p) {
+  if (!std::isfinite(x)) return x;
+  if (p == Precision::single && double(float(x)) == x) {
+    char text[40];
+    const auto end = std::to_chars(text, text + sizeof text - 1, float(x)).ptr;
+    *end = '\0';
+    return std::strtod(text, nullptr);
+  }
+  return significant(x, p == Precision::single ? 9 : 15);
+}
+
+// A JSON number: a whole value as an integer (10, not 10.0), any other as it is.
+inline nlohmann::ordered_json number(double x) {
+  if (std::isfinite(x) && x == std::trunc(x) && std::abs(x) < 0x1p53) return std::int64_t(x);
+  return x;
+}
+
+}  // namespace kinema::cli
