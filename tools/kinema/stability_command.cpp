@@ -15,6 +15,7 @@
 #include "interrupt.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
+#include "stability_charts.hpp"
 
 namespace kinema::cli {
 namespace fs = std::filesystem;
@@ -81,44 +82,25 @@ void write_regions(const fs::path& dir, const std::vector<const Method*>& method
   OutputFile csv(dir / "stability_region.csv"), limits(dir / "thresholds.csv");
   csv << "method,re,im\n";
   limits << "method,measured_threshold\n";
-  std::string plot = "set grid\nset size ratio -1\nset key outside right\n"
-                     "set title 'Stability regions |R(h lambda)| <= 1 of the explicit methods'\n"
-                     "set xlabel 'Re(h lambda)'\nset ylabel 'Im(h lambda)'\nplot ";
-  bool first = true;
-  int color = 0;
+  std::vector<RegionBoundary> regions;
   for (const Method* m : methods) {
     if (m->kind != MethodKind::runge_kutta) continue;
-    ++color;
     const std::vector<double> c = stability_polynomial(m->tableau);
     stop_if_interrupted();
-    OutputFile dat(dir / ("region_" + std::string(m->name) + ".dat"));
+    RegionBoundary region{std::string(m->name), c, {}, 0};
     for (int k = 0; k < 240; ++k) {
       std::vector<Complex> p(c.begin(), c.end());
       p[0] -= std::polar(1.0, 2 * M_PI * k / 240);
-      for (const Complex& z : roots(p)) {
-        dat << z.real() << ' ' << z.imag() << '\n';
-        csv << m->name << ',' << z.real() << ',' << z.imag() << '\n';
-      }
+      region.roots.push_back(roots(p));
+      for (const Complex& z : region.roots.back()) csv << m->name << ',' << z.real() << ',' << z.imag() << '\n';
     }
-    dat.close();
-    const double limit = measured_threshold(*m);
-    limits << m->name << ',' << limit << '\n';
-    OutputFile mark(dir / ("threshold_" + std::string(m->name) + ".dat"));
-    mark << -limit << " 0\n";
-    mark.close();
-    const std::string name(m->name), lc = " lc " + std::to_string(color);
-    char label[96];
-    std::snprintf(label, sizeof label, "%s: measured limit h lambda = %.4g", name.c_str(), limit);
-    plot += std::string(first ? "" : ", \\\n  ") +
-            gnuplot_quote("region_" + name + ".dat") + " with points pt 7 ps 0.15" + lc +
-            " title " + gnuplot_quote("|R| = 1, " + name) + ", " +
-            gnuplot_quote("threshold_" + name + ".dat") + " with points pt 2 ps 2 lw 2" + lc +
-            " title " + gnuplot_quote(label);
-    first = false;
+    region.measured_limit = measured_threshold(*m);
+    limits << m->name << ',' << region.measured_limit << '\n';
+    regions.push_back(std::move(region));
   }
   csv.close();
   limits.close();
-  if (!first) render_chart(dir, "stability_region", plot);
+  if (!regions.empty()) render_region_chart(dir, regions);
 }
 
 // Returns how many points of the energy error it wrote for the chart.
@@ -206,7 +188,8 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
   ParticleSet<double> bodies = make_particles<double>(scene);
   if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
   const StiffnessEstimate e = estimate_stiffness(bodies, forces);
-  OutputFile csv(dir / "step_limits.csv"), dat(dir / "step_limits.dat");
+  OutputFile csv(dir / "step_limits.csv");
+  std::vector<StepLimit> chart;
   csv << "method,stiffness,angle,predicted_step,measured_step\n";
   std::string line = "largest stable step, predicted / measured:";
   for (const Method* m : methods) {
@@ -217,24 +200,13 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
       return measured_step<T>(scene, *m, guess, duration);
     });
     csv << m->name << ',' << e.magnitude << ',' << e.angle << ',' << predicted << ',' << measured << '\n';
-    // Zero and infinite steps have no place on a log scale: drawn at the axis' ends.
-    dat << '"' << m->name << "\" " << std::clamp(predicted, dt / 1e3, dt * 1e3) << ' '
-        << std::clamp(measured, dt / 1e3, dt * 1e3) << '\n';
+    chart.push_back({std::string(m->name), predicted, measured});
     char item[96];
     std::snprintf(item, sizeof item, " %s %.3g / %.3g", std::string(m->name).c_str(), predicted, measured);
     line += item;
   }
   csv.close();
-  dat.close();
-  char head[400];
-  std::snprintf(head, sizeof head,
-                "set logscale y\nset grid\nset key outside right\nset xtics rotate by -30\n"
-                "set title 'Largest stable step: predicted (|lambda| = %.4g /s at the start) and measured'\n"
-                "set ylabel 'h (s)'\nset xrange [-0.5:%zu]\n", e.magnitude, methods.size() - 0);
-  render_chart(dir, "step_limits",
-               std::string(head) + "plot 'step_limits.dat' using 0:2:xtic(1) with points pt 7 ps 1.5 title 'predicted', "
-               "'' using 0:3 with points pt 6 ps 2 lw 2 title 'measured blow-up', " + std::to_string(dt) +
-               " with lines dt 2 title 'the scene''s dt'");
+  render_step_limits(dir, chart, e.magnitude, dt);
   return line + "\n";
 }
 
@@ -252,12 +224,6 @@ int stability_scene(const StabilityOptions& o) {
   OutputFile energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
   energy_csv << "method,t,energy,relative_error\n";
   path_csv << "method,t,x,y,z\n";
-  std::string energy_plot = "set logscale y\nset grid\nset key outside right\nset format y '%.0e'\n"
-                            "set title " + gnuplot_quote("Energy error: " + scene.name + ", h = " + std::to_string(dt)) +
-                            "\nset xlabel 't (s)'\nset ylabel '|E - E_0| / |E_0|'\nplot ";
-  std::string path_plot = "set grid\nset size ratio -1\nset key outside right\n"
-                          "set title " + gnuplot_quote("Trajectory of body 0: " + scene.name) +
-                          "\nset xlabel 'x'\nset ylabel 'y'\nplot ";
   double max_z = 0;
   std::size_t plotted = 0;
   Progress progress("kinema stability", o.quiet);
@@ -270,12 +236,6 @@ int stability_scene(const StabilityOptions& o) {
     });
     energy_dat.close();
     path_dat.close();
-    const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
-    const std::string lc = " lc " + std::to_string(i + 1);
-    energy_plot += gnuplot_quote("energy_" + name + ".dat") + " with lines lw 2" +
-                   lc + " title " + gnuplot_quote(name) + sep;
-    path_plot += gnuplot_quote("path_" + name + ".dat") + " with lines" + lc +
-                 " title " + gnuplot_quote(name) + sep;
     progress.update(double(i + 1) / double(methods.size() + 1));
   }
   energy_csv.close();
@@ -285,9 +245,9 @@ int stability_scene(const StabilityOptions& o) {
                 "initial energy is 0, or every method blew up at once); the values are in " +
                 (dir / "energy.csv").string());
   }
-  render_chart(dir, "energy", energy_plot);
+  render_energy_chart(dir, scene.name, dt, methods);
   const bool planar = max_z == 0;
-  if (planar) render_chart(dir, "trajectory", path_plot);
+  if (planar) render_trajectory_chart(dir, scene.name, methods);
   write_regions(dir, methods);
   const std::string springs = spring_limits(scene, dir);
   const std::string steps_line = step_limits(scene, methods, dt, duration, dir);
