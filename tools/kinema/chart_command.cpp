@@ -229,7 +229,7 @@ Curve sweep_method(const Sweep& s, const Method& m, std::ofstream& csv, Written&
 std::string log_chart_head(const std::string& title, const std::string& xlabel,
                            const std::string& ylabel, Frame& frame,
                            const std::vector<std::string>& key_titles) {
-  return key_below(frame, key_titles) + "set logscale xy\nset grid\nset format y '%.0e'\n" +
+  return key_below(frame, key_titles) + "set logscale xy\nset grid\nset format xy '%g'\n" +
          "set title " + gnuplot_quote(title) + "\nset xlabel " + gnuplot_quote(xlabel) +
          "\nset ylabel " + gnuplot_quote(ylabel) + "\n";
 }

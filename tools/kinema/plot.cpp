@@ -247,8 +247,8 @@ struct Spot {
   double dx, dy;
   int align;
 };
-constexpr Spot kSpots[] = {{9, 0, 1},   {-9, 0, -1}, {0, -13, 0}, {0, 13, 0},
-                           {6, -11, 1}, {6, 11, 1},  {-6, -11, -1}, {-6, 11, -1}};
+constexpr Spot kSpots[] = {{11, 0, 1},  {-11, 0, -1}, {0, -14, 0},   {0, 14, 0},
+                           {7, -12, 1}, {7, 12, 1},   {-7, -12, -1}, {-7, 12, -1}};
 
 Box label_box(Pixel anchor, int align, const std::string& text) {
   const double w = double(text.size()) * kLabelCharPixels, h = 1.2 * kLabelFontPixels;
@@ -260,7 +260,7 @@ bool clear(const Box& box, const std::vector<Box>& taken, const std::vector<std:
   for (const Box& t : taken) {
     if (box.overlaps(t)) return false;
   }
-  constexpr double marker = 6;  // half a point marker's width
+  constexpr double marker = 8;  // half a point marker's width (ps 1.2), and a gap
   const Box padded{box.left - marker, box.top - marker, box.right + marker, box.bottom + marker};
   for (const auto& curve : curves) {
     for (std::size_t i = 0; i < curve.size(); ++i) {

@@ -41,6 +41,8 @@ void render_energy_chart(const fs::path& dir, const std::string& scene, double d
   Frame frame;
   render_chart(dir, "energy",
                key_below(frame, names) + "set logscale y\nset grid\nset format y '%.0e'\n" +
+                   // No minor tics: across the tens of decades of a blow-up they crowd into blots.
+                   "set mytics 1\n" +
                    "set title " + gnuplot_quote(title) +
                    "\nset xlabel 't (s)'\nset ylabel '|E - E_0| / |E_0|'\n" +
                    method_curves(names, "energy_", "lw 2"));
