@@ -168,6 +168,8 @@ double key_column_width(const std::vector<std::string>& titles) {
   return (double(longest) + 6.1) * kKeyCharPixels;  // the title, the sample and the gaps
 }
 
+double key_height(std::size_t rows) { return double(rows) * kKeyRowPixels; }
+
 std::string key_below(Frame& frame, const std::vector<std::string>& titles, double under_axis) {
   // gnuplot's own layout of a horizontal key: as many columns of the widest entry as the
   // plot's width takes, then as few columns as give that many rows.
@@ -175,7 +177,7 @@ std::string key_below(Frame& frame, const std::vector<std::string>& titles, doub
   const std::size_t entries = std::max<std::size_t>(1, titles.size());
   const std::size_t fit = std::clamp<std::size_t>(std::size_t(frame.width() / column), 1, entries);
   const std::size_t rows = (entries + fit - 1) / fit;
-  const double key_top = 10 + double(rows) * kKeyRowPixels;
+  const double key_top = 10 + key_height(rows);
   frame.bottom = key_top + under_axis;
   return frame.margins() + "set key at screen 0.5," + screen_fraction(key_top, frame.canvas.height) +
          " center top horizontal samplen 3 spacing 1 width 0 noautotitle\n";

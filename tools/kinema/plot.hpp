@@ -57,8 +57,10 @@ struct Frame {
   std::string margins() const;  // the gnuplot settings that put the frame there
 };
 
-// The width gnuplot gives a key column holding these titles, in pixels.
+// The width gnuplot gives a key column holding these titles, and the height of `rows` rows
+// of a key, in pixels.
 double key_column_width(const std::vector<std::string>& titles);
+double key_height(std::size_t rows);
 
 // The key under the x label, in as many columns as the canvas' width takes, so that the plot
 // keeps the whole width: raises frame.bottom to make room and returns the gnuplot settings

@@ -109,26 +109,24 @@ const RegionBoundary* same_region(const std::vector<RegionBoundary>& regions, st
 }
 
 // The chart's window at equal scales: every boundary point within reach, and on the right of
-// them room for the key (`key_pixels` wide), at the frame's aspect.
+// them room for the key (`key_width` x `key_height` pixels, centred on the real axis), at the
+// frame's aspect.
 struct Window {
   double x_lo, x_hi, y_half;
   std::string far_note;  // what lies beyond reach
 };
 
-Window window_for(const std::vector<RegionBoundary>& regions, const Frame& frame, double key_pixels) {
-  double left = 0, right = 0, top = 0;
+Window window_for(const std::vector<RegionBoundary>& regions, const Frame& frame, double key_width,
+                  double key_height) {
+  std::vector<Complex> near;
   std::string far;
   for (const RegionBoundary& r : regions) {
     double far_re = 0;
     std::size_t far_count = 0;
     for (const auto& row : r.roots) {
       for (const Complex& z : row) {
-        if (std::abs(z) > kChartReach) {
-          far_re += z.real(), ++far_count;
-          continue;
-        }
-        left = std::min(left, z.real()), right = std::max(right, z.real());
-        top = std::max(top, std::abs(z.imag()));
+        if (std::abs(z) <= kChartReach) near.push_back(z);
+        else far_re += z.real(), ++far_count;
       }
     }
     if (far_count > 0) {
@@ -138,10 +136,20 @@ Window window_for(const std::vector<RegionBoundary>& regions, const Frame& frame
       far += note;
     }
   }
+  double left = 0, top = 0;
+  for (const Complex& z : near) left = std::min(left, z.real()), top = std::max(top, std::abs(z.imag()));
   const double pad = 0.3, x_lo = left - pad;
-  // Pixels per unit: the regions' height fills the frame, unless the key then lacks room.
-  const double unit = std::min(frame.height() / (2 * (top + pad)),
-                               (frame.width() - key_pixels - 20) / (right + pad - x_lo));
+  // Pixels per unit: the regions' height fills the frame, unless the key then lacks room
+  // beside the boundary points level with it; a smaller unit makes the key's band taller.
+  double unit = frame.height() / (2 * (top + pad));
+  for (int pass = 0; pass < 4; ++pass) {
+    const double band = key_height / 2 / unit + pad;
+    double edge = 0;
+    for (const Complex& z : near) {
+      if (std::abs(z.imag()) <= band) edge = std::max(edge, z.real());
+    }
+    unit = std::min(unit, (frame.width() - key_width - 20) / (edge + pad - x_lo));
+  }
   return {x_lo, x_lo + frame.width() / unit, frame.height() / (2 * unit), far};
 }
 
@@ -164,7 +172,7 @@ void render_region_chart(const fs::path& dir, const std::vector<RegionBoundary>&
   std::vector<std::string> titles;
   for (std::size_t i = 0; i < regions.size(); ++i) titles.push_back(region_title(regions, i));
   titles.push_back(kLimitTitle);
-  const Window w = window_for(regions, frame, key_column_width(titles));
+  const Window w = window_for(regions, frame, key_column_width(titles), key_height(titles.size() + 1));
   char ranges[160];
   std::snprintf(ranges, sizeof ranges, "set xrange [%.4f:%.4f]\nset yrange [%.4f:%.4f]\n", w.x_lo, w.x_hi,
                 -w.y_half, w.y_half);
