@@ -533,3 +533,70 @@ TEST_CASE("stability: a table of predicted and measured steps, and where an orbi
   CHECK(spring.out.find(" *\n") == std::string::npos);
   CHECK(spring.out.find("breaks the linear bound") == std::string::npos);
 }
+
+// The charts' files and styles, as the chart and stability commands write them.
+namespace {
+
+// Each plot item with a title in a gnuplot script kinema wrote: the method the title names
+// (its first word) and the item's colour and dash ("lc rgb '#rrggbb' dt D ... title 'NAME...").
+std::vector<std::pair<std::string, std::string>> titled_styles(const fs::path& gp) {
+  std::vector<std::pair<std::string, std::string>> out;
+  const std::string text = read(gp);
+  for (std::size_t at = text.find("lc rgb '"); at != std::string::npos; at = text.find("lc rgb '", at + 1)) {
+    const std::size_t dash = text.find(" dt ", at), title = text.find(" title '", at);
+    const std::size_t item_end = text.find_first_of(",\n", at);
+    if (dash > item_end || title > item_end) continue;  // no dash or no title: not a method
+    const std::string colour = text.substr(at + 8, 7);
+    const std::string dash_type = text.substr(dash + 4, text.find(' ', dash + 4) - dash - 4);
+    const std::size_t name = title + 8;
+    out.emplace_back(text.substr(name, text.find_first_of(" ,'", name) - name), colour + " dt " + dash_type);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("chart lists every file it wrote, the error_vs_evaluations charts among them", "[cli][chart]") {
+  const fs::path out = work_dir() / "chart_listed";
+  const Result r = kinema_cli("chart " + scene("damped_spring.json") +
+                              " --methods euler,rk4 --dts 0.02,0.01 --duration 2 --repeat 1 --out " + out.string());
+  REQUIRE(r.code == 0);
+  const std::size_t list = r.out.find("wrote in");
+  REQUIRE(list != std::string::npos);
+  std::istringstream words(r.out.substr(r.out.find('\n', list)));
+  std::map<std::string, int> listed;
+  for (std::string w; words >> w;) ++listed[w];
+  std::map<std::string, int> present;
+  for (const auto& entry : fs::directory_iterator(out)) ++present[entry.path().filename().string()];
+  CHECK(listed == present);
+  for (const char* file : {"error_vs_evaluations.svg", "error_vs_evaluations.png", "error_vs_evaluations.gp",
+                           "work_precision.csv", "orders.csv", "points_rk4.dat"}) {
+    INFO(file);
+    CHECK(listed.count(file) == 1);
+  }
+}
+
+TEST_CASE("each method has one colour and dash in every chart, no two methods the same", "[cli][chart][stability]") {
+  const fs::path charts = work_dir() / "styles_chart", stability = work_dir() / "styles_stability";
+  REQUIRE(kinema_cli("chart " + scene("kepler_eccentric.json") + " --dts 0.004,0.002 --repeat 1 -q --out " +
+                     charts.string()).code == 0);
+  REQUIRE(kinema_cli("stability " + scene("kepler_circular.json") + " -q --out " + stability.string()).code == 0);
+  std::map<std::string, std::string> style_of;  // method -> colour and dash
+  for (const fs::path& gp : {charts / "work_precision.gp", charts / "error_vs_step.gp",
+                             charts / "error_vs_evaluations.gp", stability / "energy.gp",
+                             stability / "trajectory.gp", stability / "stability_region.gp"}) {
+    const auto styles = titled_styles(gp);
+    CHECK(styles.size() >= 7);  // the Runge-Kutta methods at least
+    for (const auto& [method, style] : styles) {
+      INFO(gp.filename().string() << ": " << method);
+      CHECK(style_of.emplace(method, style).first->second == style);
+    }
+  }
+  REQUIRE(style_of.size() == 9);
+  std::map<std::string, std::string> method_of;  // colour and dash -> method
+  for (const auto& [method, style] : style_of) {
+    const auto [first, unique] = method_of.emplace(style, method);
+    INFO(method << " and " << first->second << " share " << style);
+    CHECK(unique);
+  }
+}

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 
 #include "kinema/scenes.hpp"
@@ -68,6 +69,7 @@ struct Point {
   double dt;
   std::uint64_t steps;
   double error;
+  double seconds;  // wall time of the run
   double seconds_per_simulated_second;
   double evaluations;
 };
@@ -110,127 +112,303 @@ double motion_scale(const BodyStates& s) {
   return scale;
 }
 
-void write_charts(const fs::path& dir, const Scene& scene, const std::vector<const Method*>& methods,
-                  const std::vector<std::string>& legends, const Reference& ref, double duration) {
-  std::string wp = "set logscale xy\nset grid\nset key outside right\n";
+// What every method's sweep shares: the scene, the steps and the reference to measure against.
+struct Sweep {
+  Scene scene;  // the bodies sampled
+  double duration;
+  std::vector<double> dts;
+  Reference ref;
+  double epsilon, scale;  // round-off and motion: where a fitted order can be trusted
+  int repeat;
+};
+
+// The step sizes asked for (default: the scene's dt times 2^-3 .. 2^4), smallest first, one
+// per step count.
+std::vector<double> step_sizes(const ChartOptions& o, const Scene& full, double duration) {
+  std::vector<double> dts = o.dts;
+  if (dts.empty()) {
+    for (int k = -3; k <= 4; ++k) dts.push_back(full.dt * std::ldexp(1.0, k));
+  }
+  std::sort(dts.begin(), dts.end());
+  dts.erase(std::unique(dts.begin(), dts.end(), [&](double a, double b) {
+              return step_count(duration, a) == step_count(duration, b);
+            }),
+            dts.end());
+  return dts;
+}
+
+// The sweep's scene, duration and steps; its reference comes after (measure_against_reference).
+Sweep plan_sweep(const ChartOptions& o, const Scene& full) {
+  const double duration = o.duration.value_or(full.dt * double(full.steps));
+  if (!(duration > 0)) throw Error("the duration must be positive (--duration or the scene's dt x steps)");
+  Sweep s{sample_bodies(full, o.max_bodies), duration, {}, {}, 0, 0, o.repeat};
+  s.dts = step_sizes(o, full, duration);
+  return s;
+}
+
+// The reference the errors are measured against: 64 times the most steps swept.
+void measure_against_reference(Sweep& s) {
+  std::uint64_t most_steps = 1;
+  for (double dt : s.dts) most_steps = std::max(most_steps, step_count(s.duration, dt));
+  s.ref = reference_states(s.scene, s.duration, 64 * most_steps);
+  s.epsilon = s.scene.precision == Precision::single ? 1.2e-7 : 2.2e-16;
+  s.scale = motion_scale(s.ref.states);
+}
+
+// One run of `m` at about `dt` over the sweep's duration: its error and its cost.
+Point measure(const Sweep& s, const Method& m, double dt) {
+  const std::uint64_t steps = step_count(s.duration, dt);
+  const double h = s.duration / double(steps);
+  const double error = state_error(simulate(s.scene, m, steps, s.duration), s.ref.states);
+  const double seconds = with_precision(
+      s.scene.precision, [&]<class T>() { return timed<T>(s.scene, m, steps, s.duration, s.repeat); });
+  const std::size_t bodies = s.scene.particles.size() + s.scene.rigid_bodies.size();
+  const double evaluations = double(steps) * m.evaluations() * double(bodies);
+  return {&m, h, steps, error, seconds, seconds / s.duration, evaluations};
+}
+
+// What log axes can show.
+bool plottable(const Point& p) { return std::isfinite(p.error) && p.error > 0; }
+
+void write_csv_row(std::ofstream& csv, const Point& p, const Reference& ref) {
+  char line[512];
+  std::snprintf(line, sizeof line, "%s,%d,%.17g,%llu,%.17g,%.6g,%.17g,%.6g,%s\n",
+                std::string(p.method->name).c_str(), p.method->order, p.dt,
+                static_cast<unsigned long long>(p.steps), p.error, p.seconds_per_simulated_second,
+                p.evaluations, ref.error, ref.analytic ? "true" : "false");
+  csv << line;
+}
+
+// A method's sweep: its points, plotted or not, and its key title with the fitted order.
+struct Curve {
+  const Method* method;
+  std::vector<Point> points;
+  std::optional<double> order;  // fitted
+  std::string legend;
+
+  std::string data_file() const { return "points_" + std::string(method->name) + ".dat"; }
+};
+
+std::string legend_of(const Method& m, std::optional<double> order) {
+  char legend[128];
+  std::snprintf(legend, sizeof legend, order ? "%s (fitted order %.2f)" : "%s (no asymptotic range)",
+                std::string(m.name).c_str(), order.value_or(0));
+  return legend;
+}
+
+// The files of the run so far, by name inside the output folder.
+struct Written {
+  fs::path dir;
+  std::vector<std::string> data, charts;
+};
+
+Curve sweep_method(const Sweep& s, const Method& m, std::ofstream& csv, Written& written,
+                   const std::function<void()>& tick) {
+  Curve curve{&m, {}, {}, {}};
+  OutputFile dat(written.dir / curve.data_file());
+  written.data.push_back(curve.data_file());
+  dat << "# steps dt seconds evaluations error seconds_per_simulated_second\n";
+  for (double dt : s.dts) {
+    stop_if_interrupted();
+    const Point p = measure(s, m, dt);
+    curve.points.push_back(p);
+    write_csv_row(csv, p, s.ref);
+    if (plottable(p)) {
+      dat << p.steps << ' ' << p.dt << ' ' << p.seconds << ' '
+          << p.evaluations << ' ' << p.error << ' ' << p.seconds_per_simulated_second << '\n';
+    }
+    tick();
+  }
+  dat.close();
+  curve.order = fitted_order(curve.points, s.epsilon, s.scale, s.ref.error);
+  curve.legend = legend_of(m, curve.order);
+  return curve;
+}
+
+// The axes' shared settings and the key under the plot.
+std::string log_chart_head(const std::string& title, const std::string& xlabel,
+                           const std::string& ylabel, Frame& frame,
+                           const std::vector<std::string>& key_titles) {
+  return key_below(frame, key_titles) + "set logscale xy\nset grid\nset format xy '%g'\n" +
+         "set title " + gnuplot_quote(title) + "\nset xlabel " + gnuplot_quote(xlabel) +
+         "\nset ylabel " + gnuplot_quote(ylabel) + "\n";
+}
+
+// One line with points per method: columns `x:y` of its data file, its key title.
+std::string method_lines(const std::vector<Curve>& curves, const std::string& columns,
+                         const std::vector<std::string>& titles) {
+  std::string plot = "plot ";
+  for (std::size_t i = 0; i < curves.size(); ++i) {
+    plot += std::string(i ? ", \\\n  " : "") + gnuplot_quote(curves[i].data_file()) + " using " +
+            columns + " with linespoints lw 2 ps 1.2" + style_of(curves[i].method->name) +
+            " title " + gnuplot_quote(titles[i]);
+  }
+  return plot;
+}
+
+// Error and cost of each plotted point, on the work-precision chart's axes.
+struct Extent {
+  static constexpr double kNone = std::numeric_limits<double>::infinity();
+  double min_error = kNone, max_error = 0, min_cost = kNone, max_cost = 0;
+
+  explicit Extent(const std::vector<Curve>& curves) {
+    for (const Curve& c : curves) {
+      for (const Point& p : c.points) {
+        if (!plottable(p) || !(p.seconds_per_simulated_second > 0)) continue;
+        min_error = std::min(min_error, p.error), max_error = std::max(max_error, p.error);
+        min_cost = std::min(min_cost, p.seconds_per_simulated_second);
+        max_cost = std::max(max_cost, p.seconds_per_simulated_second);
+      }
+    }
+  }
+};
+
+// Labels h=... at the two ends of each curve, where they fit: labelling every point piles
+// them up where methods cluster, and the points between the ends follow the sweep.
+std::string end_labels(const std::vector<Curve>& curves, const LogAxis& x, const LogAxis& y,
+                       const Frame& frame) {
+  std::vector<std::vector<Pixel>> lines;
+  std::vector<PointLabel> wanted;
+  for (const Curve& c : curves) {
+    std::vector<const Point*> shown;
+    for (const Point& p : c.points) {
+      if (plottable(p) && p.seconds_per_simulated_second > 0) shown.push_back(&p);
+    }
+    std::vector<Pixel> line;
+    for (const Point* p : shown) {
+      line.push_back({frame.left + x.fraction(p->error) * frame.width(),
+                      frame.top + (1 - y.fraction(p->seconds_per_simulated_second)) * frame.height()});
+    }
+    lines.push_back(line);
+    if (shown.empty()) continue;
+    const MethodStyle style = method_style(c.method->name);
+    char text[32];
+    for (std::size_t k : {std::size_t(0), shown.size() - 1}) {
+      std::snprintf(text, sizeof text, "h=%.3g", shown[k]->dt);
+      wanted.push_back({line[k], text, style.colour});
+      if (shown.size() == 1) break;
+    }
+  }
+  return place_labels(wanted, lines, frame);
+}
+
+std::string work_precision_script(const Sweep& s, const std::vector<Curve>& curves) {
   char title[256];
   std::snprintf(title, sizeof title, "Work-precision: %s (%s, %g s simulated, %zu bodies)",
-                scene.name.c_str(), std::string(precision_name(scene.precision)).c_str(), duration,
-                scene.particles.size() + scene.rigid_bodies.size());
-  wp += "set title " + gnuplot_quote(title) + "\n";
-  wp += "set xlabel 'error at the end: max over bodies of |dx| + |dv| (+ orientation, rad)'\n";
-  wp += "set ylabel 'wall time per simulated second, 1 thread (s)'\n";
-  wp += "plot ";
-  // Cost as force evaluations: what the method's order buys, whatever its kernel's speed.
-  std::string fe = "set logscale xy\nset grid\nset key outside right\n";
-  fe += "set title " + gnuplot_quote("Error against force evaluations: " + scene.name + " (" +
-                                      std::string(precision_name(scene.precision)) + ")") + "\n";
-  fe += "set xlabel 'error at the end'\nset ylabel 'force evaluations (stages x steps x bodies)'\nplot ";
-  std::string ev = "set logscale xy\nset grid\nset key outside right\n";
-  ev += "set title " + gnuplot_quote("Error against step size: " + scene.name) + "\n";
-  ev += "set xlabel 'step size h (s)'\nset ylabel 'error at the end'\nplot ";
-  for (std::size_t i = 0; i < methods.size(); ++i) {
-    const std::string data = gnuplot_quote("points_" + std::string(methods[i]->name) + ".dat");
-    const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
-    const std::string lc = " lc " + std::to_string(i + 1);
-    wp += data + " using 5:6 with linespoints pt 7" + lc + " title " +
-          gnuplot_quote(std::string(methods[i]->name)) + ", " + data +
-          " using 5:6:(sprintf('h=%.3g', $2)) with labels offset 0.6,0.6 font ',8' tc lt " +
-          std::to_string(i + 1) + " notitle" + sep;
-    ev += data + " using 2:5 with linespoints pt 7" + lc + " title " + gnuplot_quote(legends[i]) + sep;
-    fe += data + " using 5:4 with linespoints pt 7" + lc + " title " + gnuplot_quote(legends[i]) + sep;
+                s.scene.name.c_str(), std::string(precision_name(s.scene.precision)).c_str(),
+                s.duration, s.scene.particles.size() + s.scene.rigid_bodies.size());
+  std::vector<std::string> names;
+  for (const Curve& c : curves) names.emplace_back(c.method->name);
+  Frame frame;
+  std::string script = log_chart_head(title, "error at the end: max over bodies of |dx| + |dv| (+ orientation, rad)",
+                                      "wall time per simulated second, 1 thread (s)", frame, names);
+  const Extent e(curves);
+  if (e.max_error > 0 && e.max_cost > 0) {  // fixed ranges: the labels are placed against them
+    const LogAxis x = LogAxis::around(e.min_error, e.max_error), y = LogAxis::around(e.min_cost, e.max_cost);
+    script += "set xrange " + x.range() + "\nset yrange " + y.range() + "\n" + x.tics('x') + y.tics('y') +
+              end_labels(curves, x, y, frame);
   }
-  if (!ref.analytic && ref.error > 0) {
-    ev += ", " + std::to_string(ref.error) + " with lines dt 2 lc 'gray' title 'reference error (estimate)'";
+  return script + method_lines(curves, "5:6", names);
+}
+
+std::vector<std::string> legends_of(const std::vector<Curve>& curves) {
+  std::vector<std::string> legends;
+  for (const Curve& c : curves) legends.push_back(c.legend);
+  return legends;
+}
+
+std::string error_vs_step_script(const Sweep& s, const std::vector<Curve>& curves) {
+  std::vector<std::string> titles = legends_of(curves);
+  const bool reference_line = !s.ref.analytic && s.ref.error > 0;
+  if (reference_line) titles.push_back("reference error (estimate)");
+  Frame frame;
+  std::string script = log_chart_head("Error against step size: " + s.scene.name, "step size h (s)",
+                                      "error at the end", frame, titles) +
+                       method_lines(curves, "2:5", legends_of(curves));
+  if (reference_line) {
+    char line[128];
+    std::snprintf(line, sizeof line, ", %.17g with lines lw 2 dt 3 lc rgb '#999999' title ", s.ref.error);
+    script += line + gnuplot_quote(titles.back());
   }
-  render_chart(dir, "work_precision", wp);
-  render_chart(dir, "error_vs_step", ev);
-  render_chart(dir, "error_vs_evaluations", fe);
+  return script;
+}
+
+// Cost as force evaluations: what the method's order buys, whatever its kernel's speed.
+std::string error_vs_evaluations_script(const Sweep& s, const std::vector<Curve>& curves) {
+  Frame frame;
+  return log_chart_head("Error against force evaluations: " + s.scene.name + " (" +
+                            std::string(precision_name(s.scene.precision)) + ")",
+                        "error at the end", "force evaluations (stages x steps x bodies)", frame,
+                        legends_of(curves)) +
+         method_lines(curves, "5:4", legends_of(curves));
+}
+
+void write_charts(const Sweep& s, const std::vector<Curve>& curves, Written& written) {
+  const std::pair<const char*, std::string> charts[] = {
+      {"work_precision", work_precision_script(s, curves)},
+      {"error_vs_step", error_vs_step_script(s, curves)},
+      {"error_vs_evaluations", error_vs_evaluations_script(s, curves)},
+  };
+  for (const auto& [name, script] : charts) {
+    render_chart(written.dir, name, script);
+    for (const std::string& file : chart_files(name)) written.charts.push_back(file);
+  }
+}
+
+void require_plotted(const std::vector<Curve>& curves, const fs::path& dir) {
+  for (const Curve& c : curves) {
+    if (std::any_of(c.points.begin(), c.points.end(), plottable)) return;
+  }
+  throw Error("no chart: every error is zero or not finite (the methods are exact on this "
+              "scene, or every run blew up); the values are in " +
+              (dir / "work_precision.csv").string());
+}
+
+void print_summary(const Sweep& s, const std::vector<Curve>& curves, const Written& written) {
+  std::printf("kinema chart: %s, %zu methods x %zu step sizes, reference %s\n",
+              printable(s.scene.name).c_str(), curves.size(), s.dts.size(),
+              s.ref.analytic ? "analytic" : ("rk4 double, " + std::to_string(s.ref.steps) + " steps").c_str());
+  for (const Curve& c : curves) std::printf("  %s\n", c.legend.c_str());
+  std::printf("wrote in %s:\n", printable(written.dir.string()).c_str());
+  for (const auto* group : {&written.data, &written.charts}) {
+    std::string line;
+    for (const std::string& file : *group) {
+      if (!line.empty() && line.size() + file.size() > 96) std::printf("%s\n", line.c_str()), line.clear();
+      line += "  " + printable(file);
+    }
+    std::printf("%s\n", line.c_str());
+  }
 }
 
 }  // namespace
 
 int chart_scene(const ChartOptions& o) {
   const Scene full = load_checked(o.scene_path, o.precision);
-  const Scene scene = sample_bodies(full, o.max_bodies);
-  const double duration = o.duration.value_or(full.dt * double(full.steps));
-  if (!(duration > 0)) throw Error("the duration must be positive (--duration or the scene's dt x steps)");
-  std::vector<double> dts = o.dts;
-  if (dts.empty()) {
-    for (int k = -3; k <= 4; ++k) dts.push_back(full.dt * std::ldexp(1.0, k));
-  }
+  Sweep sweep = plan_sweep(o, full);
   const std::vector<const Method*> methods = pick_methods(o.methods, full);
-  std::sort(dts.begin(), dts.end());
-  dts.erase(std::unique(dts.begin(), dts.end(), [&](double a, double b) {
-              return step_count(duration, a) == step_count(duration, b);
-            }),
-            dts.end());
-  std::uint64_t most_steps = 1;
-  for (double dt : dts) most_steps = std::max(most_steps, step_count(duration, dt));
-  const Reference ref = reference_states(scene, duration, 64 * most_steps);
-
+  measure_against_reference(sweep);
   fs::create_directories(o.out);
-  OutputFile csv(fs::path(o.out) / "work_precision.csv");
+  Written written{o.out, {"work_precision.csv", "orders.csv"}, {}};
+  OutputFile csv(written.dir / "work_precision.csv");
   csv << "method,order,dt,steps,error,seconds_per_simulated_second,force_evaluations,"
          "reference_error,analytic_reference\n";
-  const double eps = scene.precision == Precision::single ? 1.2e-7 : 2.2e-16;
-  const double scale = motion_scale(ref.states);
-  Progress progress("kinema chart", o.quiet);
-  std::vector<std::string> legends;
-  OutputFile orders(fs::path(o.out) / "orders.csv");
+  OutputFile orders(written.dir / "orders.csv");
   orders << "method,nominal_order,fitted_order\n";
-  std::size_t done = 0, plotted = 0;
+  Progress progress("kinema chart", o.quiet);
+  std::size_t done = 0;
+  const auto tick = [&] { progress.update(double(++done) / double(methods.size() * sweep.dts.size())); };
+  std::vector<Curve> curves;
   for (const Method* m : methods) {
-    std::vector<Point> points;
-    OutputFile dat(fs::path(o.out) / ("points_" + std::string(m->name) + ".dat"));
-    dat << "# steps dt seconds evaluations error seconds_per_simulated_second\n";
-    for (double dt : dts) {
-      stop_if_interrupted();
-      const std::uint64_t steps = step_count(duration, dt);
-      const double h = duration / double(steps);
-      const double error = state_error(simulate(scene, *m, steps, duration), ref.states);
-      const double seconds = with_precision(
-          scene.precision, [&]<class T>() { return timed<T>(scene, *m, steps, duration, o.repeat); });
-      const std::size_t bodies = scene.particles.size() + scene.rigid_bodies.size();
-      const double evaluations = double(steps) * m->evaluations() * double(bodies);
-      points.push_back({m, h, steps, error, seconds / duration, evaluations});
-      char line[512];
-      std::snprintf(line, sizeof line, "%s,%d,%.17g,%llu,%.17g,%.6g,%.17g,%.6g,%s\n",
-                    std::string(m->name).c_str(), m->order, h, static_cast<unsigned long long>(steps),
-                    error, seconds / duration, evaluations, ref.error, ref.analytic ? "true" : "false");
-      csv << line;
-      if (std::isfinite(error) && error > 0) {  // what log axes can show
-        ++plotted;
-        dat << steps << ' ' << h << ' ' << seconds << ' ' << evaluations << ' ' << error << ' '
-            << seconds / duration << '\n';
-      }
-      progress.update(double(++done) / double(methods.size() * dts.size()));
-    }
-    const auto order = fitted_order(points, eps, scale, ref.error);
-    char legend[128];
-    std::snprintf(legend, sizeof legend, order ? "%s (fitted order %.2f)" : "%s (no asymptotic range)",
-                  std::string(m->name).c_str(), order.value_or(0));
-    legends.push_back(legend);
+    curves.push_back(sweep_method(sweep, *m, csv, written, tick));
+    const std::optional<double> order = curves.back().order;
     orders << m->name << ',' << m->order << ',' << (order ? std::to_string(*order) : "") << '\n';
-    dat.close();
   }
   progress.finish();
   csv.close();
   orders.close();
-  if (plotted == 0) {
-    throw Error("no chart: every error is zero or not finite (the methods are exact on this "
-                "scene, or every run blew up); the values are in " +
-                (fs::path(o.out) / "work_precision.csv").string());
-  }
-  write_charts(o.out, scene, methods, legends, ref, duration);
-  if (!o.quiet) {
-    std::printf("kinema chart: %s, %zu methods x %zu step sizes, reference %s\n", printable(scene.name).c_str(),
-                methods.size(), dts.size(),
-                ref.analytic ? "analytic" : ("rk4 double, " + std::to_string(ref.steps) + " steps").c_str());
-    for (const std::string& l : legends) std::printf("  %s\n", l.c_str());
-    std::printf("wrote %s/{work_precision,orders}.csv and {work_precision,error_vs_step}.{svg,png}\n",
-                printable(o.out).c_str());
-  }
+  require_plotted(curves, written.dir);
+  write_charts(sweep, curves, written);
+  if (!o.quiet) print_summary(sweep, curves, written);
   return 0;
 }
 

@@ -16,6 +16,7 @@
 #include "interrupt.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
+#include "stability_charts.hpp"
 
 namespace kinema::cli {
 namespace fs = std::filesystem;
@@ -82,44 +83,25 @@ void write_regions(const fs::path& dir, const std::vector<const Method*>& method
   OutputFile csv(dir / "stability_region.csv"), limits(dir / "thresholds.csv");
   csv << "method,re,im\n";
   limits << "method,measured_threshold\n";
-  std::string plot = "set grid\nset size ratio -1\nset key outside right\n"
-                     "set title 'Stability regions |R(h lambda)| <= 1 of the explicit methods'\n"
-                     "set xlabel 'Re(h lambda)'\nset ylabel 'Im(h lambda)'\nplot ";
-  bool first = true;
-  int color = 0;
+  std::vector<RegionBoundary> regions;
   for (const Method* m : methods) {
     if (m->kind != MethodKind::runge_kutta) continue;
-    ++color;
     const std::vector<double> c = stability_polynomial(m->tableau);
     stop_if_interrupted();
-    OutputFile dat(dir / ("region_" + std::string(m->name) + ".dat"));
+    RegionBoundary region{std::string(m->name), c, {}, 0};
     for (int k = 0; k < 240; ++k) {
       std::vector<Complex> p(c.begin(), c.end());
       p[0] -= std::polar(1.0, 2 * M_PI * k / 240);
-      for (const Complex& z : roots(p)) {
-        dat << z.real() << ' ' << z.imag() << '\n';
-        csv << m->name << ',' << z.real() << ',' << z.imag() << '\n';
-      }
+      region.roots.push_back(roots(p));
+      for (const Complex& z : region.roots.back()) csv << m->name << ',' << z.real() << ',' << z.imag() << '\n';
     }
-    dat.close();
-    const double limit = measured_threshold(*m);
-    limits << m->name << ',' << limit << '\n';
-    OutputFile mark(dir / ("threshold_" + std::string(m->name) + ".dat"));
-    mark << -limit << " 0\n";
-    mark.close();
-    const std::string name(m->name), lc = " lc " + std::to_string(color);
-    char label[96];
-    std::snprintf(label, sizeof label, "%s: measured limit h lambda = %.4g", name.c_str(), limit);
-    plot += std::string(first ? "" : ", \\\n  ") +
-            gnuplot_quote("region_" + name + ".dat") + " with points pt 7 ps 0.15" + lc +
-            " title " + gnuplot_quote("|R| = 1, " + name) + ", " +
-            gnuplot_quote("threshold_" + name + ".dat") + " with points pt 2 ps 2 lw 2" + lc +
-            " title " + gnuplot_quote(label);
-    first = false;
+    region.measured_limit = measured_threshold(*m);
+    limits << m->name << ',' << region.measured_limit << '\n';
+    regions.push_back(std::move(region));
   }
   csv.close();
   limits.close();
-  if (!first) render_chart(dir, "stability_region", plot);
+  if (!regions.empty()) render_region_chart(dir, regions);
 }
 
 // Returns how many points of the energy error it wrote for the chart.
@@ -200,16 +182,16 @@ double measured_step(const Scene& scene, const Method& m, double guess, double d
 
 // One method's largest stable step on the scene: predicted from the stiffness at the start,
 // and measured over the duration.
-struct StepLimit {
+struct MethodLimit {
   const Method* method;
   double predicted, measured;
   // The measured limit well below the prediction: the scene broke the linear bound.
   bool broken() const { return std::isfinite(predicted) && predicted > 0 && measured < 0.8 * predicted; }
 };
 
-std::vector<StepLimit> measure_limits(const Scene& scene, const std::vector<const Method*>& methods,
+std::vector<MethodLimit> measure_limits(const Scene& scene, const std::vector<const Method*>& methods,
                                       const StiffnessEstimate& e, double dt, double duration) {
-  std::vector<StepLimit> limits;
+  std::vector<MethodLimit> limits;
   for (const Method* m : methods) {
     stop_if_interrupted();
     const double predicted = largest_stable_step(*m, e);
@@ -223,29 +205,19 @@ std::vector<StepLimit> measure_limits(const Scene& scene, const std::vector<cons
 }
 
 // step_limits.csv and its chart.
-void write_limits(const std::vector<StepLimit>& limits, const StiffnessEstimate& e, double dt, const fs::path& dir) {
-  OutputFile csv(dir / "step_limits.csv"), dat(dir / "step_limits.dat");
+void write_limits(const std::vector<MethodLimit>& limits, const StiffnessEstimate& e, double dt, const fs::path& dir) {
+  OutputFile csv(dir / "step_limits.csv");
   csv << "method,stiffness,angle,predicted_step,measured_step\n";
-  for (const StepLimit& l : limits) {
+  std::vector<StepLimit> chart;
+  for (const MethodLimit& l : limits) {
     csv << l.method->name << ',' << e.magnitude << ',' << e.angle << ',' << l.predicted << ',' << l.measured << '\n';
-    // Zero and infinite steps have no place on a log scale: drawn at the axis' ends.
-    dat << '"' << l.method->name << "\" " << std::clamp(l.predicted, dt / 1e3, dt * 1e3) << ' '
-        << std::clamp(l.measured, dt / 1e3, dt * 1e3) << '\n';
+    chart.push_back({std::string(l.method->name), l.predicted, l.measured});
   }
   csv.close();
-  dat.close();
-  char head[400];
-  std::snprintf(head, sizeof head,
-                "set logscale y\nset grid\nset key outside right\nset xtics rotate by -30\n"
-                "set title 'Largest stable step: predicted (|lambda| = %.4g /s at the start) and measured'\n"
-                "set ylabel 'h (s)'\nset xrange [-0.5:%zu]\n", e.magnitude, limits.size() - 0);
-  render_chart(dir, "step_limits",
-               std::string(head) + "plot 'step_limits.dat' using 0:2:xtic(1) with points pt 7 ps 1.5 title 'predicted', "
-               "'' using 0:3 with points pt 6 ps 2 lw 2 title 'measured blow-up', " + std::to_string(dt) +
-               " with lines dt 2 title 'the scene''s dt'");
+  render_step_limits(dir, chart, e.magnitude, dt);
 }
 
-std::string table_row(const StepLimit& l) {
+std::string table_row(const MethodLimit& l) {
   char ratio[32] = "-";
   if (l.predicted > 0 && std::isfinite(l.predicted) && std::isfinite(l.measured)) {
     std::snprintf(ratio, sizeof ratio, "%.2f%s", l.measured / l.predicted, l.broken() ? " *" : "");
@@ -275,20 +247,20 @@ std::string broken_note(const Scene& scene) {
 }
 
 // The table people read: each method's predicted and measured limit, and what a * means.
-std::string limits_table(const Scene& scene, const std::vector<StepLimit>& limits, const StiffnessEstimate& e,
+std::string limits_table(const Scene& scene, const std::vector<MethodLimit>& limits, const StiffnessEstimate& e,
                          double duration) {
   char text[400];
   std::snprintf(text, sizeof text, "largest stable step (s):\n  %-18s %10s %10s   %s\n", "method", "predicted",
                 "measured", "measured/predicted");
   std::string table = text;
-  for (const StepLimit& l : limits) table += table_row(l);
+  for (const MethodLimit& l : limits) table += table_row(l);
   std::snprintf(text, sizeof text,
                 "predicted: where the fastest mode of the forces linearized about the start state would grow "
                 "(|lambda| = %.4g /s)\nmeasured: the largest step whose run stays finite, its energy within |E0| "
                 "of the start, over %g s (to 0.5%%)\n",
                 e.magnitude, duration);
   table += text;
-  if (std::any_of(limits.begin(), limits.end(), [](const StepLimit& l) { return l.broken(); })) {
+  if (std::any_of(limits.begin(), limits.end(), [](const MethodLimit& l) { return l.broken(); })) {
     table += broken_note(scene);
   }
   return table;
@@ -303,7 +275,7 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
   ParticleSet<double> bodies = make_particles<double>(scene);
   if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
   const StiffnessEstimate e = estimate_stiffness(bodies, forces);
-  const std::vector<StepLimit> limits = measure_limits(scene, methods, e, dt, duration);
+  const std::vector<MethodLimit> limits = measure_limits(scene, methods, e, dt, duration);
   write_limits(limits, e, dt, dir);
   return limits_table(scene, limits, e, duration);
 }
@@ -322,12 +294,6 @@ int stability_scene(const StabilityOptions& o) {
   OutputFile energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
   energy_csv << "method,t,energy,relative_error\n";
   path_csv << "method,t,x,y,z\n";
-  std::string energy_plot = "set logscale y\nset grid\nset key outside right\nset format y '%.0e'\n"
-                            "set title " + gnuplot_quote("Energy error: " + scene.name + ", h = " + std::to_string(dt)) +
-                            "\nset xlabel 't (s)'\nset ylabel '|E - E_0| / |E_0|'\nplot ";
-  std::string path_plot = "set grid\nset size ratio -1\nset key outside right\n"
-                          "set title " + gnuplot_quote("Trajectory of body 0: " + scene.name) +
-                          "\nset xlabel 'x'\nset ylabel 'y'\nplot ";
   double max_z = 0;
   std::size_t plotted = 0;
   Progress progress("kinema stability", o.quiet);
@@ -340,12 +306,6 @@ int stability_scene(const StabilityOptions& o) {
     });
     energy_dat.close();
     path_dat.close();
-    const std::string sep = i + 1 < methods.size() ? ", \\\n  " : "";
-    const std::string lc = " lc " + std::to_string(i + 1);
-    energy_plot += gnuplot_quote("energy_" + name + ".dat") + " with lines lw 2" +
-                   lc + " title " + gnuplot_quote(name) + sep;
-    path_plot += gnuplot_quote("path_" + name + ".dat") + " with lines" + lc +
-                 " title " + gnuplot_quote(name) + sep;
     progress.update(double(i + 1) / double(methods.size() + 1));
   }
   energy_csv.close();
@@ -355,9 +315,9 @@ int stability_scene(const StabilityOptions& o) {
                 "initial energy is 0, or every method blew up at once); the values are in " +
                 (dir / "energy.csv").string());
   }
-  render_chart(dir, "energy", energy_plot);
+  render_energy_chart(dir, scene.name, dt, methods);
   const bool planar = max_z == 0;
-  if (planar) render_chart(dir, "trajectory", path_plot);
+  if (planar) render_trajectory_chart(dir, scene.name, methods);
   write_regions(dir, methods);
   const std::string springs = spring_limits(scene, dir);
   const std::string steps_line = step_limits(scene, methods, dt, duration, dir);
