@@ -10,7 +10,6 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <limits>
 #include <memory>
 
 #include "kinema/adaptive.hpp"
@@ -99,7 +98,7 @@ class Stepper {
   // With an embedded pair (bs3, dopri5): steps from time() to t_end choosing each step's
   // size, and returns what it took. A step whose error is too large is taken back (the bodies
   // as they were) and tried shorter; the next size comes from a PI controller (see
-  // error_control.hpp); the last step lands on t_end. A pair whose last stage is evaluated at
+  // src/step/step_controller.hpp); the last step lands on t_end. A pair whose last stage is evaluated at
   // the new state (FSAL) reuses it as the next step's first. The accepted steps depend only
   // on the bodies and the tolerances: the same on every thread count and instruction set.
   // A candidate that is not finite is rejected like one too inaccurate (the finiteness guard
@@ -129,7 +128,8 @@ class Stepper {
   // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);
   // Bytes the stepper holds for stepping: the staged path's stage state, the lowered spring
-  // network, the finiteness guard's copy of the state.
+  // network, the finiteness guard's copy of the state, and the scratch of the accelerations
+  // probe once accelerations() (or advance_to's stable-step cap) has used it.
   std::size_t scratch_bytes() const;
   // Replaces the force model between steps (new gravity, wind, anchors, torques): checked
   // here, before anything changes (kinema::Error, the stepper as it was), with no new job

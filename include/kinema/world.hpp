@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <memory>
 
+#include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/methods.hpp"

@@ -74,7 +74,7 @@ LoweredForces<T> lower_forces(std::span<const LocalTerm> terms) {
 }
 
 template <class T>
-void check_scaled_forces(const kernels::LocalForces<T>& f, T scale, T h) {
+void check_scaled_forces(const kernels::LocalForces<T>& f, const CoupledForces<T>& coupled, T scale, T h) {
   bool finite = std::isfinite(f.spring_k * scale) && std::isfinite(f.linear * scale) &&
                 std::isfinite(f.quadratic * scale);
   for (int d = 0; d < 3; ++d) {
@@ -85,11 +85,17 @@ void check_scaled_forces(const kernels::LocalForces<T>& f, T scale, T h) {
     throw Error("step size h = " + shortest_text(h) + " times the force parameters overflows " +
                 type_name<T>() + "; take a smaller step");
   }
+  if (coupled.nbody && !std::isfinite(scale * T(coupled.nbody->G))) {
+    throw Error("step size h = " + shortest_text(h) + " times nbody.G overflows " + type_name<T>() +
+                "; take a smaller step");
+  }
 }
 
 template LoweredForces<float> lower_forces<float>(std::span<const LocalTerm>);
 template LoweredForces<double> lower_forces<double>(std::span<const LocalTerm>);
-template void check_scaled_forces<float>(const kernels::LocalForces<float>&, float, float);
-template void check_scaled_forces<double>(const kernels::LocalForces<double>&, double, double);
+template void check_scaled_forces<float>(const kernels::LocalForces<float>&, const CoupledForces<float>&, float,
+                                         float);
+template void check_scaled_forces<double>(const kernels::LocalForces<double>&, const CoupledForces<double>&, double,
+                                          double);
 
 }  // namespace kinema

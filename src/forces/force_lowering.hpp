@@ -23,8 +23,9 @@ template <class T>
 LoweredForces<T> lower_forces(std::span<const LocalTerm> terms);
 
 // Throws kinema::Error when `scale` (sigma h for Runge-Kutta kernels, see
-// kernels::acceleration_scale) times a parameter overflows T; `h` only names the step.
+// kernels::acceleration_scale) times a local parameter or N-body's G overflows T; `h` only
+// names the step.
 template <class T>
-void check_scaled_forces(const kernels::LocalForces<T>& forces, T scale, T h);
+void check_scaled_forces(const kernels::LocalForces<T>& forces, const CoupledForces<T>& coupled, T scale, T h);
 
 }  // namespace kinema

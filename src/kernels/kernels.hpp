@@ -72,8 +72,8 @@ using FusedFn = void (*)(const FusedJob<T>& job, std::size_t begin, std::size_t 
 // Runge-Kutta stages carry their accelerations pre-multiplied by sigma h, sigma being the
 // tableau's first nonzero a_sj (1/2 for rk4 and midpoint; see below): a stage velocity v + h a_sj k_j
 // then takes (a_sj / sigma) K_j, an add where that is 1, and the FMA pipes, which bound the
-// fused kernels, do less work. The
-// scaling goes into the force coefficients, once per call: no per-body cost.
+// fused kernels, do less work. The scaling goes into the force coefficients, once per call:
+// no per-body cost.
 // sigma is used only when it is a power of two from 1/64 to 64, so scaling by it is exact
 // and a user tableau's other weights divided by it stay finite; else it is 1.
 constexpr double acceleration_scale(const ButcherTableau& t) {

@@ -49,8 +49,7 @@ template <int S, class T>
 
 template <class T>
 [[gnu::always_inline]] inline double weighted_squares(const T* y0, const T* y1, const T* const* k, const double* w,
-                                                      
-                                   int stages, double rtol, double atol, std::size_t n) {
+                                                      int stages, double rtol, double atol, std::size_t n) {
   static_assert(kMaxStages == 7);
   switch (stages) {  // a stage count known at compile time unrolls the sum over stages
     case 1: return squares_of<1>(y0, y1, k, w, rtol, atol, n);
@@ -97,12 +96,12 @@ template <class T>
 
 }  // namespace
 
-KINEMA_CLONED double scaled_squares(const float* a, const float* w,
-                                   double scale, double rtol, double atol, std::size_t n) {
+KINEMA_CLONED double scaled_squares(const float* a, const float* w, double scale, double rtol, double atol,
+                                   std::size_t n) {
   return scaled_squares_of(a, w, scale, rtol, atol, n);
 }
-KINEMA_CLONED double scaled_squares(const double* a, const double* w,
-                                   double scale, double rtol, double atol, std::size_t n) {
+KINEMA_CLONED double scaled_squares(const double* a, const double* w, double scale, double rtol, double atol,
+                                   std::size_t n) {
   return scaled_squares_of(a, w, scale, rtol, atol, n);
 }
 
@@ -111,8 +110,10 @@ KINEMA_CLONED double scaled_squares(const double* a, const double* w,
 // value is not finite, in a loop that vectorizes: cloned per instruction set (the answer is
 // the same on each), since the scan runs after every call of a guarded stepper. The bits are
 // read through types allowed to alias float and double.
+namespace {
 using FloatBits [[gnu::may_alias]] = std::uint32_t;
 using DoubleBits [[gnu::may_alias]] = std::uint64_t;
+}  // namespace
 
 KINEMA_CLONED bool any_not_finite(const float* values, std::size_t n) {
   const auto* a = reinterpret_cast<const FloatBits*>(values);

@@ -146,8 +146,8 @@ class SliceSchedule {
 
 // Slots kept for host threads. One: a worker looking for work picks victims at random among
 // the arena's slots, so empty reserved slots slow every hand-off (bench/README.md has the
-// figures). A host thread that finds no free slot
-// has its call run by a thread of the arena while it waits. That hand-off happens inside
+// figures). A host thread that finds no free slot has its call run by a thread of the arena
+// while it waits. That hand-off happens inside
 // uninstrumented libtbb, out of reach of the annotations, so under TSan each host thread of
 // the tests keeps a slot of its own.
 #if defined(KINEMA_TSAN)

@@ -14,22 +14,20 @@ namespace kinema {
 
 class MeasuredWorkers {
  public:
-  // Kinds of call that cost differently per body-step: each has its own measurements.
-  enum class Call : std::uint64_t { fused, staged, rigid, adaptive, accelerations };
-
   // `all`: every call goes to every worker, untimed. Sets of fewer than `inline_below`
   // bodies, and sets of one block, always run on the calling thread.
   MeasuredWorkers(JobSystem& jobs, bool all, std::size_t inline_below)
       : jobs_(&jobs), all_(all), inline_below_(inline_below) {}
 
   // Runs fn(Workers) and times it: fn returns the body-steps it did. A call that throws is
-  // not counted.
+  // not counted. `kind` (below 2^55) tells apart calls that cost differently per body-step:
+  // each kind, power of two of the body count and single or many steps has its own timings.
   template <class Fn>
-  void run(Call call, std::size_t bodies, std::uint64_t steps, Fn&& fn) {
+  void run(std::uint64_t kind, std::size_t bodies, std::uint64_t steps, Fn&& fn) {
     if (bodies < inline_below_ || block_count(bodies) <= 1) return void(fn(Workers{jobs_, 0}));
     if (all_) return void(fn(all_workers(*jobs_)));
     const std::uint64_t key =
-        std::uint64_t(call) << 8 | std::uint64_t(std::bit_width(bodies)) << 1 | (steps > 1);
+        kind << 8 | std::uint64_t(std::bit_width(bodies)) << 1 | (steps > 1);
     WorkerTuner& tuner = tuners_.find(key, jobs_->worker_count());
     last_ = &tuner;
     const Workers workers{jobs_, tuner.choose()};

@@ -416,27 +416,27 @@ class MethodSearch {
 
   // Fixed steps with every method that may take them, highest order first: it usually sets
   // the budget the others must beat. Rigid bodies take the fused kernels only: the built-in
-  // methods. False when the search budget ran out.
-  bool try_fixed_steps() {
+  // methods. Returns whether search budget is left.
+  bool search_fixed_steps() {
     std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
     if (pilot_scene_.rigid_bodies.empty()) order.insert(order.end(), staged_methods.begin(), staged_methods.end());
     std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
     for (const Method* m : order) {
-      if (!try_fixed_steps(*m)) return false;
+      if (!fixed_steps_leave_budget(*m)) return false;
     }
     return true;
   }
 
   // Error-controlled steps (particles only), within the stable step.
-  void try_error_control() {
+  void search_error_control() {
     if (!pilot_scene_.rigid_bodies.empty()) return;
     for (const Method* m : {&dopri5, &bs3}) {
-      if (!try_error_control(*m)) return;
+      if (!error_control_leaves_budget(*m)) return;
     }
   }
 
-  MethodChoice result(const Scene& scene) {
-    if (choice_.method == nullptr) refuse(scene);
+  MethodChoice result() {
+    if (choice_.method == nullptr) refuse();
     choice_.evaluations = best_cost_;
     if (!choice_.step_tolerance) choice_.dt = duration_ / double(choice_.steps);
     char head[96];
@@ -454,9 +454,13 @@ class MethodSearch {
  private:
   void note(const std::string& text) { reason_ += (reason_.empty() ? "" : ", ") + text; }
 
-  bool try_fixed_steps(const Method& m) {
+  // Tries m at fixed steps; false when the search budget ran out on it.
+  bool fixed_steps_leave_budget(const Method& m) {
     const double stable = largest_stable_step(m, stiffness_);
-    if (!(stable > 0)) return note(std::string(m.name) + " unstable here"), true;
+    if (!(stable > 0)) {
+      note(std::string(m.name) + " unstable here");
+      return true;
+    }
     const std::uint64_t least = std::isfinite(stable) ? std::uint64_t(std::ceil(duration_ / stable)) : 1;
     Pilot pilot(pilot_scene_, m, duration_, spent_);
     std::optional<std::uint64_t> steps;
@@ -464,9 +468,13 @@ class MethodSearch {
       steps = steps_needed(pilot, m, start_, tolerance_, best_cost_, least);
     } catch (const SearchSpent&) {
       // The best so far meets the tolerance; it may not be the cheapest.
-      return note(std::string(m.name) + " not tried (search budget spent)"), false;
+      note(std::string(m.name) + " not tried (search budget spent)");
+      return false;
     }
-    if (!steps) return note(std::string(m.name) + (std::isfinite(best_cost_) ? " costlier" : " cannot")), true;
+    if (!steps) {
+      note(std::string(m.name) + (std::isfinite(best_cost_) ? " costlier" : " cannot"));
+      return true;
+    }
     const double cost = double(*steps) * m.evaluations();
     note(std::string(m.name) + " " + std::to_string(std::uint64_t(cost)) + " (" + std::to_string(*steps) +
          " steps)");
@@ -480,7 +488,8 @@ class MethodSearch {
     return true;
   }
 
-  bool try_error_control(const Method& m) {
+  // Tries m with error control; false when the search budget ran out on it.
+  bool error_control_leaves_budget(const Method& m) {
     const double stable = largest_stable_step(m, stiffness_);
     if (!(stable > 0)) return true;
     std::optional<AdaptivePick> pick;
@@ -503,12 +512,12 @@ class MethodSearch {
     return true;
   }
 
-  [[noreturn]] void refuse(const Scene& scene) const {
+  [[noreturn]] void refuse() const {
     char text[256];
     std::snprintf(text, sizeof text,
                   "auto: no method reaches tolerance %g within 2^22 steps or 2^28 body-steps of "
                   "pilot runs (give --method and --dt, or a larger tolerance%s)", tolerance_,
-                  scene.precision == Precision::single ? "; in float, try double" : "");
+                  choice_.precision == Precision::single ? "; in float, try double" : "");
     throw Error(text);
   }
 
@@ -529,8 +538,8 @@ MethodChoice choose_method(const Scene& scene, double tolerance) {
   }
   if (scene.steps == 0) throw Error("auto: the scene has no steps to choose a step size for");
   MethodSearch search(scene, tolerance);
-  if (search.try_fixed_steps()) search.try_error_control();
-  return search.result(scene);
+  if (search.search_fixed_steps()) search.search_error_control();
+  return search.result();
 }
 
 }  // namespace kinema

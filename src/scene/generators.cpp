@@ -2,11 +2,23 @@
 
 #include <cmath>
 #include <numbers>
+#include <random>
+
+#include "scene/angular_momentum.hpp"
 
 namespace kinema {
 namespace {
 
-// A uniformly random rotation (Shoemake, "Uniform random rotations", Graphics Gems III).
+// Uniform in [lo, hi] from the top 53 bits of a 64-bit Mersenne Twister: the same numbers
+// on every platform (std::uniform_real_distribution is implementation-defined).
+double uniform(std::mt19937_64& rng, double lo, double hi) {
+  const double u = double(rng() >> 11) * 0x1.0p-53;
+  return lo + (hi - lo) * u;
+}
+
+// A uniformly random rotation (Shoemake, "Uniform random rotations", Graphics Gems III). Its
+// sines and cosines come from libm: generated rigid bodies may differ in the last bits
+// between C libraries.
 Quat<double> random_orientation(std::mt19937_64& rng) {
   const double u1 = uniform(rng, 0, 1), u2 = uniform(rng, 0, 2 * std::numbers::pi),
                u3 = uniform(rng, 0, 2 * std::numbers::pi);
@@ -81,7 +93,9 @@ void add_generated_particles(const Scene& scene, ParticleSet<T>& set) {
   }
 }
 
-void for_each_generated_rigid_body(const GenerateSpec& g, const std::function<void(const RigidSpec&)>& add) {
+void for_each_generated_rigid_body(const Scene& scene, const std::function<void(const RigidSpec&)>& add) {
+  if (!scene.generate || !scene.generate->rigid) return;
+  const GenerateSpec& g = *scene.generate;
   std::mt19937_64 rng(g.seed);
   for (std::size_t i = 0; i < g.count; ++i) {
     RigidSpec b;

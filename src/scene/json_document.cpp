@@ -10,8 +10,6 @@
 namespace kinema::scene_json {
 namespace {
 
-using json = nlohmann::json;
-
 // Builds the document from the parser's events (SAX), keeping the path it is at: an error
 // the JSON library finds (a number out of range, a syntax error) names its path, a repeated
 // key is refused (the library would keep the last one silently), and so is nesting past

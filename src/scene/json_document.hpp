@@ -9,6 +9,8 @@
 
 namespace kinema::scene_json {
 
-nlohmann::json parse_json(std::string_view text, std::string_view origin);
+using json = nlohmann::json;
+
+json parse_json(std::string_view text, std::string_view origin);
 
 }  // namespace kinema::scene_json

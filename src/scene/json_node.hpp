@@ -10,14 +10,11 @@
 #include <string_view>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
 #include "kinema/bodies.hpp"
 #include "kinema/error.hpp"
+#include "scene/json_document.hpp"
 
 namespace kinema::scene_json {
-
-using json = nlohmann::json;
 
 struct Node {
   const json& value;

@@ -29,7 +29,7 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
              converted<T>(b.angular_momentum), T(b.mass), converted<T>(b.inertia)});
   };
   for (const RigidSpec& b : scene.rigid_bodies) add(b);
-  if (generated) for_each_generated_rigid_body(*scene.generate, add);
+  for_each_generated_rigid_body(scene, add);
   return set;
 }
 

@@ -12,7 +12,7 @@
 #include "forces/force_terms.hpp"
 #include "kinema/error.hpp"
 #include "kinema/methods.hpp"
-#include "scene/generators.hpp"
+#include "scene/angular_momentum.hpp"
 #include "scene/json_document.hpp"
 #include "scene/json_node.hpp"
 #include "scene/networks.hpp"

@@ -8,10 +8,10 @@
 #include <cstddef>
 #include <optional>
 
-#include "parallel/blocks.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/error.hpp"
 #include "kinema/job_system.hpp"
+#include "parallel/blocks.hpp"
 
 namespace kinema {
 

@@ -5,18 +5,8 @@
 namespace kinema {
 
 template <class T>
-void FixedSteps<T>::advance(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps) {
-  guarded_advance(w, b, h, steps);
-}
-
-template <class T>
-void FixedSteps<T>::advance(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps) {
-  guarded_advance(w, b, h, steps);
-}
-
-template <class T>
 template <class Set>
-void FixedSteps<T>::guarded_advance(const Workers& w, Set& b, T h, std::uint64_t steps) {
+void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps) {
   if (core_.options.guard == FiniteGuard::off) return run(w, b, h, steps, nullptr);
   const StateArrays<T> state = state_arrays(b);
   checkpoint_.reserve(state);
@@ -73,8 +63,7 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
                 "callbacks, no coupled terms)");
   }
   const LoweredForces<T>& lowered = core_.lowered();
-  core_.check_step_size(h, lowered.rigid);
-  core_.clock.use(h);
+  core_.begin(h, lowered.rigid);
   const kernels::RigidJob<T> job{center_arrays(b), {b.q(0), b.q(1), b.q(2), b.q(3)},
                                  {b.l(0), b.l(1), b.l(2)},
                                  {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
@@ -120,5 +109,9 @@ void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* gu
 
 template class FixedSteps<float>;
 template class FixedSteps<double>;
+template void FixedSteps<float>::advance(const Workers&, ParticleSet<float>&, float, std::uint64_t);
+template void FixedSteps<float>::advance(const Workers&, RigidBodySet<float>&, float, std::uint64_t);
+template void FixedSteps<double>::advance(const Workers&, ParticleSet<double>&, double, std::uint64_t);
+template void FixedSteps<double>::advance(const Workers&, RigidBodySet<double>&, double, std::uint64_t);
 
 }  // namespace kinema

@@ -21,8 +21,9 @@ class FixedSteps {
   // Advances the set on `workers`. Under a guard, a step that leaves a value that is not
   // finite puts the bodies and the clock back to the step before it and throws
   // NonFiniteError.
-  void advance(const Workers& workers, ParticleSet<T>& bodies, T h, std::uint64_t steps);
-  void advance(const Workers& workers, RigidBodySet<T>& bodies, T h, std::uint64_t steps);
+  // (Instantiated for ParticleSet<T> and RigidBodySet<T>.)
+  template <class Set>
+  void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps);
 
   std::size_t checkpoint_bytes() const { return checkpoint_.bytes(); }
 
@@ -36,8 +37,6 @@ class FixedSteps {
     bool clamp;
   };
 
-  template <class Set>
-  void guarded_advance(const Workers& w, Set& b, T h, std::uint64_t steps);
   template <class Set>
   std::optional<NonFinite> guarded_run(const Workers& w, Set& b, T h, std::uint64_t steps,
                                        const StateArrays<T>& state);

@@ -8,13 +8,13 @@
 #include <cstddef>
 #include <vector>
 
-#include "parallel/blocks.hpp"
 #include "forces/coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/job_system.hpp"
 #include "kinema/methods.hpp"
+#include "parallel/blocks.hpp"
 #include "step/step_context.hpp"
 
 namespace kinema {

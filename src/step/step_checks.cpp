@@ -5,20 +5,14 @@
 #include <utility>
 
 #include "core/text.hpp"
-#include "forces/force_lowering.hpp"
 #include "kinema/error.hpp"
 
 namespace kinema {
 
 template <class T>
-void check_step_size(T h, T accel_scale, const kernels::LocalForces<T>& local, const CoupledForces<T>& coupled) {
+void check_step_positive(T h) {
   if (!(std::isfinite(h) && h > 0)) {
     throw Error("step size h must be positive and finite in " + type_name<T>() + ", got " + shortest_text(h));
-  }
-  check_scaled_forces(local, accel_scale, h);
-  if (coupled.nbody && !std::isfinite(accel_scale * T(coupled.nbody->G))) {
-    throw Error("step size h = " + shortest_text(h) + " times nbody.G overflows " + type_name<T>() +
-                "; take a smaller step");
   }
 }
 
@@ -64,7 +58,7 @@ void check_adaptive(const Method& method, double t_end, const Tolerances& tol, d
 }
 
 #define KINEMA_STEP_CHECKS(T)                                                                                   \
-  template void check_step_size(T, T, const kernels::LocalForces<T>&, const CoupledForces<T>&);                 \
+  template void check_step_positive(T);                                                                         \
   template void check_reach(const CoupledForces<T>&, const ParticleSet<T>&);                                    \
   template void check_clamp_limits<T>(const StepperOptions&);
 KINEMA_STEP_CHECKS(float)

@@ -11,10 +11,9 @@
 
 namespace kinema {
 
-// A step of size h (positive and finite in T) whose acceleration scale `accel_scale`, times
-// the local and N-body force parameters, stays finite in T.
+// A step size positive and finite in T (what it does to the forces: check_scaled_forces).
 template <class T>
-void check_step_size(T h, T accel_scale, const kernels::LocalForces<T>& local, const CoupledForces<T>& coupled);
+void check_step_positive(T h);
 
 // Springs must not reach past the set.
 template <class T>

@@ -4,9 +4,9 @@
 
 #include <cstddef>
 
-#include "parallel/blocks.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
+#include "parallel/blocks.hpp"
 
 namespace kinema {
 

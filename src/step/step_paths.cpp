@@ -21,20 +21,9 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
   return paths;
 }
 
-template <class T>
-StagedPath<T>& acceleration_probe(StepPaths<T>& paths, const ForceModel<T>& forces,
-                                  const kernels::KernelTable<T>& table) {
-  if (!paths.probe) {
-    const LoweredForces<T>& l = *paths.lowered;
-    paths.probe = std::make_unique<StagedPath<T>>(forces, euler, table, l.particle, l.coupled);
-  }
-  return *paths.probe;
-}
-
 #define KINEMA_STEP_PATHS(T)                                                                                    \
   template StepPaths<T> build_paths(const ForceModel<T>&, const Method&, const kernels::KernelTable<T>&, bool,  \
-                                    std::size_t);                                                               \
-  template StagedPath<T>& acceleration_probe(StepPaths<T>&, const ForceModel<T>&, const kernels::KernelTable<T>&);
+                                    std::size_t);
 KINEMA_STEP_PATHS(float)
 KINEMA_STEP_PATHS(double)
 #undef KINEMA_STEP_PATHS

@@ -30,9 +30,4 @@ template <class T>
 StepPaths<T> build_paths(const ForceModel<T>& forces, const Method& method, const kernels::KernelTable<T>& table,
                          bool force_staged, std::size_t staged_capacity);
 
-// The paths' probe for accelerations, made at the first call.
-template <class T>
-StagedPath<T>& acceleration_probe(StepPaths<T>& paths, const ForceModel<T>& forces,
-                                  const kernels::KernelTable<T>& table);
-
 }  // namespace kinema

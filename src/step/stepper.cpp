@@ -17,22 +17,25 @@
 
 namespace kinema {
 
+// Kinds of call that cost differently per body-step: each has its own worker timings.
+enum class StepperCall : std::uint64_t { fused, staged, rigid, adaptive, accelerations };
+
 template <class T>
 struct Stepper<T>::Impl {
-  using Call = MeasuredWorkers::Call;
-
   Impl(std::shared_ptr<const ForceModel<T>> forces, const Method& method, const StepperOptions& options)
       : core(std::move(forces), method, options),
         workers(options.jobs != nullptr ? *options.jobs : default_job_system(options.threads),
                 options.workers == WorkerChoice::all, options.inline_below),
         fixed(core) {}
 
-  Call kind_of(const ParticleSet<T>&) const { return core.paths.fused ? Call::fused : Call::staged; }
-  Call kind_of(const RigidBodySet<T>&) const { return Call::rigid; }
+  StepperCall kind_of(const ParticleSet<T>&) const {
+    return core.paths.fused ? StepperCall::fused : StepperCall::staged;
+  }
+  StepperCall kind_of(const RigidBodySet<T>&) const { return StepperCall::rigid; }
 
   template <class Set>
   void advance(Set& bodies, T h, std::uint64_t steps) {
-    workers.run(kind_of(bodies), bodies.size(), steps, [&](const Workers& w) {
+    workers.run(std::uint64_t(kind_of(bodies)), bodies.size(), steps, [&](const Workers& w) {
       fixed.advance(w, bodies, h, steps);
       return double(bodies.size()) * double(steps);
     });
@@ -43,7 +46,7 @@ struct Stepper<T>::Impl {
     check_reach(core.lowered().coupled, bodies);
     const double max_step = step_cap(bodies, t_end, tolerances);
     AdaptiveStats stats;
-    workers.run(Call::adaptive, bodies.size(), 2, [&](const Workers& w) {
+    workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
       stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step);
       return double(bodies.size()) * double(stats.evaluations);
     });
@@ -64,9 +67,9 @@ struct Stepper<T>::Impl {
   // The stage reads the bodies and writes scratch only.
   void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]) {
     check_reach(core.lowered().coupled, bodies);
-    StagedPath<T>& probe = acceleration_probe(core.paths, core.forces(), *core.table);
+    StagedPath<T>& probe = core.acceleration_probe();
     probe.reserve(bodies.padded_size());
-    workers.run(Call::accelerations, bodies.size(), 1, [&](const Workers& w) {
+    workers.run(std::uint64_t(StepperCall::accelerations), bodies.size(), 1, [&](const Workers& w) {
       const StepContext<T> c{const_cast<ParticleSet<T>&>(bodies), T(1), T(1), t, w};
       probe.evaluate_first_stage(c);
       return double(bodies.size());
@@ -147,7 +150,8 @@ template <class T>
 std::size_t Stepper<T>::scratch_bytes() const {
   const StepperCore<T>& core = impl_->core;
   const std::size_t staged = core.paths.staged ? core.paths.staged->bytes() : 0;
-  return staged + core.lowered().coupled.springs.bytes() + impl_->fixed.checkpoint_bytes();
+  const std::size_t probe = core.paths.probe ? core.paths.probe->bytes() : 0;
+  return staged + probe + core.lowered().coupled.springs.bytes() + impl_->fixed.checkpoint_bytes();
 }
 
 template <class T>
@@ -195,6 +199,8 @@ unsigned Stepper<T>::chosen_workers() const {
 template <class T>
 StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t,
                                      int iterations, StepperOptions options) {
+  // Checked before the stepper is made, as the estimate itself checks it, so that a bad count
+  // is the error reported whatever else is wrong.
   if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
   Stepper<T> stepper(forces, euler, options);
   const auto accelerations = [&](const ParticleSet<T>& set, T* const out[3]) { stepper.accelerations(set, t, out); };

@@ -1,5 +1,6 @@
 #include "step/stepper_core.hpp"
 
+#include "forces/force_lowering.hpp"
 #include "kinema/error.hpp"
 #include "step/step_checks.hpp"
 
@@ -31,15 +32,30 @@ T StepperCore<T>::accel_scale(T h) const {
 
 template <class T>
 void StepperCore<T>::check_step_size(T h, const kernels::LocalForces<T>& local) const {
-  kinema::check_step_size(h, accel_scale(h), local, paths.lowered->coupled);
+  check_step_positive(h);
+  check_scaled_forces(local, paths.lowered->coupled, accel_scale(h), h);
+}
+
+template <class T>
+void StepperCore<T>::begin(T h, const kernels::LocalForces<T>& local) {
+  check_step_size(h, local);
+  clock.use(h);
 }
 
 template <class T>
 StepContext<T> StepperCore<T>::start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local,
                                      const Workers& workers) {
-  check_step_size(h, local);
-  clock.use(h);
+  begin(h, local);
   return {bodies, h, accel_scale(h), 0, workers};
+}
+
+template <class T>
+StagedPath<T>& StepperCore<T>::acceleration_probe() {
+  if (!paths.probe) {
+    const LoweredForces<T>& l = *paths.lowered;
+    paths.probe = std::make_unique<StagedPath<T>>(*forces_, euler, *table, l.particle, l.coupled);
+  }
+  return *paths.probe;
 }
 
 template class StepperCore<float>;

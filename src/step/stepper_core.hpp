@@ -34,8 +34,13 @@ class StepperCore {
   // Throws what a step of size h would throw to a set feeling `local` (the particles' or the
   // rigid bodies' terms, which add the point forces' push).
   void check_step_size(T h, const kernels::LocalForces<T>& local) const;
-  // A call's context, after checking h; a new h moves the clock's origin to now.
+  // Starts a call of steps of size h: checks h, and a new h moves the clock's origin to now.
+  void begin(T h, const kernels::LocalForces<T>& local);
+  // begin(), and the call's context.
   StepContext<T> start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local, const Workers& workers);
+  // The staged path that evaluates accelerations alone (Euler's first stage), made at the
+  // first call and kept until the model changes.
+  StagedPath<T>& acceleration_probe();
 
   const ForceModel<T>& forces() const { return *forces_; }
   const LoweredForces<T>& lowered() const { return *paths.lowered; }
@@ -43,11 +48,14 @@ class StepperCore {
   Method method;
   StepperOptions options;
   const kernels::KernelTable<T>* table = nullptr;
-  StepPaths<T> paths;
-  Clock<T> clock;
 
  private:
+  // Before the paths, which refer to it: destroyed after them.
   std::shared_ptr<const ForceModel<T>> forces_;
+
+ public:
+  StepPaths<T> paths;
+  Clock<T> clock;
 };
 
 extern template class StepperCore<float>;

@@ -1,4 +1,4 @@
-// Every registered force term, walked through its home (src/force_terms.hpp): a scene can
+// Every registered force term, walked through its home (src/forces/force_terms.hpp): a scene can
 // spell it, the model validates it, its potential agrees with the force the kernels apply
 // (or it says it has none), and its reference rule gives the motion a fine rk4 run finds.
 #include <catch2/catch.hpp>

@@ -1,6 +1,6 @@
 # The one-way flow of src/: each folder may include only from the folders below it (and
 # from itself). Public headers count as the layer of the concept they declare. Fails with
-# every include that points up.
+# every include that points up, and every file or quoted include that is in no layer.
 #   cmake -DSOURCE_DIR=<repo> -P check_layers.cmake
 cmake_minimum_required(VERSION 3.25)
 set(layers core parallel kernels forces analysis step scene)
@@ -48,7 +48,7 @@ foreach(source IN LISTS sources)
   elseif(source MATCHES "^include/(kinema/[a-z_]+\\.hpp)$")
     include_rank(${CMAKE_MATCH_1} own)
   else()
-    continue()
+    set(own -1)  # a file directly in src/ belongs to no layer
   endif()
   if(own LESS 0)
     list(APPEND violations "${source}: in no layer")
@@ -59,7 +59,9 @@ foreach(source IN LISTS sources)
     string(REGEX REPLACE "^#include \"([^\"]+)\".*" "\\1" included "${line}")
     include_rank(${included} rank)
     math(EXPR checked "${checked} + 1")
-    if(rank GREATER own)
+    if(rank LESS 0)
+      list(APPEND violations "${source} includes ${included}, in no layer (name it from its folder)")
+    elseif(rank GREATER own)
       list(APPEND violations "${source} includes ${included}, a layer above it")
     endif()
   endforeach()

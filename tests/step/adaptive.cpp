@@ -222,7 +222,7 @@ TEST_CASE("limit_to_stable_step keeps the driver's steps within the method's sta
 }
 
 TEST_CASE("the error norm's sums give a plain loop's bits in the clone this CPU runs", "[adaptive][determinism]") {
-  // The same operations in the same order as error_norm.cpp: the stage sum in double, the
+  // The same operations in the same order as kernels/reductions.cpp: the stage sum in double, the
   // terms into 16 running sums, added in order.
   const auto reference = []<class T>(const std::vector<T>& y0, const std::vector<T>& y1,
                                      const std::vector<std::vector<T>>& k, const std::vector<double>& w) {
