@@ -30,11 +30,18 @@ struct Worst {
     ratio = r;
     at = row.p + " N = " + std::to_string(row.n) + " gap " + std::to_string(row.gap) + " us";
   }
+  std::string text() const {
+    if (at.empty()) return "-";
+    char buf[128];
+    std::snprintf(buf, sizeof buf, "%.2fx (%s)", ratio, at.c_str());
+    return buf;
+  }
 };
 
 struct Summary {
   Worst by_median, by_mean, against_peer;
   double same_low = 1e9, same_high = 0;  // N = 1024: one block, the same code in every variant
+  bool same_seen() const { return same_high > 0; }
 };
 
 // A variant's median or mean step at a row, ns per body-step: back to back from its own
@@ -110,18 +117,30 @@ void print_frame_loop_notes(const Summary& s) {
               "favoured at the end, 0 = the calling thread alone); prepared: default with Stepper::prepare() "
               "right before each step, timed with it; 2 threads: both on every step. Back to back each variant "
               "is a row of its own; with gaps the variants take turns frame by frame in one row.\n"
-              "worst default against 1 thread: %.2fx (%s); by mean step (every frame, pre-empted ones and retries "
-              "of the other worker count too): %.2fx (%s); worst default against parallel_for at N >= 16384: %.2fx (%s)\n"
-              "the run's noise: at N = 1024 every variant runs the same code on the calling thread (one block), and "
-              "their speeds range %.2f-%.2fx\n",
-              s.by_median.ratio, s.by_median.at.c_str(), s.by_mean.ratio, s.by_mean.at.c_str(), s.against_peer.ratio,
-              s.against_peer.at.c_str(), s.same_low, s.same_high);
+              "worst default against 1 thread: %s; by mean step (every frame, pre-empted ones and retries "
+              "of the other worker count too): %s; worst default against parallel_for at N >= 16384: %s\n",
+              s.by_median.text().c_str(), s.by_mean.text().c_str(), s.against_peer.text().c_str());
+  if (!s.same_seen()) return;
+  std::printf("the run's noise: at N = 1024 every variant runs the same code on the calling thread (one block), and "
+              "their speeds range %.2f-%.2fx\n", s.same_low, s.same_high);
+}
+
+bool has_frame_loop(const Results& results) {
+  for (int gap : kGaps) {
+    for (const std::string p : {"float", "double"}) {
+      for (long n : kSizes) {
+        const FrameRow r{p, gap, n};
+        if (frame_step(results, r, "threads:1", "median") && frame_step(results, r, "default", "median")) return true;
+      }
+    }
+  }
+  return false;
 }
 
 }  // namespace
 
 void print_frame_loop_table(const Results& results, Noise& noise) {
-  if (!frame_step(results, FrameRow{"float", 0, 16384}, "threads:1", "median")) return;
+  if (!has_frame_loop(results)) return;
   print_frame_loop_header(results.isa());
   Summary summary;
   for (int gap : kGaps) {

@@ -56,9 +56,14 @@ int main(int argc, char** argv) {
   }
   const auto results = load(argv[1]);
   if (!results) return 1;
+  if (results->empty()) {
+    std::fprintf(stderr, "kinema_bench_report: %s: no benchmark runs in the file\n", argv[1]);
+    return 1;
+  }
   print_header(results->context());
   std::unique_ptr<report::Rk4Csv> csv;
   if (argc > 2) csv = std::make_unique<report::Rk4Csv>(argv[2], results->isa());
+  if (csv && !csv->ok()) std::fprintf(stderr, "kinema_bench_report: %s: cannot write the CSV; printing the table only\n", argv[2]);
   print_sections(*results, csv && csv->ok() ? csv.get() : nullptr);
   return 0;
 }

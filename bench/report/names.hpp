@@ -36,6 +36,11 @@ inline std::string nbody_run(const std::string& p, const std::string& isa, int t
   return "nbody/" + p + "/" + isa + "/threads:" + std::to_string(threads) + "/" + std::to_string(n) + "/real_time";
 }
 
+// rigid/ and rigid-ceiling/ runs, all at 100000 bodies.
+inline std::string rigid_run(const std::string& kind, const std::string& p, const std::string& isa, int threads) {
+  return kind + "/rk4/" + p + "/" + isa + "/threads:" + std::to_string(threads) + "/100000/real_time";
+}
+
 // The paired 2-thread scaling at n bodies.
 inline std::string scaling_run(const std::string& p, const std::string& isa) {
   return "scaling/rk4/" + p + "/" + isa + "/100000";

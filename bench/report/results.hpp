@@ -30,6 +30,7 @@ class Results {
   // A counter's median as a cell, "-" when find() has nothing.
   std::string value(const std::string& run, const char* counter, const char* format = "%.1f") const;
 
+  bool empty() const { return runs_.empty(); }
   const std::string& isa() const { return context_.isa; }
   const Context& context() const { return context_; }
 

@@ -20,7 +20,7 @@ void print_paired_row(const Results& results, const std::string& p, const std::s
   std::printf("%-6s %s in the pairs where FMA work scaled 1.8x or more (%s of %s pairs; FMA %s), "
               "%s over all pairs\n",
               p.c_str(), cell(median(results.find(run, "scaling")), "%.2fx").c_str(),
-              results.value(run, "pairs_kept", "%.0f").c_str(), results.value(run, "pairs", "%.0f").c_str(),
+              cell(results.count(run, "pairs_kept"), "%.0f").c_str(), results.value(run, "pairs", "%.0f").c_str(),
               results.value(run, "fma_scaling", "%.2fx").c_str(),
               cell(median(results.find(run, "scaling_all_pairs")), "%.2fx").c_str());
 }
@@ -44,6 +44,20 @@ void print_scaling_check(const Results& results) {
   }
 }
 
+// The largest state the run streamed on 1 thread (DRAM at 4M bodies), 0 for none.
+long stream_size(const Results& results) {
+  for (long n : {4194304L, 1048576L, 100000L, 65536L, 16384L, 4096L, 1024L}) {
+    if (state_stream(results, "float", n, 1)) return n;
+  }
+  return 0;
+}
+
+std::string size_label(long n) {
+  if (n >= (1L << 20) && n % (1L << 20) == 0) return std::to_string(n >> 20) + "M";
+  if (n >= 1000 && n % 1000 == 0) return std::to_string(n / 1000) + "k";
+  return std::to_string(n);
+}
+
 }  // namespace
 
 void print_paired_scaling(const Results& results) {
@@ -58,15 +72,15 @@ void print_paired_scaling(const Results& results) {
 }
 
 void print_limits(const Results& results) {
+  const long n = stream_size(results);
+  if (!fma_peak(results, "float", 1) && n == 0) return;
   const auto peak = [&](const char* p, int threads) { return cell(median(fma_peak(results, p, threads)), "%.1f"); };
-  const auto stream = [&](int threads) {
-    return cell(median(state_stream(results, "float", 4194304, threads)), "%.1f");
-  };
+  const auto stream = [&](int threads) { return cell(median(state_stream(results, "float", n, threads)), "%.1f"); };
   std::printf("\nMachine limits in this run: FMA peak float %s / %s GFLOP/s (1 / 2 threads), double %s / %s;"
-              "\n  the state stream at 4M float bodies (%s): %s / %s GB/s (2 threads: Google Benchmark averages each "
+              "\n  the state stream at %s float bodies (%s): %s / %s GB/s (2 threads: Google Benchmark averages each "
               "thread's own time, so a limit measured on threads that did not overlap reads high)\n",
               peak("float", 1).c_str(), peak("float", 2).c_str(), peak("double", 1).c_str(), peak("double", 2).c_str(),
-              results.isa().c_str(), stream(1).c_str(), stream(2).c_str());
+              size_label(n).c_str(), results.isa().c_str(), stream(1).c_str(), stream(2).c_str());
   print_scaling_check(results);
 }
 

@@ -10,12 +10,12 @@ namespace kinema::bench::report {
 namespace {
 
 void print_rigid_row(const Results& results, const std::string& p, int threads) {
-  const std::string suffix = "/" + results.isa() + "/threads:" + std::to_string(threads) + "/100000/real_time";
-  const auto rigid = results.find("rigid/rk4/" + p + suffix, "ns_per_body_step");
+  const std::string run = rigid_run("rigid", p, results.isa(), threads);
+  const auto rigid = results.find(run, "ns_per_body_step");
   if (!rigid) return;
-  const auto ceiling = results.find("rigid-ceiling/rk4/" + p + suffix, "ns_per_body_step");
+  const auto ceiling = results.find(rigid_run("rigid-ceiling", p, results.isa(), threads), "ns_per_body_step");
   const auto particle = results.find(kernel_run("fused", "rk4", p, results.isa(), threads, 100000), "ns_per_body_step");
-  const auto flops = results.find("rigid/rk4/" + p + suffix, "GFLOP_per_s");
+  const auto flops = results.find(run, "GFLOP_per_s");
   std::printf("%-6s N = 100000, %d thread%s: %.3f (%s a particle step; ceiling %s; %s of the FMA peak)\n",
               p.c_str(), threads, threads > 1 ? "s" : "", rigid->median, cell(ratio(rigid, particle), "%.1fx").c_str(),
               cell(percent(ratio(ceiling, rigid)), "%.0f%%").c_str(),
@@ -53,9 +53,19 @@ void print_adaptive_row(const Results& results, Noise& noise, const std::string&
               cell(percent(bw), "%.1f%%").c_str());
 }
 
+bool has_rigid(const Results& results) {
+  for (const std::string p : {"float", "double"}) {
+    for (int threads : {1, 2}) {
+      if (results.find(rigid_run("rigid", p, results.isa(), threads), "ns_per_body_step")) return true;
+    }
+  }
+  return false;
+}
+
 }  // namespace
 
 void print_rigid_table(const Results& results) {
+  if (!has_rigid(results)) return;
   std::printf("\nRigid bodies, RK4, %s: ns per body-step (cost relative to a particle); the kernel's 597 flops "
               "per body-step (FMA = 2) as a share of the FMA peak at that thread count\n", results.isa().c_str());
   for (const std::string p : {"float", "double"}) {
