@@ -68,7 +68,7 @@ void print_bounds_table(const Results& results, Noise& noise) {
   std::printf("\n");
   std::vector<std::string> below_70;
   for (const std::string p : {"float", "double"}) {
-    for (const char* m : {"euler", "midpoint", "heun", "rk4", "symplectic_euler", "velocity_verlet"}) {
+    for (const char* m : kMethods) {
       print_bounds_row(results, noise, p, m, below_70);
     }
   }

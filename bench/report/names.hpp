@@ -4,6 +4,9 @@
 
 namespace kinema::bench::report {
 
+// The built-in fixed-step methods the particle suites run, in the tables' order.
+inline const char* const kMethods[] = {"euler", "midpoint", "heun", "rk4", "symplectic_euler", "velocity_verlet"};
+
 // fused/, ceiling/ and staged/ particle runs: kind/method/precision/isa/threads:t/n.
 inline std::string kernel_run(const std::string& kind, const std::string& method, const std::string& p,
                               const std::string& isa, int threads, long n) {

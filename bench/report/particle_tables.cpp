@@ -11,7 +11,6 @@
 namespace kinema::bench::report {
 namespace {
 
-const char* const kMethods[] = {"euler", "midpoint", "heun", "rk4", "symplectic_euler", "velocity_verlet"};
 const char* const kIsas[] = {"scalar", "sse2", "avx2", "avx512"};
 
 void print_rk4_row(const Rk4Row& r) {
