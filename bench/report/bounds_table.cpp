@@ -61,8 +61,9 @@ void print_bounds_row(const Results& results, Noise& noise, const std::string& p
 
 void print_bounds_table(const Results& results, Noise& noise) {
   if (!results.find(kernel_run("fused", "euler", "float", results.isa(), 1, 4194304), "ns_per_body_step")) return;
+  const char* levels = results.context().caches.empty() ? "memory (the run did not know the cache sizes)" : "L2 / L3 / DRAM";
   std::printf("\nWhat bounds each method, 1 thread, %s: ns per body-step, the bound (compute: the ceiling; "
-              "L2 / L3 / DRAM: the state stream at that size) and the share of it reached\n", results.isa().c_str());
+              "%s: the state stream at that size) and the share of it reached\n", results.isa().c_str(), levels);
   std::printf("%-6s %-16s", "prec", "method");
   for (long n : kSizes) std::printf(" | %8ld: ns   bound    %%", n);
   std::printf("\n");

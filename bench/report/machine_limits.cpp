@@ -22,8 +22,10 @@ std::optional<Figure> fma_peak(const Results& results, const std::string& p, int
 }
 
 std::string memory_level(const Results& results, const std::string& p, long n) {
+  const auto& caches = results.context().caches;
+  if (caches.empty()) return "memory";  // the run could not read the cache sizes
   const double bytes = 7 * value_bytes(p) * double(n);
-  for (const auto& [l, size] : results.context().caches) {
+  for (const auto& [l, size] : caches) {
     if (l >= 2 && bytes <= size) return l == 2 ? "L2" : l == 3 ? "L3" : "L4";
   }
   return "DRAM";

@@ -17,7 +17,8 @@ std::optional<Figure> state_stream(const Results& results, const std::string& p,
 // The FMA peak of a precision at a thread count, GFLOP/s.
 std::optional<Figure> fma_peak(const Results& results, const std::string& p, int threads);
 
-// Where a state of n bodies of precision p lives: the smallest data cache holding it.
+// Where a state of n bodies of precision p lives: the smallest data cache holding it, DRAM,
+// or "memory" when the run did not know its caches.
 std::string memory_level(const Results& results, const std::string& p, long n);
 
 }  // namespace kinema::bench::report
