@@ -112,8 +112,8 @@ void naive_aos_rk4(benchmark::State& state) {
 }
 
 // Odeint's state: [x(3n), v(3n)], inverse masses alongside. The derivative loops over bodies,
-// then components, as one would write it; a flat loop indexing masses by i / 3 vectorizes
-// worse (measured 17 -> 12 ns per body-step in float at 100k on Zen 4 when changed to this).
+// then components, as one would write it: a flat loop indexing masses by i / 3 vectorizes
+// worse, and the baseline should be the fair one (bench/README.md has the figures).
 template <class T>
 struct OdeintSystem {
   const std::vector<T>* inv_mass;

@@ -28,9 +28,9 @@ constexpr double rigid_step_bytes() {
 // Floating-point operations per body-step of the rk4 kernel this scene takes (no point
 // forces, no central term): 168 FMAs (2 each), 121 multiplies, 88 adds, 43 subtracts, 8
 // divisions and 1 square root (the renormalization), float and double alike, counted in the
-// AVX-512 loop of the kernel when it took each batch in one pass (now two passes, the same
-// operations on every value: the golden hashes did not move). By hand: 472 for the
-// orientation (94 + 3 x 108 over the stages, 42 to combine them, 12 to renormalize).
+// kernel's AVX-512 loop; every value goes through the same operations whatever the order of
+// its passes. By hand: 472 for the orientation (94 + 3 x 108 over the stages, 42 to combine
+// them, 12 to renormalize).
 constexpr double kRigidRk4Flops = 597;
 
 template <class T>
