@@ -69,6 +69,41 @@ constexpr std::size_t padded_count(std::size_t count) {
   return (count + lane - 1) / lane * lane;
 }
 
+// Vectors applied to single bodies from outside the force model (the game's forces and
+// torques), three component arrays of the set's capacity. A set allocates them at its first
+// apply and never before: a set that applies nothing carries and reads no such arrays.
+// clear() only marks them unused (no pass over memory); the next add zeroes them first.
+template <class T>
+class AppliedVectors {
+ public:
+  AppliedVectors() = default;
+  AppliedVectors(const AppliedVectors&) = default;
+  AppliedVectors& operator=(const AppliedVectors&) = default;
+  // A moved-from value holds nothing.
+  AppliedVectors(AppliedVectors&& other) noexcept
+      : arrays_(std::move(other.arrays_)), active_(std::exchange(other.active_, false)) {}
+  AppliedVectors& operator=(AppliedVectors&& other) noexcept {
+    arrays_ = std::move(other.arrays_), active_ = std::exchange(other.active_, false);
+    return *this;
+  }
+
+  bool active() const { return active_; }
+  // Component d's array while active, else nullptr (what the kernels test).
+  const T* data(int d) const { return active_ ? arrays_[d].data() : nullptr; }
+  Vec3<T> at(std::size_t i) const;  // zero when not active
+  // Adds v to body i, whose set has `capacity` elements per array; kinema::Error naming the
+  // body and `field` when v or the sum is not finite (nothing changes then).
+  void add(std::size_t i, const Vec3<T>& v, std::size_t capacity, const char* field);
+  void clear() { active_ = false; }
+  void grow(std::size_t capacity);  // keeps the arrays as long as the set's
+  void copy_body(std::size_t from, std::size_t to);
+  void clear_body(std::size_t i);
+
+ private:
+  std::array<AlignedArray<T>, 3> arrays_;
+  bool active_ = false;
+};
+
 template <class T>
 struct ParticleDesc {
   Vec3<T> position{};
@@ -130,6 +165,24 @@ class ParticleSet {
   void set_mass(std::size_t i, T mass);  // positive and finite; makes a kinematic body dynamic
   void set_kinematic(std::size_t i);     // forces stop moving it (inv_mass 0)
 
+  // Forces from the game, per body. An applied force acts, constant, over every step of the
+  // next Stepper::step or advance (or advance_to) call, as part of the body's acceleration
+  // (F inv_mass), and is cleared when that call returns, unless keep_forces(true) keeps it
+  // for later calls too. A call that throws leaves the forces applied. Forces on one body
+  // add up. Bodies with inv_mass 0 (kinematic) ignore them. The first apply allocates the
+  // set's force arrays; a set that never applies a force carries none, and its steps cost
+  // what they cost without this feature. kinema::Error for a bad index or a non-finite value.
+  void apply_force(std::size_t i, const Vec3<T>& force);
+  // An immediate change of momentum: v += J inv_mass (nothing for a kinematic body).
+  void apply_impulse(std::size_t i, const Vec3<T>& impulse);
+  void clear_forces() { applied_.clear(); }
+  void keep_forces(bool keep) { keep_forces_ = keep; }
+  bool keeps_forces() const { return keep_forces_; }
+  bool has_applied_forces() const { return applied_.active(); }
+  Vec3<T> applied_force(std::size_t i) const { return applied_.at(i); }
+  // Component d (0..2: x, y, z) of the applied forces, padded_size() long; nullptr when none.
+  const T* applied_force_data(int d) const { return applied_.data(d); }
+
   // Removes body i by moving the last body into its place (no reallocation, no shift).
   // Returns the index the moved body had (the old last index), or kNoBody when i was last.
   static constexpr std::size_t kNoBody = std::size_t(-1);
@@ -153,6 +206,8 @@ class ParticleSet {
 
   AlignedArray<T> px_, py_, pz_, vx_, vy_, vz_, inv_mass_;
   std::size_t size_ = 0;
+  AppliedVectors<T> applied_;
+  bool keep_forces_ = false;
 };
 
 template <class T>
@@ -203,6 +258,25 @@ class RigidBodySet {
   // and does not turn. set_mass makes its centre dynamic again and set_inertia its rotation
   // (torques meanwhile still change L, which then turns it).
   void set_kinematic(std::size_t i);
+  // Forces from the game, as ParticleSet's (the same life: the next call, or kept), plus
+  // torques. apply_force pushes the centre of mass; apply_force_at(i, F, p), p a world point,
+  // also gives the torque (p - x) x F about the centre x as it is now; apply_torque adds a
+  // world torque. Impulses change velocity (J inv_mass) and world angular momentum (the
+  // angular impulse, or (p - x) x J at a point) at once. Bodies with inv_mass 0 ignore all.
+  void apply_force(std::size_t i, const Vec3<T>& force) { centers_.apply_force(i, force); }
+  void apply_force_at(std::size_t i, const Vec3<T>& force, const Vec3<T>& world_point);
+  void apply_torque(std::size_t i, const Vec3<T>& torque);
+  void apply_impulse(std::size_t i, const Vec3<T>& impulse) { centers_.apply_impulse(i, impulse); }
+  void apply_impulse_at(std::size_t i, const Vec3<T>& impulse, const Vec3<T>& world_point);
+  void apply_angular_impulse(std::size_t i, const Vec3<T>& impulse);
+  void clear_forces() { centers_.clear_forces(), torques_.clear(); }
+  void keep_forces(bool keep) { centers_.keep_forces(keep); }
+  bool keeps_forces() const { return centers_.keeps_forces(); }
+  bool has_applied_forces() const { return centers_.has_applied_forces() || torques_.active(); }
+  Vec3<T> applied_force(std::size_t i) const { return centers_.applied_force(i); }
+  Vec3<T> applied_torque(std::size_t i) const { return torques_.at(i); }
+  const T* applied_torque_data(int d) const { return torques_.data(d); }  // nullptr when none
+
   // As ParticleSet::remove: the last body moves into i; returns its old index or kNoBody.
   static constexpr std::size_t kNoBody = ParticleSet<T>::kNoBody;
   std::size_t remove(std::size_t i);
@@ -232,10 +306,13 @@ class RigidBodySet {
  private:
   void grow_rotation_arrays();
   void pad_rotation_arrays(std::size_t from);  // identity orientation from `from` on
+  // (p - x_i) x v in double, checked finite in T.
+  Vec3<T> moment_about(std::size_t i, const Vec3<T>& v, const Vec3<T>& world_point, const char* field) const;
 
   ParticleSet<T> centers_;
   std::array<AlignedArray<T>, 4> q_;
   std::array<AlignedArray<T>, 3> l_, inv_inertia_;
+  AppliedVectors<T> torques_;
 };
 
 // Principal moments of a symmetric inertia tensor (body frame) and the rotation from the
@@ -293,6 +370,8 @@ void remove_bodies(Set& set, std::span<const std::size_t> indices, Moved&& moved
 }
 
 extern template class AlignedArray<float>;
+extern template class AppliedVectors<float>;
+extern template class AppliedVectors<double>;
 extern template class AlignedArray<double>;
 extern template class ParticleSet<float>;
 extern template class ParticleSet<double>;

@@ -116,12 +116,67 @@ T inverse_mass(T mass, std::size_t i) {
 }  // namespace
 
 template <class T>
+Vec3<T> AppliedVectors<T>::at(std::size_t i) const {
+  if (!active_) return {};
+  return {arrays_[0][i], arrays_[1][i], arrays_[2][i]};
+}
+
+template <class T>
+void AppliedVectors<T>::add(std::size_t i, const Vec3<T>& v, std::size_t capacity, const char* field) {
+  check_finite(v, i, field);
+  const Vec3<T> old = at(i);
+  const Vec3<T> sum{old[0] + v[0], old[1] + v[1], old[2] + v[2]};
+  check_finite(sum, i, (std::string(field) + " summed with the one already applied").c_str());
+  for (auto& a : arrays_) a.resize(capacity);  // may throw: nothing has changed yet
+  if (!active_) {
+    for (auto& a : arrays_) std::fill(a.data(), a.data() + a.size(), T(0));
+    active_ = true;
+  }
+  for (int d = 0; d < 3; ++d) arrays_[d][i] = sum[d];
+}
+
+template <class T>
+void AppliedVectors<T>::grow(std::size_t capacity) {
+  if (arrays_[0].size() == 0) return;  // never applied: stays without arrays
+  for (auto& a : arrays_) a.resize(capacity);
+}
+
+template <class T>
+void AppliedVectors<T>::copy_body(std::size_t from, std::size_t to) {
+  if (arrays_[0].size() == 0) return;
+  for (auto& a : arrays_) a[to] = a[from];
+}
+
+template <class T>
+void AppliedVectors<T>::clear_body(std::size_t i) {
+  if (arrays_[0].size() == 0) return;
+  for (auto& a : arrays_) a[i] = 0;
+}
+
+template <class T>
+void ParticleSet<T>::apply_force(std::size_t i, const Vec3<T>& force) {
+  check_index(i);
+  applied_.add(i, force, capacity(), "force");
+}
+
+template <class T>
+void ParticleSet<T>::apply_impulse(std::size_t i, const Vec3<T>& impulse) {
+  check_index(i);
+  check_finite(impulse, i, "impulse");
+  const Vec3<T> v{vx_[i] + impulse[0] * inv_mass_[i], vy_[i] + impulse[1] * inv_mass_[i],
+                  vz_[i] + impulse[2] * inv_mass_[i]};
+  check_finite(v, i, "velocity after the impulse");
+  vx_[i] = v[0], vy_[i] = v[1], vz_[i] = v[2];
+}
+
+template <class T>
 void ParticleSet<T>::grow_to(std::size_t count) {
   // Geometric growth so adding one by one stays linear overall.
   std::size_t capacity = px_.size();
   if (count <= capacity) return;
   std::size_t target = std::max(count, capacity * 2);
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(target);
+  applied_.grow(target);
 }
 
 template <class T>
@@ -164,6 +219,8 @@ template <class T>
 ParticleSet<T>& ParticleSet<T>::operator=(const ParticleSet& other) {
   if (this == &other) return *this;
   if (capacity() < other.capacity()) return *this = ParticleSet(other);  // all or nothing
+  applied_ = other.applied_;  // the one copy that may allocate: before anything else changes
+  keep_forces_ = other.keep_forces_;
   for (auto [to, from] : {std::pair{&px_, &other.px_}, {&py_, &other.py_}, {&pz_, &other.pz_}, {&vx_, &other.vx_},
                           {&vy_, &other.vy_}, {&vz_, &other.vz_}, {&inv_mass_, &other.inv_mass_}}) {
     *to = *from;  // fits: no allocation, no throw
@@ -178,6 +235,8 @@ ParticleSet<T>& ParticleSet<T>::operator=(ParticleSet&& other) noexcept {
   px_ = std::move(other.px_), py_ = std::move(other.py_), pz_ = std::move(other.pz_);
   vx_ = std::move(other.vx_), vy_ = std::move(other.vy_), vz_ = std::move(other.vz_);
   inv_mass_ = std::move(other.inv_mass_);
+  applied_ = std::move(other.applied_);
+  keep_forces_ = std::exchange(other.keep_forces_, false);
   size_ = std::exchange(other.size_, 0);
   return *this;
 }
@@ -185,6 +244,7 @@ ParticleSet<T>& ParticleSet<T>::operator=(ParticleSet&& other) noexcept {
 template <class T>
 void ParticleSet<T>::reserve(std::size_t count) {
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(count);
+  applied_.grow(capacity());
 }
 
 template <class T>
@@ -192,6 +252,7 @@ void ParticleSet<T>::clear() {
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) {
     std::fill(a->data(), a->data() + a->size(), T(0));
   }
+  applied_.clear();
   size_ = 0;
 }
 
@@ -229,11 +290,13 @@ void ParticleSet<T>::set_kinematic(std::size_t i) {
 template <class T>
 void ParticleSet<T>::copy_body(std::size_t from, std::size_t to) {
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) (*a)[to] = (*a)[from];
+  applied_.copy_body(from, to);
 }
 
 template <class T>
 void ParticleSet<T>::clear_body(std::size_t i) {
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) (*a)[i] = 0;
+  applied_.clear_body(i);
 }
 
 template <class T>
@@ -261,6 +324,8 @@ void check_removals(std::span<const std::size_t> indices, std::size_t size, std:
 
 template class AlignedArray<float>;
 template class AlignedArray<double>;
+template class AppliedVectors<float>;
+template class AppliedVectors<double>;
 template class ParticleSet<float>;
 template class ParticleSet<double>;
 

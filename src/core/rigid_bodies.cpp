@@ -163,6 +163,7 @@ void RigidBodySet<T>::grow_rotation_arrays() {
   for (auto& a : q_) a.resize(target);
   for (auto& a : l_) a.resize(target);
   for (auto& a : inv_inertia_) a.resize(target);
+  torques_.grow(target);
   for (std::size_t i = old; i < target; ++i) q_[0][i] = 1;
 }
 
@@ -207,6 +208,7 @@ RigidBodySet<T>& RigidBodySet<T>::operator=(const RigidBodySet& other) {
   if (centers_.capacity() < other.centers_.capacity() || q_[0].size() < other.q_[0].size()) {
     return *this = RigidBodySet(other);  // all or nothing
   }
+  torques_ = other.torques_;  // the one copy that may allocate: before anything else changes
   centers_ = other.centers_;
   q_ = other.q_, l_ = other.l_, inv_inertia_ = other.inv_inertia_;
   pad_rotation_arrays(other.q_[0].size());  // past the copied arrays: inert padding
@@ -257,13 +259,58 @@ std::size_t RigidBodySet<T>::remove(std::size_t i) {
     for (auto& a : q_) a[to] = a[from];
     for (auto& a : l_) a[to] = a[from];
     for (auto& a : inv_inertia_) a[to] = a[from];
+    torques_.copy_body(from, to);
   };
   if (i != last) move_rotation(last, i);
   for (auto& a : q_) a[last] = 0;
   for (auto& a : l_) a[last] = 0;
   for (auto& a : inv_inertia_) a[last] = 0;
+  torques_.clear_body(last);
   q_[0][last] = 1;  // inert padding: the identity orientation
   return centers_.remove(i);
+}
+
+template <class T>
+Vec3<T> RigidBodySet<T>::moment_about(std::size_t i, const Vec3<T>& v, const Vec3<T>& world_point,
+                                      const char* field) const {
+  centers_.check_index(i);
+  check_finite(v, i, field);
+  check_finite(world_point, i, "point");
+  const Vec3<T> x = centers_.position(i);
+  const Vec3<double> r{double(world_point[0]) - x[0], double(world_point[1]) - x[1], double(world_point[2]) - x[2]};
+  const Vec3<T> moment{T(r[1] * v[2] - r[2] * v[1]), T(r[2] * v[0] - r[0] * v[2]), T(r[0] * v[1] - r[1] * v[0])};
+  check_finite(moment, i, (std::string("moment of the ") + field + " about the centre").c_str());
+  return moment;
+}
+
+template <class T>
+void RigidBodySet<T>::apply_torque(std::size_t i, const Vec3<T>& torque) {
+  centers_.check_index(i);
+  torques_.add(i, torque, centers_.capacity(), "torque");
+}
+
+template <class T>
+void RigidBodySet<T>::apply_force_at(std::size_t i, const Vec3<T>& force, const Vec3<T>& world_point) {
+  const Vec3<T> moment = moment_about(i, force, world_point, "force");
+  centers_.apply_force(i, force);
+  torques_.add(i, moment, centers_.capacity(), "torque");
+}
+
+template <class T>
+void RigidBodySet<T>::apply_angular_impulse(std::size_t i, const Vec3<T>& impulse) {
+  centers_.check_index(i);
+  check_finite(impulse, i, "angular_impulse");
+  if (centers_.inv_mass()[i] == 0) return;  // kinematic
+  const Vec3<T> l{l_[0][i] + impulse[0], l_[1][i] + impulse[1], l_[2][i] + impulse[2]};
+  check_finite(l, i, "angular momentum after the impulse");
+  for (int d = 0; d < 3; ++d) l_[d][i] = l[d];
+}
+
+template <class T>
+void RigidBodySet<T>::apply_impulse_at(std::size_t i, const Vec3<T>& impulse, const Vec3<T>& world_point) {
+  const Vec3<T> moment = moment_about(i, impulse, world_point, "impulse");
+  apply_angular_impulse(i, moment);
+  centers_.apply_impulse(i, impulse);
 }
 
 template <class T>

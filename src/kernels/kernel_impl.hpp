@@ -49,13 +49,13 @@ KINEMA_INLINE void store3(value_t<V>* const p[3], std::size_t i, const Vec<V>& v
 template <class V>
 struct Forces {
   using T = value_t<V>;
-  V g[3], force[3], anchor[3], neg_spring_k, neg_linear, neg_quadratic;
+  V g[3], force[3], anchor[3], neg_spring_k, neg_linear, neg_quadratic, scale;
   int central_count;
   V center[4][3], neg_mu[4];
 
   explicit Forces(const LocalForces<T>& f, T scale = 1)
       : neg_spring_k(-(f.spring_k * scale)), neg_linear(-(f.linear * scale)),
-        neg_quadratic(-(f.quadratic * scale)), central_count(f.central_count) {
+        neg_quadratic(-(f.quadratic * scale)), scale(scale), central_count(f.central_count) {
     for (int d = 0; d < 3; ++d) {
       g[d] = V(f.gravity[d] * scale);
       force[d] = V(f.constant_force[d] * scale);
@@ -88,6 +88,26 @@ KINEMA_INLINE auto body_terms(const Forces<V>& f, const V& inv_mass) {
     b.g[d] = pick(dynamic, Pushed ? mul_add(inv_mass, f.force[d], f.g[d]) : f.g[d], V(0));
   }
   return b;
+}
+
+// The forces applied to single bodies (constant over the call) join their constant
+// acceleration: g + inv_mass (scale F), still zero where inv_mass is 0.
+template <class V, class B>
+KINEMA_INLINE void add_applied(B& body, const Forces<V>& f, const V& inv_mass, const Vec<V>& force) {
+  for (int d = 0; d < 3; ++d) {
+    body.g[d] = pick(body.dynamic, mul_add(inv_mass, f.scale * force.c[d], body.g[d]), V(0));
+  }
+}
+
+// body_terms, plus the applied forces when the `full` variant finds the set has them.
+template <bool Full, bool Pushed = false, class V, class T>
+KINEMA_INLINE auto body_terms_at(const Forces<V>& f, const V& inv_mass, const T* const applied[3],
+                                 std::size_t i) {
+  auto body = body_terms<Pushed>(f, inv_mass);
+  if constexpr (Full) {
+    if (applied[0] != nullptr) add_applied(body, f, inv_mass, load3<V>(applied, i));
+  }
+  return body;
 }
 
 // Position relative to the springs' anchor.
@@ -247,6 +267,7 @@ KINEMA_INLINE void prefetch(const BodyArrays<T>& b, std::size_t i) {
 
 // One batch of a Runge-Kutta step of positions and velocities, the bodies at i, all stages in
 // registers. `Pushed`: rigid bodies add the constant force of their point-force terms.
+// `Central`: the full variant (central terms, applied forces).
 template <const Method& M, bool Quadratic, bool Central, bool Pushed = false, class V>
 KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forces<V>& f, value_t<V> h,
                                      std::size_t i) {
@@ -254,7 +275,7 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forc
   constexpr int S = tab.stages;
   constexpr double sigma = acceleration_scale(tab);
   const Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
-  const auto body = body_terms<Pushed>(f, load<V>(b.inv_mass + i));
+  const auto body = body_terms_at<Central, Pushed>(f, load<V>(b.inv_mass + i), b.applied, i);
   const Vec<V> p = linear_part(body, anchored(f, x));
   Vec<V> kx[S], kv[S];  // stage velocities and accelerations
   static_for<S>([&](auto s) {
@@ -291,7 +312,7 @@ void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::s
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * job.h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
-    const auto body = body_terms(f, load<V>(b.inv_mass + i));
+    const auto body = body_terms_at<Central>(f, load<V>(b.inv_mass + i), b.applied, i);
     static_for<scheme.count>([&](auto k) {
       if constexpr (scheme.ops[k].kind == OpKind::kick) {
         v = step_by(wh[k], accel_at<Quadratic, Central>(f, body, x, v), v);
@@ -349,7 +370,7 @@ void stage(const StageJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
   const Forces<V> f(job.forces, job.accel_scale);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const Vec<V> x = load3<V>(job.x.in, i);
-    const auto body = body_terms(f, load<V>(job.inv_mass + i));
+    const auto body = body_terms_at<Central>(f, load<V>(job.inv_mass + i), job.applied, i);
     Vec<V> xs = x, p = linear_part(body, anchored(f, x));
     const Vec<V> vs = combined<V>(job.v, i);
     if (!job.x.empty()) {

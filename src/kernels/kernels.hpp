@@ -32,6 +32,9 @@ struct BodyArrays {
   T* x[3];         // px py pz
   T* v[3];         // vx vy vz
   const T* inv_mass;
+  // Forces applied to single bodies (ParticleSet::apply_force), constant over the call;
+  // nullptr when the set has none. Read by the kernels of the `full` variant only.
+  const T* applied[3];
 };
 
 // The rotational terms of a model, for rigid bodies.
@@ -55,6 +58,7 @@ struct RigidJob {
   RotationalForces<T> rotation;
   T h;
   bool renormalize;
+  const T* torque[3];  // applied per body (world frame); nullptr when none
 };
 template <class T>
 using RigidFn = void (*)(const RigidJob<T>& job, std::size_t begin, std::size_t end);
@@ -174,6 +178,7 @@ struct StageJob {
   Combination<T> x, v;
   T accel_scale;
   const T* inv_mass;
+  const T* applied[3];  // as BodyArrays::applied
   T* acc[3];
   LocalForces<T> forces;
 };
@@ -257,11 +262,19 @@ using InterpolateFn = void (*)(const InterpolateJob<T>& job, std::size_t begin, 
 
 inline constexpr std::size_t kBuiltinCount = builtin_methods.size();
 
+// A kernel's `full` variant evaluates central attractors (their count known at run time,
+// zero allowed) and reads applied forces where the set has them; the other variant does
+// neither, so a model without them pays for neither. Both give the same bits where both apply.
+template <class T>
+constexpr int full_variant(const LocalForces<T>& f, bool applied) {
+  return f.has_central() || applied;
+}
+
 template <class T>
 struct KernelTable {
   Isa isa;
   std::size_t width;  // SIMD lanes
-  // [builtin method index][quadratic drag][central terms]
+  // [builtin method index][quadratic drag][full variant]
   FusedFn<T> fused[kBuiltinCount][2][2];
   RigidFn<T> rigid[kBuiltinCount][2][2];
   StageFn<T> stage[2][2];

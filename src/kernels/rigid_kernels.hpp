@@ -90,18 +90,30 @@ struct Rotational {
   }
 };
 
-// torque = T0 - c omega + sum (R p) x F, zero where inv_mass is 0.
+// torque = T0 - c omega + sum (R p) x F (+ the body's applied torque, when `applied`), zero
+// where inv_mass is 0.
 template <class V, class B>
 KINEMA_INLINE Vec<V> torque(const Rotational<V>& f, const B& body, const Rotation<V>& r,
-                     const Vec<V>& omega) {
+                     const Vec<V>& omega, const Vec<V>* applied = nullptr) {
   Vec<V> t;
   for (int d = 0; d < 3; ++d) t.c[d] = mul_add(f.neg_drag, omega.c[d], f.torque[d]);
   for (int p = 0; p < f.point_count; ++p) {
     const Vec<V> arm = cross(times(r, f.point[p]), f.force[p]);
     for (int d = 0; d < 3; ++d) t.c[d] = t.c[d] + arm.c[d];
   }
+  if (applied != nullptr) {
+    for (int d = 0; d < 3; ++d) t.c[d] = t.c[d] + applied->c[d];
+  }
   for (int d = 0; d < 3; ++d) t.c[d] = pick(body.dynamic, t.c[d], V(0));
   return t;
+}
+
+// The bodies' applied torques at i, or nullptr when the set has none.
+template <class V>
+KINEMA_INLINE const Vec<V>* applied_torque(const RigidJob<value_t<V>>& job, std::size_t i, Vec<V>& storage) {
+  if (job.torque[0] == nullptr) return nullptr;
+  storage = load3<V>(job.torque, i);
+  return &storage;
 }
 
 template <class V>
@@ -154,13 +166,15 @@ KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotatio
   const value_t<V> h = job.h;
   using Mask = std::decay_t<decltype(load<V>(job.bodies.inv_mass) != V(0))>;
   Quat4<V> q0[U], kq[U][S];
-  Vec<V> l0[U], inv_inertia[U], kl[U][S];
+  Vec<V> l0[U], inv_inertia[U], kl[U][S], applied_storage[U];
+  const Vec<V>* applied[U];
   Dynamic<Mask> body[U];
   for (int u = 0; u < U; ++u) {
     q0[u] = load_n<4, V>(job.q, i + u * W);
     l0[u] = load3<V>(job.l, i + u * W);
     inv_inertia[u] = load3<V>(job.inv_inertia, i + u * W);
     body[u].dynamic = load<V>(job.bodies.inv_mass + i + u * W) != V(0);
+    applied[u] = applied_torque<V>(job, i + u * W, applied_storage[u]);
   }
   static_for<S>([&](auto s) {
     constexpr Weights row = tab.a[s];
@@ -170,7 +184,7 @@ KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotatio
       const Rotation<V> r = rotation(qs);
       const Vec<V> omega = angular_velocity(r, inv_inertia[u], ls);
       kq[u][s] = quaternion_rate(omega, qs);
-      kl[u][s] = torque(rf, body[u], r, omega);
+      kl[u][s] = torque(rf, body[u], r, omega, applied[u]);
     }
   });
   for (int u = 0; u < U; ++u) {
@@ -210,8 +224,10 @@ void rigid_kick_drift(const RigidJob<value_t<V>>& shared, std::size_t begin, std
   }
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     RigidState<V> s = load_rigid<V>(job, i);
-    const auto body = body_terms<true>(f, load<V>(job.bodies.inv_mass + i));
+    const auto body = body_terms_at<Central, true>(f, load<V>(job.bodies.inv_mass + i), job.bodies.applied, i);
     const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
+    Vec<V> applied_storage;
+    const Vec<V>* applied = applied_torque<V>(job, i, applied_storage);
     auto rate = [&](const Quat4<V>& q) {
       return quaternion_rate(angular_velocity(rotation(q), inv_inertia, s.l), q);
     };
@@ -219,7 +235,7 @@ void rigid_kick_drift(const RigidJob<value_t<V>>& shared, std::size_t begin, std
       if constexpr (scheme.ops[k].kind == OpKind::kick) {
         const Rotation<V> r = rotation(s.q);
         const Vec<V> omega = angular_velocity(r, inv_inertia, s.l);
-        const Vec<V> tau = torque(rf, body, r, omega);
+        const Vec<V> tau = torque(rf, body, r, omega, applied);
         s.v = step_by(wh[k], accel_at<Quadratic, Central>(f, body, s.x, s.v), s.v);
         s.l = step_by(wh[k], tau, s.l);
       } else {

@@ -57,7 +57,7 @@ void FixedSteps<T>::run_block(Set& b, Block block, std::uint64_t steps, Guard* g
 
 template <class T>
 void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard) {
-  const kernels::RigidFn<T> rigid_fn = core_.paths.rigid;
+  const kernels::RigidFn<T> rigid_fn = core_.paths.rigid_for(b.has_applied_forces());
   if (rigid_fn == nullptr) {
     throw Error("rigid bodies need a built-in method and local force terms only (no "
                 "callbacks, no coupled terms)");
@@ -68,7 +68,8 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
                                  {b.l(0), b.l(1), b.l(2)},
                                  {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
                                  lowered.rigid, lowered.rotation, h,
-                                 core_.options.renormalize_quaternions};
+                                 core_.options.renormalize_quaternions,
+                                 {b.applied_torque_data(0), b.applied_torque_data(1), b.applied_torque_data(2)}};
   for_each_block(w, b.padded_size(), [&](Block block) {
     run_block(b, block, steps, guard, [&](Block k) { rigid_fn(job, k.begin, k.end); });
   });
@@ -80,7 +81,7 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   const LoweredForces<T>& lowered = core_.lowered();
   check_reach(lowered.coupled, b);
   StepContext<T> c = core_.start(b, h, lowered.particle, w);
-  const kernels::FusedFn<T> fused_fn = core_.paths.fused;
+  const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
   if (fused_fn == nullptr) return run_staged(c, steps, guard);
   // Local, time-independent forces: each block can take all its steps while it sits in
   // cache. Every body sees the same operations as step by step, so the bits agree.

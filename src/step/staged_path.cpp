@@ -14,8 +14,7 @@ template <class T>
 StagedPath<T>::StagedPath(const ForceModel<T>& forces, const Method& method,
                           const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local,
                           const CoupledForces<T>& coupled)
-    : forces_(forces), method_(method), table_(table), local_(local), coupled_(coupled),
-      stage_fn_(table.stage[local.has_quadratic()][local.has_central()]) {
+    : forces_(forces), method_(method), table_(table), local_(local), coupled_(coupled) {
   plan();
 }
 
@@ -254,6 +253,7 @@ void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) 
   job.inv_mass = c.bodies.inv_mass();
   job.forces = local_;
   auto body = arrays(c.bodies);
+  for (int d = 0; d < 3; ++d) job.applied[d] = body.applied[d];
   for (int d = 0; d < 3; ++d) {
     job.x.in[d] = body.x[d];
     job.v.in[d] = body.v[d];
@@ -267,7 +267,8 @@ void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) 
     job.v.set(row, s, [&](int j) { return accelerations(j); });
     set_steps(c, row, job.x, job.v);
   }
-  stage_fn_(job, b.begin, b.end);
+  const bool applied = body.applied[0] != nullptr;
+  table_.stage[local_.has_quadratic()][kernels::full_variant(local_, applied)](job, b.begin, b.end);
   if (!needs_force_scratch()) return;
   for (auto& f : force_) std::fill(f.data() + b.begin, f.data() + b.end, T(0));
   const ParticleBlock<T> view = block_view(c, s, b, phase_time(c, p));

@@ -105,7 +105,6 @@ class StagedPath {
   const kernels::KernelTable<T>& table_;
   const kernels::LocalForces<T>& local_;
   const CoupledForces<T>& coupled_;
-  kernels::StageFn<T> stage_fn_;
   std::array<Phase, kMaxPhases> phases_{};
   int phase_count_ = 0;
   std::size_t capacity_ = 0;

@@ -13,15 +13,20 @@ namespace kinema {
 // A set's arrays as the kernels take them.
 template <class T>
 kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
-  return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass()};
+  return {{b.px(), b.py(), b.pz()},
+          {b.vx(), b.vy(), b.vz()},
+          b.inv_mass(),
+          {b.applied_force_data(0), b.applied_force_data(1), b.applied_force_data(2)}};
 }
 
 // The centres of mass of rigid bodies, likewise.
 template <class T>
 kernels::BodyArrays<T> center_arrays(RigidBodySet<T>& b) {
+  const ParticleSet<T>& c = b.centers();
   return {{b.position_data(0), b.position_data(1), b.position_data(2)},
           {b.velocity_data(0), b.velocity_data(1), b.velocity_data(2)},
-          b.centers().inv_mass()};
+          c.inv_mass(),
+          {c.applied_force_data(0), c.applied_force_data(1), c.applied_force_data(2)}};
 }
 
 template <class T>

@@ -39,6 +39,13 @@ struct Stepper<T>::Impl {
       fixed.advance(w, bodies, h, steps);
       return double(bodies.size()) * double(steps);
     });
+    if (steps > 0) forces_used(bodies);
+  }
+
+  // Applied forces last one call, unless the set keeps them.
+  template <class Set>
+  static void forces_used(Set& bodies) {
+    if (!bodies.keeps_forces()) bodies.clear_forces();
   }
 
   AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances) {
@@ -50,6 +57,7 @@ struct Stepper<T>::Impl {
       stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step);
       return double(bodies.size()) * double(stats.evaluations);
     });
+    if (stats.accepted > 0) forces_used(bodies);
     return stats;
   }
 
