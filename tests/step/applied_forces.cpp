@@ -1,0 +1,258 @@
+// Forces from the game: forces, torques and impulses applied to single bodies.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+namespace {
+
+template <class T>
+std::uint64_t rigid_hash(const RigidBodySet<T>& b) {
+  std::uint64_t h = test::state_hash(b.centers());
+  for (int k = 0; k < 4; ++k) {
+    for (std::size_t i = 0; i < b.padded_size(); ++i) h = h * 31 + std::uint64_t(std::hash<T>{}(b.q(k)[i]));
+  }
+  for (int d = 0; d < 3; ++d) {
+    for (std::size_t i = 0; i < b.padded_size(); ++i) h = h * 31 + std::uint64_t(std::hash<T>{}(b.l(d)[i]));
+  }
+  return h;
+}
+
+// A force that differs from body to body, so that a mix-up of bodies shows.
+template <class T>
+Vec3<T> game_force(std::size_t i) {
+  return {T(0.5) + T(i % 7), T(-2) * T(i % 3), T(0.25) * T(i % 5)};
+}
+
+template <class T>
+void apply_game_forces(ParticleSet<T>& b) {
+  for (std::size_t i = 0; i < b.size(); i += 3) b.apply_force(i, game_force<T>(i));
+}
+
+RigidBodySet<double> sphere_at_rest(double mass, double moment) {
+  RigidBodySet<double> b;
+  b.add({{1, 2, 3}, {}, {1, 0, 0, 0}, {}, mass, {moment, moment, moment}});
+  return b;
+}
+
+}  // namespace
+
+TEST_CASE("a constant applied force gives x0 + v0 t + F t^2 / 2m under rk4", "[forces][applied]") {
+  const Vec3<double> x0{1, -2, 0.5}, v0{0.3, 2, -1}, F{3, -1.5, 6};
+  const double m = 2.5, h = 0.01;
+  const int n = 100;
+  for (bool staged : {false, true}) {
+    INFO("staged " << staged);
+    StepperOptions o = test::serial_options();
+    o.force_staged = staged;
+    ParticleSet<double> b;
+    b.add(x0, v0, m);
+    b.apply_force(0, F);
+    Stepper<double> s(ForceModel<double>{}, rk4, o);
+    s.advance(b, h, n);
+    const double t = n * h;
+    for (int d = 0; d < 3; ++d) {
+      CHECK(b.position(0)[d] == Approx(x0[d] + v0[d] * t + F[d] * t * t / (2 * m)).epsilon(1e-13));
+      CHECK(b.velocity(0)[d] == Approx(v0[d] + F[d] * t / m).epsilon(1e-13));
+    }
+    CHECK_FALSE(b.has_applied_forces());  // used by that call, then cleared
+  }
+}
+
+TEST_CASE("applied forces add to the model's terms and last one call unless kept", "[forces][applied]") {
+  ForceModel<double> f;
+  f.add(Gravity{{0, -9.81, 0}});
+  Stepper<double> s(f, rk4, test::serial_options());
+  ParticleSet<double> b;
+  b.add({0, 0, 0}, {0, 0, 0}, 2);
+  b.apply_force(0, {0, 2 * 9.81, 0});  // holds the body up against gravity
+  b.apply_force(0, {1, 0, 0});         // forces on one body add up
+  CHECK(b.applied_force(0)[1] == 2 * 9.81);
+  s.advance(b, 0.01, 10);
+  CHECK(b.velocity(0)[1] == Approx(0).margin(1e-14));
+  CHECK(b.velocity(0)[0] == Approx(0.5 * 0.1).epsilon(1e-13));
+  s.advance(b, 0.01, 10);  // cleared: gravity alone
+  CHECK(b.velocity(0)[1] == Approx(-9.81 * 0.1).epsilon(1e-13));
+  CHECK(b.velocity(0)[0] == Approx(0.05).epsilon(1e-13));
+
+  b.keep_forces(true);
+  b.apply_force(0, {0, 2 * 9.81, 0});
+  const double vy = b.velocity(0)[1];
+  for (int k = 0; k < 3; ++k) s.step(b, 0.01);
+  CHECK(b.velocity(0)[1] == Approx(vy).margin(1e-14));
+  CHECK(b.has_applied_forces());
+  b.clear_forces();  // cleared forces stop acting
+  s.step(b, 0.01);
+  CHECK(b.velocity(0)[1] == Approx(vy - 9.81 * 0.01).epsilon(1e-13));
+}
+
+TEST_CASE("an impulse changes momentum by exactly J; kinematic bodies ignore everything", "[forces][applied]") {
+  ParticleSet<double> b;
+  b.add({0, 0, 0}, {1, 2, 3}, 4);
+  b.add_kinematic({5, 0, 0}, {0, 1, 0});
+  b.apply_impulse(0, {8, -4, 2});
+  CHECK(b.velocity(0) == Vec3<double>{3, 1, 3.5});  // m v changed by J
+  b.apply_impulse(1, {8, -4, 2});
+  b.apply_force(1, {100, 100, 100});
+  CHECK(b.velocity(1) == Vec3<double>{0, 1, 0});
+  Stepper<double>(ForceModel<double>{}, rk4, test::serial_options()).advance(b, 0.5, 2);
+  CHECK(b.velocity(1) == Vec3<double>{0, 1, 0});
+  CHECK(b.position(1) == Vec3<double>{5, 1, 0});
+}
+
+TEST_CASE("a set that applies nothing carries no force arrays", "[bodies][applied]") {
+  ParticleSet<float> b = test::cloud<float>(100);
+  CHECK(b.applied_force_data(0) == nullptr);
+  Stepper<float>(test::all_local_terms<float>(), rk4, test::serial_options()).advance(b, 0.01f, 3);
+  CHECK(b.applied_force_data(0) == nullptr);
+  b.apply_force(5, {1, 2, 3});
+  REQUIRE(b.applied_force_data(0) != nullptr);
+  for (std::size_t i = 0; i < b.padded_size(); ++i) CHECK(b.applied_force_data(1)[i] == (i == 5 ? 2.0f : 0.0f));
+  b.clear_forces();
+  CHECK(b.applied_force_data(0) == nullptr);
+  b.apply_force(7, {0, 1, 0});  // a new frame starts from zero
+  CHECK(b.applied_force(5) == Vec3<float>{0, 0, 0});
+  CHECK(b.applied_force(7) == Vec3<float>{0, 1, 0});
+}
+
+TEST_CASE("applied forces move with their body on removal and copy with the set", "[bodies][applied]") {
+  ParticleSet<double> b;
+  for (int i = 0; i < 4; ++i) b.add({double(i), 0, 0}, {}, 1);
+  b.apply_force(3, {0, 0, 7});
+  b.remove(1);  // body 3 moves into 1
+  CHECK(b.applied_force(1) == Vec3<double>{0, 0, 7});
+  CHECK(b.applied_force_data(2)[3] == 0);  // the freed slot is inert padding again
+  ParticleSet<double> copy;
+  copy = b;
+  CHECK(copy.applied_force(1) == Vec3<double>{0, 0, 7});
+  ParticleSet<double> moved = std::move(copy);
+  CHECK(moved.applied_force(1) == Vec3<double>{0, 0, 7});
+  CHECK_FALSE(copy.has_applied_forces());
+}
+
+TEST_CASE("bad applied forces are refused by body and field", "[bodies][applied][errors]") {
+  ParticleSet<float> b;
+  b.add({0, 0, 0}, {}, 1);
+  const float inf = std::numeric_limits<float>::infinity();
+  CHECK_THROWS_WITH(b.apply_force(0, {0, inf, 0}), Catch::Contains("body 0") && Catch::Contains("force"));
+  CHECK_THROWS_WITH(b.apply_force(3, {0, 1, 0}), Catch::Contains("body 3: no such body"));
+  CHECK_THROWS_WITH(b.apply_impulse(0, {NAN, 0, 0}), Catch::Contains("impulse"));
+  b.apply_force(0, {3e38f, 0, 0});
+  CHECK_THROWS_WITH(b.apply_force(0, {3e38f, 0, 0}), Catch::Contains("summed"));
+  CHECK(b.applied_force(0)[0] == 3e38f);  // the refused one changed nothing
+  RigidBodySet<float> r;
+  r.add({});
+  CHECK_THROWS_WITH(r.apply_torque(0, {inf, 0, 0}), Catch::Contains("torque"));
+  CHECK_THROWS_WITH(r.apply_force_at(0, {1, 0, 0}, {0, NAN, 0}), Catch::Contains("point"));
+}
+
+TEST_CASE("the fused and staged paths give applied forces the same bits", "[determinism][applied]") {
+  for (bool central : {false, true}) {
+    for (const Method* m : builtin_methods) {
+      auto run = [&](bool staged) {
+        ParticleSet<float> b = test::cloud<float>(3000);
+        StepperOptions o = test::serial_options();
+        o.force_staged = staged;
+        Stepper<float> s(test::all_local_terms<float>(true, central), *m, o);
+        apply_game_forces(b);
+        s.advance(b, 0.01f, 5);
+        return test::state_hash(b);
+      };
+      INFO(m->name << " central " << central);
+      CHECK(run(false) == run(true));
+    }
+  }
+}
+
+TEST_CASE("applied forces: the same bits on every ISA, thread count and job system", "[determinism][applied]") {
+  for (const Method* m : {&rk4, &velocity_verlet}) {
+    INFO(m->name);
+    test::check_same_bits_everywhere(
+        [&](StepperOptions o, std::size_t n) {
+          ParticleSet<float> b = test::cloud<float>(n);
+          Stepper<float> s(test::all_local_terms<float>(true, false), *m, o);
+          apply_game_forces(b);
+          s.advance(b, 0.01f, 10);
+          return test::state_hash(b);
+        },
+        2000, 9000);
+    test::check_same_bits_everywhere(
+        [&](StepperOptions o, std::size_t n) {
+          RigidBodySet<float> b;
+          for (std::size_t i = 0; i < n; ++i) {
+            b.add({{float(i % 10), float(i % 7), 0}, {}, {1, 0.1f * float(i % 4), 0, 0.2f}, {0.1f, 0, 0.3f}, 1 + float(i % 3), {1, 2, 3}});
+            if (i % 3 == 0) b.apply_force_at(i, game_force<float>(i), {1, 1, 1});
+            if (i % 4 == 0) b.apply_torque(i, {0.5f, -0.25f, 1});
+          }
+          Stepper<float> s(test::all_local_terms<float>(), *m, o);
+          s.advance(b, 0.01f, 10);
+          return rigid_hash(b);
+        },
+        2000, 9000);
+  }
+}
+
+TEST_CASE("apply_force_at off the centre turns a body at rest about r x F at rate tau / I", "[rigid][applied]") {
+  const double m = 2, I = 0.5, h = 0.001;
+  const int n = 100;
+  RigidBodySet<double> b = sphere_at_rest(m, I);
+  const Vec3<double> F{0, 3, 0}, at{1.5, 2, 3};  // r = (0.5, 0, 0): tau = r x F = (0, 0, 1.5)
+  b.apply_force_at(0, F, at);
+  CHECK(b.applied_torque(0) == Vec3<double>{0, 0, 1.5});
+  Stepper<double> s(ForceModel<double>{}, rk4, test::serial_options());
+  s.advance(b, h, n);
+  const double t = n * h;
+  const Vec3<double> w = b.angular_velocity(0);
+  CHECK(w[2] == Approx(1.5 * t / I).epsilon(1e-12));  // about z, at the rate tau / I
+  CHECK(std::abs(w[0]) + std::abs(w[1]) < 1e-15);
+  CHECK(b.angular_momentum(0)[2] == Approx(1.5 * t).epsilon(1e-12));
+  CHECK(b.centers().position(0)[1] == Approx(2 + 3 * t * t / (2 * m)).epsilon(1e-13));
+  // A sphere under a constant torque turns by tau t^2 / 2I: q = (cos(a/2), 0, 0, sin(a/2)).
+  const double angle = 1.5 * t * t / (2 * I);
+  CHECK(b.orientation(0)[3] == Approx(std::sin(angle / 2)).epsilon(1e-9));
+  CHECK_FALSE(b.has_applied_forces());
+}
+
+TEST_CASE("rigid impulses change momentum and angular momentum at once, kinematic bodies ignore them",
+          "[rigid][applied]") {
+  RigidBodySet<double> b = sphere_at_rest(4, 1);
+  b.apply_impulse_at(0, {0, 0, 8}, {1, 3, 3});  // r = (0, 1, 0): r x J = (8, 0, 0)
+  CHECK(b.centers().velocity(0) == Vec3<double>{0, 0, 2});
+  CHECK(b.angular_momentum(0) == Vec3<double>{8, 0, 0});
+  b.apply_angular_impulse(0, {0, -1, 0});
+  CHECK(b.angular_momentum(0) == Vec3<double>{8, -1, 0});
+  b.set_kinematic(0);
+  b.apply_angular_impulse(0, {5, 5, 5});
+  b.apply_impulse(0, {5, 5, 5});
+  b.apply_torque(0, {5, 5, 5});
+  CHECK(b.angular_momentum(0) == Vec3<double>{8, -1, 0});
+  CHECK(b.centers().velocity(0) == Vec3<double>{0, 0, 2});
+  Stepper<double>(ForceModel<double>{}, rk4, test::serial_options()).advance(b, 0.1, 3);
+  CHECK(b.angular_momentum(0) == Vec3<double>{8, -1, 0});
+}
+
+TEST_CASE("an applied torque under kick-drift methods grows L linearly", "[rigid][applied]") {
+  for (const Method* m : {&symplectic_euler, &velocity_verlet}) {
+    INFO(m->name);
+    RigidBodySet<double> b = sphere_at_rest(1, 2);
+    b.keep_forces(true);
+    b.apply_torque(0, {0, 0.5, 0});
+    Stepper<double>(ForceModel<double>{}, *m, test::serial_options()).advance(b, 0.01, 50);
+    CHECK(b.angular_momentum(0)[1] == Approx(0.25).epsilon(1e-13));
+    CHECK(b.has_applied_forces());
+  }
+}
+
+TEST_CASE("error control steps applied forces too", "[adaptive][applied]") {
+  ParticleSet<double> b;
+  b.add({0, 0, 0}, {1, 0, 0}, 2);
+  b.apply_force(0, {0, 4, 0});
+  Stepper<double> s(ForceModel<double>{}, dopri5, test::serial_options());
+  s.advance_to(b, 1.5, Tolerances{1e-9, 1e-9});
+  CHECK(b.position(0)[1] == Approx(4 * 1.5 * 1.5 / 4).epsilon(1e-12));
+  CHECK(b.position(0)[0] == Approx(1.5).epsilon(1e-12));
+  CHECK_FALSE(b.has_applied_forces());
+}
