@@ -47,6 +47,7 @@ struct BodySpec {
   Vec3<double> velocity{};
   double mass = 1;
   bool kinematic = false;  // inv_mass 0: forces do not move it
+  Vec3<double> force{};    // applied, constant, for the whole run (ParticleSet::apply_force)
 };
 
 // A rigid body resolved to principal axes: `orientation` is that of the principal frame and
@@ -58,6 +59,7 @@ struct RigidSpec {
   Vec3<double> angular_momentum{};
   double mass = 1;
   Vec3<double> inertia{1, 1, 1};
+  Vec3<double> force{}, torque{};  // applied, constant, for the whole run (world frame)
 };
 
 struct Scene {

@@ -129,7 +129,7 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
   for (std::size_t j = 0; j < np; ++j) {
     const std::size_t i = std::size_t((unsigned __int128)j * p.size() / np);  // no overflow
     const double inv = p.inv_mass()[i];
-    out.particles.push_back({p.position(i), p.velocity(i), inv == 0 ? 1 : 1 / inv, inv == 0});
+    out.particles.push_back({p.position(i), p.velocity(i), inv == 0 ? 1 : 1 / inv, inv == 0, p.applied_force(i)});
   }
   const RigidBodySet<double> r = make_rigid_bodies<double>(scene);
   const std::size_t nr = std::min(r.size(), max_bodies);
@@ -142,6 +142,8 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
     b.angular_momentum = r.angular_momentum(i);
     b.mass = 1 / r.centers().inv_mass()[i];
     for (int d = 0; d < 3; ++d) b.inertia[d] = 1 / r.inv_inertia(d)[i];
+    b.force = r.applied_force(i);
+    b.torque = r.applied_torque(i);
     out.rigid_bodies.push_back(b);
   }
   return out;
@@ -208,6 +210,7 @@ std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
     if (b.kinematic) {
       for (int d = 0; d < 3; ++d) m.x[d] = b.position[d] + b.velocity[d] * t, m.v[d] = b.velocity[d];
     } else if (kepler_only) {
+      if (b.force != Vec3<double>{}) return std::nullopt;  // a pushed orbit: no closed form
       const auto k = kepler(central, b, t);
       if (!k) return std::nullopt;
       m = *k;
@@ -216,7 +219,9 @@ std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
       for (int d = 0; d < 3; ++d) {
         // y = x - anchor under y'' + gamma y' + w2 y = g (the spring pulls to its anchor).
         const double anchor = spring_k > 0 ? weighted_anchor[d] / spring_k : 0;
-        const auto [y, v] = linear_motion(b.position[d] - anchor, b.velocity[d], gamma, w2, g[d], t);
+        // The body's applied force is one more constant acceleration.
+        const double a = g[d] + b.force[d] / b.mass;
+        const auto [y, v] = linear_motion(b.position[d] - anchor, b.velocity[d], gamma, w2, a, t);
         m.x[d] = anchor + y, m.v[d] = v;
       }
     }

@@ -15,6 +15,21 @@ Vec3<T> converted(const Vec3<double>& v) {
   return {T(v[0]), T(v[1]), T(v[2])};
 }
 
+bool nonzero(const Vec3<double>& v) {
+  return v[0] != 0 || v[1] != 0 || v[2] != 0;
+}
+
+// The applied forces a scene gives its bodies act for the whole run: the set keeps them.
+// `apply` may throw kinema::Error (a value too large for T): it names the body's list entry.
+template <class Apply>
+void apply_scene_load(const char* list, std::size_t i, Apply&& apply) {
+  try {
+    apply();
+  } catch (const Error& e) {
+    throw Error(std::string(list) + "[" + std::to_string(i) + "]: " + e.what() + " in this precision");
+  }
+}
+
 }  // namespace
 
 template <class T>
@@ -29,6 +44,12 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
              converted<T>(b.angular_momentum), T(b.mass), converted<T>(b.inertia)});
   };
   for (const RigidSpec& b : scene.rigid_bodies) add(b);
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
+    const RigidSpec& b = scene.rigid_bodies[i];
+    if (nonzero(b.force)) apply_scene_load("rigid_bodies", i, [&] { set.apply_force(i, converted<T>(b.force)); });
+    if (nonzero(b.torque)) apply_scene_load("rigid_bodies", i, [&] { set.apply_torque(i, converted<T>(b.torque)); });
+  }
+  set.keep_forces(true);
   for_each_generated_rigid_body(scene, add);
   return set;
 }
@@ -47,6 +68,11 @@ ParticleSet<T> make_particles(const Scene& scene) {
       set.add(v3(b.position), v3(b.velocity), T(b.mass));
     }
   }
+  for (std::size_t i = 0; i < scene.particles.size(); ++i) {
+    const Vec3<double>& f = scene.particles[i].force;
+    if (nonzero(f)) apply_scene_load("particles", i, [&] { set.apply_force(i, v3(f)); });
+  }
+  set.keep_forces(true);
   add_generated_particles(scene, set);
   return set;
 }

@@ -60,12 +60,14 @@ LocalTerm parse_force(const Node& n) {
 }
 
 BodySpec parse_body(const Node& n) {
-  n.expect_object({"position", "velocity", "mass", "kinematic"});
+  n.expect_object({"position", "velocity", "mass", "kinematic", "force"});
   BodySpec b;
   b.position = n.required("position").vec3();
   if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
   if (n.has("kinematic")) b.kinematic = n.child("kinematic").boolean();
   if (n.has("mass")) b.mass = n.child("mass").positive();
+  if (n.has("force")) b.force = n.child("force").vec3();
+  if (b.kinematic && n.has("force")) n.child("force").fail("a kinematic body ignores forces: give one or the other");
   return b;
 }
 
@@ -122,11 +124,13 @@ Quat<double> parse_orientation(const Node& n) {
 
 RigidSpec parse_rigid(const Node& n) {
   n.expect_object({"position", "velocity", "orientation", "angular_velocity",
-                   "angular_momentum", "mass", "inertia"});
+                   "angular_momentum", "mass", "inertia", "force", "torque"});
   RigidSpec b;
   b.position = n.required("position").vec3();
   if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
   if (n.has("mass")) b.mass = n.child("mass").positive();
+  if (n.has("force")) b.force = n.child("force").vec3();
+  if (n.has("torque")) b.torque = n.child("torque").vec3();
   Quat<double> given{1, 0, 0, 0}, turn{1, 0, 0, 0};
   if (n.has("orientation")) given = parse_orientation(n.child("orientation"));
   if (n.has("inertia")) b.inertia = parse_inertia(n.child("inertia"), turn);

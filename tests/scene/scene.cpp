@@ -242,3 +242,44 @@ TEST_CASE("a Plummer sphere is centred, at rest, and near virial equilibrium", "
   CHECK(2 * kinetic / -potential == Approx(1).margin(0.1));
   CHECK(kinetic + potential == Approx(-3 * std::numbers::pi / 64).epsilon(0.1));
 }
+
+TEST_CASE("a scene's bodies may carry constant applied forces and torques", "[scene][applied]") {
+  const Scene s = parse_scene(R"({
+    "precision": "double",
+    "particles": [{"position": [0, 0, 0], "mass": 2, "force": [0, 19.62, 4]},
+                  {"position": [1, 0, 0]}],
+    "rigid_bodies": [{"position": [0, 0, 0], "mass": 2, "inertia": [0.5, 0.5, 0.5],
+                      "force": [2, 0, 0], "torque": [0, 0, 1.5]}],
+    "forces": [{"type": "gravity", "g": [0, -9.81, 0]}]
+  })");
+  ParticleSet<double> p = make_particles<double>(s);
+  Stepper<double> stepper(make_forces<double>(s), rk4, on_calling_thread());
+  stepper.advance(p, 0.01, 10);
+  stepper.advance(p, 0.01, 10);  // a scene's forces act for the whole run
+  CHECK(p.velocity(0)[1] == Approx(0).margin(1e-13));  // held up against gravity
+  CHECK(p.velocity(0)[2] == Approx(2 * 0.2).epsilon(1e-13));
+  CHECK(p.velocity(1)[1] == Approx(-9.81 * 0.2).epsilon(1e-13));
+  CHECK_FALSE(p.applied_force_data(0) == nullptr);
+
+  RigidBodySet<double> r = make_rigid_bodies<double>(s);
+  Stepper<double>(ForceModel<double>{}, rk4, on_calling_thread()).advance(r, 0.01, 20);
+  CHECK(r.centers().velocity(0)[0] == Approx(0.2).epsilon(1e-13));
+  CHECK(r.angular_momentum(0)[2] == Approx(1.5 * 0.2).epsilon(1e-13));
+
+  // The closed-form reference knows the applied force.
+  Scene particles_only = s;
+  particles_only.rigid_bodies.clear();
+  const auto exact = analytic_states(particles_only, 0.2);
+  REQUIRE(exact);
+  CHECK(exact->velocities[0][2] == Approx(p.velocity(0)[2]).epsilon(1e-12));
+  CHECK(exact->positions[0][1] == Approx(p.position(0)[1]).margin(1e-12));
+}
+
+TEST_CASE("applied forces in scenes are checked", "[scene][applied][errors]") {
+  CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [0, 0, 0], "kinematic": true, "force": [1, 0, 0]}]})"),
+                    Catch::Contains("particles[0].force") && Catch::Contains("kinematic"));
+  CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [0, 0, 0], "force": [1, "a", 0]}]})"),
+                    Catch::Contains("particles[0].force"));
+  const Scene big = parse_scene(R"({"particles": [{"position": [0, 0, 0], "force": [1e39, 0, 0]}]})");
+  CHECK_THROWS_WITH(make_particles<float>(big), Catch::Contains("particles[0]") && Catch::Contains("force"));
+}
