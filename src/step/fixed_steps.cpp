@@ -92,11 +92,76 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   core_.clock.steps += steps;
 }
 
-// One pass per stage: the guard's save, clamp and scan are passes of their own.
 template <class T>
 void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
   StagedPath<T>& staged = *core_.paths.staged;
   staged.reserve(c.bodies.padded_size());
+  if (staged.blocks_alone()) return run_blocks(staged, c, steps, guard);
+  run_steps(staged, c, steps, guard);
+}
+
+// The block path: without coupled terms each block takes every step of the call while it is
+// in cache, as the fused path does; step k's callbacks see the clock's time k steps on.
+// Where user code may throw, each block keeps its state as it starts, so that a throw can
+// put the set back (see recover).
+template <class T>
+void FixedSteps<T>::run_blocks(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard) {
+  const std::size_t n = c.bodies.padded_size();
+  const bool may_throw = staged.may_throw();
+  if (may_throw) {
+    completed_.resize(std::max(completed_.size(), block_count(n)));
+    std::fill(completed_.begin(), completed_.end(), kNotRun);
+  }
+  const Clock<T> start = core_.clock;
+  try {
+    for_each_block(c.workers, n, [&](Block block) {
+      std::uint64_t done = 0;
+      auto step = [&](Block b) {
+        StepContext<T> at = c;
+        Clock<T> now = start;
+        now.steps += done;
+        at.t0 = now.time();
+        staged.step_block(at, b);
+        ++done;
+      };
+      if (!may_throw) return run_block(c.bodies, block, steps, guard, step);
+      std::uint64_t& completed = completed_[block.begin / kBlockBodies];
+      staged.keep_block(c, block);
+      try {
+        run_block(c.bodies, block, steps, guard, step);
+      } catch (...) {
+        completed = done;
+        throw;
+      }
+      completed = done;
+    });
+  } catch (...) {
+    recover(staged, c, guard);
+    throw;
+  }
+  core_.clock.steps += steps;
+}
+
+// After a throw on the block path: blocks ran ahead of one another, so every block is put
+// back to the call's start and the steps before the first one that threw are taken again,
+// one at a time, leaving the set as before that step (callbacks are pure functions of their
+// block, so the retaken steps give the same bits). A throw while retaking them is the one
+// that propagates.
+template <class T>
+void FixedSteps<T>::recover(StagedPath<T>& staged, StepContext<T>& c, Guard* guard) {
+  std::uint64_t first = kNotRun;
+  for (std::size_t i = 0; i < block_count(c.bodies.padded_size()); ++i) {
+    if (completed_[i] == kNotRun) continue;
+    first = std::min(first, completed_[i]);
+    staged.restore_block(c, block(i, c.bodies.padded_size()));
+  }
+  if (first != kNotRun) run_steps(staged, c, first, guard);
+}
+
+// One pass per step (and per stage where coupled terms need every body's stage state): the
+// guard's save, clamp and scan are passes of their own.
+template <class T>
+void FixedSteps<T>::run_steps(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard) {
   const std::size_t n = c.bodies.padded_size();
   if (guard) for_each_block(c.workers, n, [&](Block b) { guard->checkpoint.save(guard->state, b); });
   for (std::uint64_t k = 0; k < steps; ++k) {

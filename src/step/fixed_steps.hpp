@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <vector>
 
 #include "kinema/bodies.hpp"
 #include "kinema/error.hpp"
@@ -45,11 +46,18 @@ class FixedSteps {
   void run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard);
   void run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps, Guard* guard);
   void run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard);
+  void run_blocks(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard);
+  void run_steps(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard);
+  void recover(StagedPath<T>& staged, StepContext<T>& c, Guard* guard);
   void clamp(ParticleSet<T>& b, Block block) const;
   void clamp(RigidBodySet<T>& b, Block block) const;
 
   StepperCore<T>& core_;
   Checkpoint<T> checkpoint_;  // the state a guarded call starts from
+  // The block path, when user code may throw: per block, the steps it completed (kNotRun for
+  // a block the call never started).
+  static constexpr std::uint64_t kNotRun = ~std::uint64_t(0);
+  std::vector<std::uint64_t> completed_;
 };
 
 extern template class FixedSteps<float>;

@@ -60,6 +60,16 @@ class StagedPath {
   // first step size.
   std::array<const T*, 3> first_stage() const { return accelerations(0); }
 
+  // The block path (no coupled terms): a driver may run each block through all the steps of
+  // a call while it is in cache, one step_block per step. A block's steps see nothing of
+  // the others, so the bits are those of step().
+  bool blocks_alone() const { return !coupled(); }
+  bool may_throw() const { return !forces_.callbacks().empty() || !forces_.coupled_terms().empty(); }
+  void step_block(const StepContext<T>& c, Block b) { run_block(c, b); }
+  // Keeps the block's positions and velocities (save), or puts them back.
+  void keep_block(const StepContext<T>& c, Block b) { copy_state(c, b, true); }
+  void restore_block(const StepContext<T>& c, Block b) { copy_state(c, b, false); }
+
  private:
   enum class PhaseKind { stage, coupled, finish, kick, drift };
   struct Phase {
@@ -72,7 +82,6 @@ class StagedPath {
   void run_phases(const StepContext<T>& c);
   // Saves the block's positions and velocities to saved_, or puts them back.
   void copy_state(const StepContext<T>& c, Block b, bool save);
-  bool may_throw() const { return !forces_.callbacks().empty() || !forces_.coupled_terms().empty(); }
   bool coupled() const { return forces_.coupled(); }
   bool needs_force_scratch() const { return coupled() || !forces_.callbacks().empty(); }
 

@@ -2,6 +2,7 @@
 // instruction sets, and between the fused and the staged paths.
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <map>
 
 #include "support.hpp"
@@ -136,6 +137,24 @@ TEST_CASE("advance(n) gives the bits of n calls to step()", "[determinism]") {
     o.force_staged = staged;
     ParticleSet<double> a = test::cloud<double>(5000), b = a;
     Stepper<double> sa(f, rk4, o), sb(f, rk4, o);
+    sa.advance(a, 0.01, 25);
+    for (int k = 0; k < 25; ++k) sb.step(b, 0.01);
+    CHECK(test::state_hash(a) == test::state_hash(b));
+    CHECK(sa.time() == sb.time());
+  }
+}
+
+TEST_CASE("the block path: advance(n) with a time-dependent callback gives the bits of n steps",
+          "[determinism]") {
+  ForceModel<double> f = test::all_local_terms<double>();
+  f.add([](const ParticleBlock<double>& b) {
+    for (std::size_t i = 0; i < b.count; ++i) b.fy[i] += std::sin(3 * b.t) * b.px[i] + b.vz[i];
+  });
+  for (const Method* m : {&rk4, &velocity_verlet, &dopri5}) {
+    INFO(m->name);
+    ParticleSet<double> a = test::cloud<double>(5000), b = a;
+    Stepper<double> sa(f, *m, test::serial_options()), sb(f, *m, test::serial_options());
+    sa.set_time(0.25), sb.set_time(0.25);
     sa.advance(a, 0.01, 25);
     for (int k = 0; k < 25; ++k) sb.step(b, 0.01);
     CHECK(test::state_hash(a) == test::state_hash(b));
