@@ -99,12 +99,27 @@ KINEMA_INLINE void add_applied(B& body, const Forces<V>& f, const V& inv_mass, c
   }
 }
 
-// body_terms, plus the applied forces when the `full` variant finds the set has them.
-template <bool Full, bool Pushed = false, class V, class T>
+// Whether a kernel reads the set's applied forces: never (a plain fused variant), when the
+// set has them (tested once per batch), or always (the fused variant for sets that have).
+enum class Applied { never, if_present, always };
+
+// The fused particle kernels' variants: plain, with central terms (and applied forces if
+// present), with applied forces. A model pays only for what it uses.
+template <int Variant>
+inline constexpr bool has_central = Variant == kCentralVariant;
+template <int Variant>
+inline constexpr Applied reads_applied = Variant == kPlainVariant     ? Applied::never
+                                         : Variant == kCentralVariant ? Applied::if_present
+                                                                      : Applied::always;
+
+// body_terms, plus the applied forces as A says.
+template <Applied A, bool Pushed = false, class V, class T>
 KINEMA_INLINE auto body_terms_at(const Forces<V>& f, const V& inv_mass, const T* const applied[3],
                                  std::size_t i) {
   auto body = body_terms<Pushed>(f, inv_mass);
-  if constexpr (Full) {
+  if constexpr (A == Applied::always) {
+    add_applied(body, f, inv_mass, load3<V>(applied, i));
+  } else if constexpr (A == Applied::if_present) {
     if (applied[0] != nullptr) add_applied(body, f, inv_mass, load3<V>(applied, i));
   }
   return body;
@@ -267,15 +282,14 @@ KINEMA_INLINE void prefetch(const BodyArrays<T>& b, std::size_t i) {
 
 // One batch of a Runge-Kutta step of positions and velocities, the bodies at i, all stages in
 // registers. `Pushed`: rigid bodies add the constant force of their point-force terms.
-// `Central`: the full variant (central terms, applied forces).
-template <const Method& M, bool Quadratic, bool Central, bool Pushed = false, class V>
+template <const Method& M, bool Quadratic, bool Central, bool Pushed, Applied A, class V>
 KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forces<V>& f, value_t<V> h,
                                      std::size_t i) {
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
   constexpr double sigma = acceleration_scale(tab);
   const Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
-  const auto body = body_terms_at<Central, Pushed>(f, load<V>(b.inv_mass + i), b.applied, i);
+  const auto body = body_terms_at<A, Pushed>(f, load<V>(b.inv_mass + i), b.applied, i);
   const Vec<V> p = linear_part(body, anchored(f, x));
   Vec<V> kx[S], kv[S];  // stage velocities and accelerations
   static_for<S>([&](auto s) {
@@ -291,20 +305,21 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forc
   store3(b.v, i, advanced<tab.b, sigma>(h, kv, v));
 }
 
-template <const Method& M, bool Quadratic, bool Central, class V>
+template <const Method& M, bool Quadratic, int Variant, class V>
 void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   const value_t<V> h = job.h;
   const Forces<V> f(job.forces, value_t<V>(acceleration_scale(M.tableau)) * h);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     prefetch<V>(b, i);
-    runge_kutta_batch<M, Quadratic, Central>(b, f, h, i);
+    runge_kutta_batch<M, Quadratic, has_central<Variant>, false, reads_applied<Variant>>(b, f, h, i);
   }
 }
 
-template <const Method& M, bool Quadratic, bool Central, class V>
+template <const Method& M, bool Quadratic, int Variant, class V>
 void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   using T = value_t<V>;
+  constexpr bool Central = has_central<Variant>;
   constexpr KickDriftScheme scheme = M.scheme;
   const Forces<V> f(job.forces);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
@@ -312,7 +327,7 @@ void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::s
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * job.h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
-    const auto body = body_terms_at<Central>(f, load<V>(b.inv_mass + i), b.applied, i);
+    const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.applied, i);
     static_for<scheme.count>([&](auto k) {
       if constexpr (scheme.ops[k].kind == OpKind::kick) {
         v = step_by(wh[k], accel_at<Quadratic, Central>(f, body, x, v), v);
@@ -325,12 +340,12 @@ void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::s
   }
 }
 
-template <const Method& M, bool Quadratic, bool Central, class V>
+template <const Method& M, bool Quadratic, int Variant, class V>
 constexpr FusedFn<value_t<V>> fused_kernel() {
   if constexpr (M.kind == MethodKind::runge_kutta) {
-    return &fused_runge_kutta<M, Quadratic, Central, V>;
+    return &fused_runge_kutta<M, Quadratic, Variant, V>;
   } else {
-    return &fused_kick_drift<M, Quadratic, Central, V>;
+    return &fused_kick_drift<M, Quadratic, Variant, V>;
   }
 }
 
@@ -370,7 +385,7 @@ void stage(const StageJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
   const Forces<V> f(job.forces, job.accel_scale);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const Vec<V> x = load3<V>(job.x.in, i);
-    const auto body = body_terms_at<Central>(f, load<V>(job.inv_mass + i), job.applied, i);
+    const auto body = body_terms_at<Applied::if_present>(f, load<V>(job.inv_mass + i), job.applied, i);
     Vec<V> xs = x, p = linear_part(body, anchored(f, x));
     const Vec<V> vs = combined<V>(job.v, i);
     if (!job.x.empty()) {

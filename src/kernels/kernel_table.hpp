@@ -14,10 +14,10 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.width = Lane<V>::width;
   static_for<int(kBuiltinCount)>([&](auto m) {
     constexpr const Method& method = *builtin_methods[m];
-    t.fused[m][0][0] = fused_kernel<method, false, false, V>();
-    t.fused[m][0][1] = fused_kernel<method, false, true, V>();
-    t.fused[m][1][0] = fused_kernel<method, true, false, V>();
-    t.fused[m][1][1] = fused_kernel<method, true, true, V>();
+    static_for<kFusedVariants>([&](auto v) {
+      t.fused[m][0][v] = fused_kernel<method, false, v, V>();
+      t.fused[m][1][v] = fused_kernel<method, true, v, V>();
+    });
     t.rigid[m][0][0] = rigid_kernel<method, false, false, V>();
     t.rigid[m][0][1] = rigid_kernel<method, false, true, V>();
     t.rigid[m][1][0] = rigid_kernel<method, true, false, V>();

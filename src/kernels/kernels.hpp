@@ -33,7 +33,7 @@ struct BodyArrays {
   T* v[3];         // vx vy vz
   const T* inv_mass;
   // Forces applied to single bodies (ParticleSet::apply_force), constant over the call;
-  // nullptr when the set has none. Read by the kernels of the `full` variant only.
+  // nullptr when the set has none. The plain fused particle kernels never read them.
   const T* applied[3];
 };
 
@@ -262,20 +262,23 @@ using InterpolateFn = void (*)(const InterpolateJob<T>& job, std::size_t begin, 
 
 inline constexpr std::size_t kBuiltinCount = builtin_methods.size();
 
-// A kernel's `full` variant evaluates central attractors (their count known at run time,
-// zero allowed) and reads applied forces where the set has them; the other variant does
-// neither, so a model without them pays for neither. Both give the same bits where both apply.
+// The fused particle kernels come in three variants, so that a model pays only for what it
+// uses: plain; with central attractors (their count known at run time), which also reads
+// applied forces where the set has them; with applied forces. Variants give the same bits
+// wherever more than one applies. The rigid kernels and the stage kernel read applied forces
+// and torques where present (a test per batch), and take [central] only.
+inline constexpr int kPlainVariant = 0, kCentralVariant = 1, kAppliedVariant = 2, kFusedVariants = 3;
 template <class T>
-constexpr int full_variant(const LocalForces<T>& f, bool applied) {
-  return f.has_central() || applied;
+constexpr int fused_variant(const LocalForces<T>& f, bool applied) {
+  return f.has_central() ? kCentralVariant : applied ? kAppliedVariant : kPlainVariant;
 }
 
 template <class T>
 struct KernelTable {
   Isa isa;
   std::size_t width;  // SIMD lanes
-  // [builtin method index][quadratic drag][full variant]
-  FusedFn<T> fused[kBuiltinCount][2][2];
+  // [builtin method index][quadratic drag][variant, or central terms]
+  FusedFn<T> fused[kBuiltinCount][2][kFusedVariants];
   RigidFn<T> rigid[kBuiltinCount][2][2];
   StageFn<T> stage[2][2];
   CombineFn<T> combine;

@@ -201,7 +201,7 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, st
   const Forces<V> f(job.forces, value_t<V>(sigma) * job.h);
   const Rotational<V> rf(job.rotation);
   constexpr std::size_t W = Lane<V>::width;
-  for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true>(job.bodies, f, job.h, i);
+  for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true, Applied::if_present>(job.bodies, f, job.h, i);
   std::size_t i = begin;
   for (; i + 2 * W <= end; i += 2 * W) rigid_rotation<M, 2>(job, rf, i);
   if (i < end) rigid_rotation<M, 1>(job, rf, i);
@@ -224,7 +224,7 @@ void rigid_kick_drift(const RigidJob<value_t<V>>& shared, std::size_t begin, std
   }
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     RigidState<V> s = load_rigid<V>(job, i);
-    const auto body = body_terms_at<Central, true>(f, load<V>(job.bodies.inv_mass + i), job.bodies.applied, i);
+    const auto body = body_terms_at<Applied::if_present, true>(f, load<V>(job.bodies.inv_mass + i), job.bodies.applied, i);
     const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
     Vec<V> applied_storage;
     const Vec<V>* applied = applied_torque<V>(job, i, applied_storage);

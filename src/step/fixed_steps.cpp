@@ -57,7 +57,7 @@ void FixedSteps<T>::run_block(Set& b, Block block, std::uint64_t steps, Guard* g
 
 template <class T>
 void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard) {
-  const kernels::RigidFn<T> rigid_fn = core_.paths.rigid_for(b.has_applied_forces());
+  const kernels::RigidFn<T> rigid_fn = core_.paths.rigid;
   if (rigid_fn == nullptr) {
     throw Error("rigid bodies need a built-in method and local force terms only (no "
                 "callbacks, no coupled terms)");

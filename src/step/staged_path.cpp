@@ -267,8 +267,7 @@ void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) 
     job.v.set(row, s, [&](int j) { return accelerations(j); });
     set_steps(c, row, job.x, job.v);
   }
-  const bool applied = body.applied[0] != nullptr;
-  table_.stage[local_.has_quadratic()][kernels::full_variant(local_, applied)](job, b.begin, b.end);
+  table_.stage[local_.has_quadratic()][local_.has_central()](job, b.begin, b.end);
   if (!needs_force_scratch()) return;
   for (auto& f : force_) std::fill(f.data() + b.begin, f.data() + b.end, T(0));
   const ParticleBlock<T> view = block_view(c, s, b, phase_time(c, p));

@@ -9,16 +9,14 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
   paths.lowered = std::make_unique<LoweredForces<T>>(lower_forces<T>(f.local_terms()));
   paths.lowered->coupled = lower_coupled<T>(f);
   const LoweredForces<T>& l = *paths.lowered;
-  const int quad = l.particle.has_quadratic(), full = kernels::full_variant(l.particle, false);
-  const int rigid_quad = l.rigid.has_quadratic(), rigid_full = kernels::full_variant(l.rigid, false);
+  const int quad = l.particle.has_quadratic();
   const int builtin = builtin_index(method);
   if (builtin >= 0 && f.fusable()) {
-    paths.rigid = table.rigid[builtin][rigid_quad][rigid_full];
-    paths.rigid_applied = table.rigid[builtin][rigid_quad][1];
+    paths.rigid = table.rigid[builtin][l.rigid.has_quadratic()][l.rigid.has_central()];
   }
   if (builtin >= 0 && f.fusable() && !force_staged) {
-    paths.fused = table.fused[builtin][quad][full];
-    paths.fused_applied = table.fused[builtin][quad][1];
+    paths.fused = table.fused[builtin][quad][kernels::fused_variant(l.particle, false)];
+    paths.fused_applied = table.fused[builtin][quad][kernels::fused_variant(l.particle, true)];
   } else {
     paths.staged = std::make_unique<StagedPath<T>>(f, method, table, l.particle, l.coupled);
     paths.staged->reserve(staged_capacity);

@@ -19,12 +19,9 @@ struct StepPaths {
   std::unique_ptr<LoweredForces<T>> lowered;  // a fixed address: the staged paths keep references
   kernels::FusedFn<T> fused = nullptr;        // particles, when the fused path applies
   kernels::RigidFn<T> rigid = nullptr;        // rigid bodies (fused path only)
-  // The same for sets with applied forces (the kernels' full variant).
-  kernels::FusedFn<T> fused_applied = nullptr;
-  kernels::RigidFn<T> rigid_applied = nullptr;
+  kernels::FusedFn<T> fused_applied = nullptr;  // the fused path for sets with applied forces
 
   kernels::FusedFn<T> fused_for(bool applied) const { return applied ? fused_applied : fused; }
-  kernels::RigidFn<T> rigid_for(bool applied) const { return applied ? rigid_applied : rigid; }
   std::unique_ptr<StagedPath<T>> staged;      // particles, when the fused path does not apply
   std::unique_ptr<StagedPath<T>> probe;       // evaluates accelerations alone (made on demand)
 };

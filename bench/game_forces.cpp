@@ -1,0 +1,130 @@
+// Forces from the game, beside the fused rows of the same run: the bench scene (gravity,
+// linear drag, a spring) as built-in terms; the same with a force applied to every body; with
+// gravity moved into a one-line callback (the block path); with a coupled term that adds
+// nothing (the staged path); and rigid bodies plain, with applied forces and torques, and
+// with a callback torque. Each iteration is one advance of kSteps steps, as a frame of a
+// fixed-step loop that catches up, on 1 thread at the best ISA.
+#include <benchmark/benchmark.h>
+
+#include <string>
+
+#include "bench_scene.hpp"
+
+namespace kinema::bench {
+namespace {
+
+constexpr std::uint64_t kSteps = 20;
+
+enum class Variant { fused, applied, callback, staged };
+
+const char* variant_name(Variant v) {
+  switch (v) {
+    case Variant::fused: return "fused";
+    case Variant::applied: return "applied";
+    case Variant::callback: return "callback";
+    case Variant::staged: return "staged";
+  }
+  return "";
+}
+
+// A coupled term that couples nothing: what the staged path costs by itself.
+template <class T>
+class NoCoupling final : public CoupledTerm<T> {
+ public:
+  void accumulate(const ParticleState<T>&, const ParticleBlock<T>&) const override {}
+  double potential_energy(const ParticleState<T>&) const override { return 0; }
+};
+
+// The bench scene's model, with gravity taken out of the built-in terms where the variant
+// gives it by callback.
+template <class T>
+ForceModel<T> variant_forces(Variant v, std::size_t n) {
+  Scene scene = bench_scene(n);
+  if (v == Variant::callback) scene.forces.erase(scene.forces.begin());  // gravity
+  ForceModel<T> f = make_forces<T>(scene);
+  if (v == Variant::callback) {
+    f.add([](const ParticleBlock<T>& b) {
+      for (std::size_t i = 0; i < b.count; ++i) b.fy[i] += T(kGravity) / b.inv_mass[i];
+    });
+  }
+  if (v == Variant::staged) f.add(std::make_shared<const NoCoupling<T>>());
+  return f;
+}
+
+template <class T>
+void particle_forces(benchmark::State& state, Variant v) {
+  const auto n = std::size_t(state.range(0));
+  ParticleSet<T> bodies = cached_particles<T>(n);
+  const ParticleSet<T>& initial = cached_particles<T>(n);
+  CaseJobs jobs(1);
+  StepperOptions o;
+  o.jobs = jobs.get();
+  Stepper<T> stepper(variant_forces<T>(v, n), rk4, o);
+  if (v == Variant::applied) {
+    bodies.keep_forces(true);  // a game applies them every frame; here once, and kept
+    for (std::size_t i = 0; i < n; ++i) bodies.apply_force(i, {T(0.5), T(i % 3), T(-0.25)});
+  }
+  stepper.advance(bodies, T(kDt), kSteps);  // warm: first touch, scratch
+  std::int64_t k = 0;
+  for (auto _ : state) {
+    if (++k % (kRestoreEvery / std::int64_t(kSteps)) == 0) restore(bodies, initial);
+    stepper.advance(bodies, T(kDt), kSteps);
+    benchmark::ClobberMemory();
+  }
+  require_finite(state, bodies);
+  report_body_steps(state, double(n) * double(kSteps), particle_step_bytes<T>());
+}
+
+Scene rigid_scene(std::size_t count) {
+  Scene s = bench_scene(count);
+  s.generate->rigid = true;
+  s.generate->inertia = {0.5, 0.8, 1.1};
+  s.generate->angular_velocity_min = {-3, -3, -3};
+  s.generate->angular_velocity_max = {3, 3, 3};
+  s.forces.push_back(AngularDrag{0.05});
+  return s;
+}
+
+template <class T>
+void rigid_forces(benchmark::State& state, Variant v) {
+  const auto n = std::size_t(state.range(0));
+  const Scene scene = rigid_scene(n);
+  RigidBodySet<T> bodies = make_rigid_bodies<T>(scene);
+  CaseJobs jobs(1);
+  StepperOptions o;
+  o.jobs = jobs.get();
+  Stepper<T> stepper(make_forces<T>(scene), rk4, o);
+  if (v == Variant::applied) {
+    bodies.keep_forces(true);
+    for (std::size_t i = 0; i < n; ++i) {
+      bodies.apply_force(i, {T(0.5), T(i % 3), T(-0.25)});
+      bodies.apply_torque(i, {T(0.1), T(-0.2), T(i % 2)});
+    }
+  }
+  stepper.advance(bodies, T(kDt), kSteps);
+  for (auto _ : state) {
+    stepper.advance(bodies, T(kDt), kSteps);
+    benchmark::ClobberMemory();
+  }
+  if (!all_finite(bodies)) state.SkipWithError("state is not finite after the run");
+  report_body_steps(state, double(n) * double(kSteps), 30.0 * sizeof(T));
+}
+
+void register_all() {
+  const std::string isa(isa_name(best_isa()));
+  for (Variant v : {Variant::fused, Variant::applied, Variant::callback, Variant::staged}) {
+    const std::string name = std::string("game/") + variant_name(v) + "/rk4/float/" + isa;
+    benchmark::RegisterBenchmark(name.c_str(), particle_forces<float>, v)
+        ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
+  }
+  for (Variant v : {Variant::fused, Variant::applied}) {
+    const std::string name = std::string("game/rigid-") + variant_name(v) + "/rk4/float/" + isa;
+    benchmark::RegisterBenchmark(name.c_str(), rigid_forces<float>, v)
+        ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
+  }
+}
+
+const int registered = (register_all(), 0);
+
+}  // namespace
+}  // namespace kinema::bench
