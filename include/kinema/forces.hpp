@@ -118,8 +118,42 @@ struct ParticleBlock {
 };
 
 // A user force over a block; must be safe to call concurrently for different blocks.
+//
+// The contract the block path relies on (for ForceCallback and RigidCallback alike): a
+// callback is a pure function of its block's view, the time and the user's own read-only
+// data. It sees only its block, may be called for the blocks in any order and on any thread,
+// writes only its block's outputs, and gives the same forces for the same view (a call may be
+// repeated: after a throw, the steps before the one that threw are taken again). Then every
+// stage of a block can run while the block is in cache, and the bits do not depend on threads.
 template <class T>
 using ForceCallback = std::function<void(const ParticleBlock<T>&)>;
+
+// What a rigid-body callback sees: the bodies [begin, begin + count) of one block at one
+// stage, as SoA pointers offset to `begin`: centre position and velocity, orientation
+// quaternion (w, x, y, z; at a stage it may be off unit length by the step's error, and
+// rotates as q / |q|), world angular velocity and world angular momentum, inverse mass and
+// inverse principal moments. It adds a world force (at the centre of mass) into fx, fy, fz
+// and a world torque into tx, ty, tz, zeroed before the call. Padding bodies (inv_mass 0)
+// ignore both, as kinematic bodies do.
+template <class T>
+struct RigidBlock {
+  std::size_t begin = 0;
+  std::size_t count = 0;
+  double t = 0;
+  const T *px, *py, *pz, *vx, *vy, *vz;
+  const T *qw, *qx, *qy, *qz;
+  const T *wx, *wy, *wz;
+  const T *lx, *ly, *lz;
+  const T *inv_mass, *inv_ix, *inv_iy, *inv_iz;
+  T *fx, *fy, *fz;
+  T *tx, *ty, *tz;
+};
+
+// A user force and torque on rigid bodies, called once per stage (or kick) per block, for
+// every method; the contract is ForceCallback's. Particles ignore it (and rigid bodies a
+// ForceCallback), as they ignore torques.
+template <class T>
+using RigidCallback = std::function<void(const RigidBlock<T>&)>;
 
 // The state of all bodies at one stage, for coupled terms.
 template <class T>
@@ -145,6 +179,7 @@ class ForceModel {
   // Throws kinema::Error naming the term and field when a parameter is out of range.
   ForceModel& add(const LocalTerm& term);
   ForceModel& add(ForceCallback<T> callback);
+  ForceModel& add(RigidCallback<T> callback);
   ForceModel& add(std::shared_ptr<const CoupledTerm<T>> term);
   // At most one NBody per model.
   ForceModel& add(const NBody& term);
@@ -155,17 +190,20 @@ class ForceModel {
 
   std::span<const LocalTerm> local_terms() const { return local_; }
   std::span<const ForceCallback<T>> callbacks() const { return callbacks_; }
+  std::span<const RigidCallback<T>> rigid_callbacks() const { return rigid_callbacks_; }
   std::span<const std::shared_ptr<const CoupledTerm<T>>> coupled_terms() const { return coupled_; }
   const std::optional<NBody>& nbody() const { return nbody_; }
   std::span<const SpringPair> springs() const { return springs_; }
   // True when the model couples bodies: N-body gravity, springs or a CoupledTerm.
   bool coupled() const { return nbody_ || !springs_.empty() || !coupled_.empty(); }
-  // True when every term is local and built in: the fused path applies.
+  // True when every term is local and built in: the fused path applies (to particles; to
+  // rigid bodies when there is no RigidCallback either).
   bool fusable() const { return callbacks_.empty() && !coupled(); }
 
  private:
   std::vector<LocalTerm> local_;
   std::vector<ForceCallback<T>> callbacks_;
+  std::vector<RigidCallback<T>> rigid_callbacks_;
   std::vector<std::shared_ptr<const CoupledTerm<T>>> coupled_;
   std::optional<NBody> nbody_;
   std::vector<SpringPair> springs_;

@@ -130,6 +130,13 @@ ForceModel<T>& ForceModel<T>::add(ForceCallback<T> callback) {
 }
 
 template <class T>
+ForceModel<T>& ForceModel<T>::add(RigidCallback<T> callback) {
+  if (!callback) throw Error("rigid callback force: empty function");
+  rigid_callbacks_.push_back(std::move(callback));
+  return *this;
+}
+
+template <class T>
 ForceModel<T>& ForceModel<T>::add(std::shared_ptr<const CoupledTerm<T>> term) {
   if (!term) throw Error("coupled force: null term");
   coupled_.push_back(std::move(term));

@@ -32,6 +32,13 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.nbody = &nbody<V>;
   t.springs = &springs<V>;
   t.interpolate = &interpolate<V>;
+  t.rigid_block_stage = &rigid_block_stage<V>;
+  t.rigid_block_rates[0][0] = &rigid_block_rates<false, false, V>;
+  t.rigid_block_rates[0][1] = &rigid_block_rates<false, true, V>;
+  t.rigid_block_rates[1][0] = &rigid_block_rates<true, false, V>;
+  t.rigid_block_rates[1][1] = &rigid_block_rates<true, true, V>;
+  t.rigid_block_finish = &rigid_block_finish<V>;
+  t.rigid_block_turn = &rigid_block_turn<V>;
   return t;
 }
 

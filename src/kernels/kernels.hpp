@@ -63,6 +63,44 @@ struct RigidJob {
 template <class T>
 using RigidFn = void (*)(const RigidJob<T>& job, std::size_t begin, std::size_t end);
 
+// The rigid block path (rigid callbacks, user tableaus): one phase of a step over bodies
+// [begin, end) of one block, the stage state in memory where callbacks read it. Weights are
+// run-time: y_s = y0 + sum_j w_j k_j in j order, one fma per term (w_j = h a_sj, or h b_j).
+template <class T>
+struct RigidBlockJob {
+  T* x[3];  // the bodies' state, updated by finish, kicks and turns
+  T* v[3];
+  T* q[4];
+  T* l[3];
+  const T* inv_mass;
+  const T* inv_inertia[3];
+  const T* applied[3];         // applied forces and torques; nullptr when none
+  const T* applied_torque[3];
+  // The stage state a callback sees, and what it adds.
+  T* xs[3];
+  T* vs[3];  // also the stage's position rate
+  T* qs[4];
+  T* ls[3];
+  T* omega[3];
+  T* force[3];
+  T* torque[3];
+  // The rates of earlier stages (stage: j < terms; finish: all) and of this one (rates).
+  const T* kx[kMaxStages][3];
+  T* kv[kMaxStages][3];
+  T* kq[kMaxStages][4];
+  T* kl[kMaxStages][3];
+  int terms = 0;
+  int stage = 0;  // rates: the stage whose rates are written
+  std::array<T, kMaxStages> weight{};
+  LocalForces<T> forces;
+  RotationalForces<T> rotation;
+  bool renormalize = true;
+  T turn_step = 0;     // turn: w h of the drift
+  int turn_order = 1;  // turn: 1 Euler, 2 midpoint
+};
+template <class T>
+using RigidBlockFn = void (*)(const RigidBlockJob<T>& job, std::size_t begin, std::size_t end);
+
 // One fused step over bodies [begin, end) (multiples of the SIMD width).
 template <class T>
 struct FusedJob {
@@ -286,6 +324,12 @@ struct KernelTable {
   NBodyFn<T> nbody;
   SpringFn<T> springs;
   InterpolateFn<T> interpolate;
+  // The rigid block path: stage state and the callbacks' view; the stage's rates
+  // [quadratic drag][central terms]; the final combination; a drift's turn of q.
+  RigidBlockFn<T> rigid_block_stage;
+  RigidBlockFn<T> rigid_block_rates[2][2];
+  RigidBlockFn<T> rigid_block_finish;
+  RigidBlockFn<T> rigid_block_turn;
 };
 
 // The table of an available instruction set (`isa` resolved, not automatic). `relaxed`

@@ -110,10 +110,14 @@ KINEMA_INLINE Vec<V> torque(const Rotational<V>& f, const B& body, const Rotatio
 
 // The bodies' applied torques at i, or nullptr when the set has none.
 template <class V>
-KINEMA_INLINE const Vec<V>* applied_torque(const RigidJob<value_t<V>>& job, std::size_t i, Vec<V>& storage) {
-  if (job.torque[0] == nullptr) return nullptr;
-  storage = load3<V>(job.torque, i);
+KINEMA_INLINE const Vec<V>* applied_torque_at(const value_t<V>* const torques[3], std::size_t i, Vec<V>& storage) {
+  if (torques[0] == nullptr) return nullptr;
+  storage = load3<V>(torques, i);
   return &storage;
+}
+template <class V>
+KINEMA_INLINE const Vec<V>* applied_torque(const RigidJob<value_t<V>>& job, std::size_t i, Vec<V>& storage) {
+  return applied_torque_at<V>(job.torque, i, storage);
 }
 
 template <class V>
@@ -257,6 +261,95 @@ constexpr RigidFn<value_t<V>> rigid_kernel() {
     return &rigid_runge_kutta<M, Quadratic, Central, V>;
   } else {
     return &rigid_kick_drift<M, Quadratic, Central, V>;
+  }
+}
+
+// The rigid block path's kernels (see RigidBlockJob).
+template <class V, int N>
+KINEMA_INLINE Vec<V, N> weighted(const Vec<V, N>& base, const value_t<V>* const (*k)[N], const value_t<V>* w,
+                                 int terms, std::size_t i) {
+  Vec<V, N> sum = base;
+  for (int j = 0; j < terms; ++j) {
+    if (w[j] == 0) continue;
+    const Vec<V, N> kj = load_n<N, V>(k[j], i);
+    for (int d = 0; d < N; ++d) sum.c[d] = mul_add(V(w[j]), kj.c[d], sum.c[d]);
+  }
+  return sum;
+}
+
+template <int N, class T>
+KINEMA_INLINE const T* const (*as_const(T* const (*k)[N]))[N] {
+  return reinterpret_cast<const T* const (*)[N]>(k);
+}
+
+// Stage state y0 + sum_j w_j k_j, its angular velocity, and zeroed outputs.
+template <class V>
+void rigid_block_stage(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const value_t<V>* w = job.weight.data();
+  const Vec<V> zero{{V(0), V(0), V(0)}};
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    const Vec<V> x = weighted<V, 3>(load3<V>(job.x, i), job.kx, w, job.terms, i);
+    const Vec<V> v = weighted<V, 3>(load3<V>(job.v, i), as_const<3>(job.kv), w, job.terms, i);
+    const Quat4<V> q = weighted<V, 4>(load_n<4, V>(job.q, i), as_const<4>(job.kq), w, job.terms, i);
+    const Vec<V> l = weighted<V, 3>(load3<V>(job.l, i), as_const<3>(job.kl), w, job.terms, i);
+    store3(job.xs, i, x);
+    store3(job.vs, i, v);
+    store_n<4, V>(job.qs, i, q);
+    store3(job.ls, i, l);
+    store3(job.omega, i, angular_velocity(rotation(q), load3<V>(job.inv_inertia, i), l));
+    store3(job.force, i, zero);
+    store3(job.torque, i, zero);
+  }
+}
+
+// The stage's rates from its state and what the callbacks added: kv = local accelerations +
+// inv_mass F, kq = 1/2 (0, omega) q, kl = local torques + the callbacks' torque.
+template <bool Quadratic, bool Central, class V>
+void rigid_block_rates(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const Forces<V> f(job.forces);
+  const Rotational<V> rf(job.rotation);
+  const int s = job.stage;
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    const V inv_mass = load<V>(job.inv_mass + i);
+    auto body = body_terms_at<Applied::if_present, true>(f, inv_mass, job.applied, i);
+    add_applied(body, f, inv_mass, load3<V>(job.force, i));
+    const Vec<V> x = load3<V>(job.xs, i), v = load3<V>(job.vs, i), omega = load3<V>(job.omega, i);
+    const Quat4<V> q = load_n<4, V>(job.qs, i);
+    store3(job.kv[s], i, accel_at<Quadratic, Central>(f, body, x, v));
+    store_n<4, V>(job.kq[s], i, quaternion_rate(omega, q));
+    Vec<V> extra = load3<V>(job.torque, i), applied_storage;
+    if (const Vec<V>* applied = applied_torque_at<V>(job.applied_torque, i, applied_storage)) {
+      for (int d = 0; d < 3; ++d) extra.c[d] = extra.c[d] + applied->c[d];
+    }
+    store3(job.kl[s], i, torque(rf, body, rotation(q), omega, &extra));
+  }
+}
+
+// y1 = y0 + sum_j w_j k_j over every stage; q renormalized.
+template <class V>
+void rigid_block_finish(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const value_t<V>* w = job.weight.data();
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    // Positions first: they read the stage velocities, which may be the bodies' own.
+    store3(job.x, i, weighted<V, 3>(load3<V>(job.x, i), job.kx, w, job.terms, i));
+    store3(job.v, i, weighted<V, 3>(load3<V>(job.v, i), as_const<3>(job.kv), w, job.terms, i));
+    const Quat4<V> q = weighted<V, 4>(load_n<4, V>(job.q, i), as_const<4>(job.kq), w, job.terms, i);
+    store_n<4, V>(job.q, i, job.renormalize ? normalized(q) : q);
+    store3(job.l, i, weighted<V, 3>(load3<V>(job.l, i), as_const<3>(job.kl), w, job.terms, i));
+  }
+}
+
+// A drift's turn of q with the current L, as the fused kick-drift kernels turn it.
+template <class V>
+void rigid_block_turn(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const V step(job.turn_step), half(value_t<V>(0.5) * job.turn_step);
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i), l = load3<V>(job.l, i);
+    auto rate = [&](const Quat4<V>& q) { return quaternion_rate(angular_velocity(rotation(q), inv_inertia, l), q); };
+    const Quat4<V> q = load_n<4, V>(job.q, i);
+    const Quat4<V> turned = job.turn_order >= 2 ? step_by(step, rate(step_by(half, rate(q), q)), q)
+                                                : step_by(step, rate(q), q);
+    store_n<4, V>(job.q, i, job.renormalize ? normalized(turned) : turned);
   }
 }
 

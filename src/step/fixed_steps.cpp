@@ -58,12 +58,18 @@ void FixedSteps<T>::run_block(Set& b, Block block, std::uint64_t steps, Guard* g
 template <class T>
 void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard) {
   const kernels::RigidFn<T> rigid_fn = core_.paths.rigid;
-  if (rigid_fn == nullptr) {
-    throw Error("rigid bodies need a built-in method and local force terms only (no "
-                "callbacks, no coupled terms)");
+  if (rigid_fn == nullptr && !core_.paths.rigid_block) {
+    throw Error("rigid bodies need local force terms and RigidCallbacks only (no ForceCallback, no coupled "
+                "terms)");
   }
   const LoweredForces<T>& lowered = core_.lowered();
   core_.begin(h, lowered.rigid);
+  if (rigid_fn == nullptr) {
+    RigidBlockPath<T>& path = *core_.paths.rigid_block;
+    path.reserve(b.padded_size());
+    RigidBlocks blocks{path, {b, h, core_.options.renormalize_quaternions}};
+    return run_blocks(w, b, blocks, steps, guard);
+  }
   const kernels::RigidJob<T> job{center_arrays(b), {b.q(0), b.q(1), b.q(2), b.q(3)},
                                  {b.l(0), b.l(1), b.l(2)},
                                  {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
@@ -96,39 +102,42 @@ template <class T>
 void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
   StagedPath<T>& staged = *core_.paths.staged;
   staged.reserve(c.bodies.padded_size());
-  if (staged.blocks_alone()) return run_blocks(staged, c, steps, guard);
-  run_steps(staged, c, steps, guard);
+  if (!staged.blocks_alone()) return run_steps(staged, c, steps, guard);
+  ParticleBlocks blocks{staged, c};
+  run_blocks(c.workers, c.bodies, blocks, steps, guard);
 }
 
-// The block path: without coupled terms each block takes every step of the call while it is
-// in cache, as the fused path does; step k's callbacks see the clock's time k steps on.
-// Where user code may throw, each block keeps its state as it starts, so that a throw can
-// put the set back (see recover).
+// The block path: each block takes every step of the call while it is in cache, as the fused
+// path does; step k's callbacks see the clock's time k steps on. Where user code may throw,
+// each block keeps its state as it starts. After a throw, blocks have run ahead of one
+// another: every block started is put back and the steps before the first one that threw
+// are taken again (callbacks are pure functions of their block, so they give the same
+// bits), leaving the set as before that step. A throw while retaking them is the one that
+// propagates.
 template <class T>
-void FixedSteps<T>::run_blocks(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard) {
-  const std::size_t n = c.bodies.padded_size();
-  const bool may_throw = staged.may_throw();
+template <class Set, class Path>
+void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint64_t steps, Guard* guard) {
+  const std::size_t n = set.padded_size();
+  const bool may_throw = path.may_throw();
   if (may_throw) {
     completed_.resize(std::max(completed_.size(), block_count(n)));
     std::fill(completed_.begin(), completed_.end(), kNotRun);
   }
   const Clock<T> start = core_.clock;
   try {
-    for_each_block(c.workers, n, [&](Block block) {
+    for_each_block(w, n, [&](Block block) {
       std::uint64_t done = 0;
       auto step = [&](Block b) {
-        StepContext<T> at = c;
         Clock<T> now = start;
         now.steps += done;
-        at.t0 = now.time();
-        staged.step_block(at, b);
+        path.step(b, now.time());
         ++done;
       };
-      if (!may_throw) return run_block(c.bodies, block, steps, guard, step);
+      if (!may_throw) return run_block(set, block, steps, guard, step);
       std::uint64_t& completed = completed_[block.begin / kBlockBodies];
-      staged.keep_block(c, block);
+      path.keep(block);
       try {
-        run_block(c.bodies, block, steps, guard, step);
+        run_block(set, block, steps, guard, step);
       } catch (...) {
         completed = done;
         throw;
@@ -136,26 +145,16 @@ void FixedSteps<T>::run_blocks(StagedPath<T>& staged, StepContext<T>& c, std::ui
       completed = done;
     });
   } catch (...) {
-    recover(staged, c, guard);
+    std::uint64_t first = kNotRun;
+    for (std::size_t i = 0; i < block_count(n); ++i) {
+      if (completed_[i] == kNotRun) continue;
+      first = std::min(first, completed_[i]);
+      path.restore(block(i, n));
+    }
+    if (first != kNotRun && first > 0) run_blocks(w, set, path, first, guard);
     throw;
   }
   core_.clock.steps += steps;
-}
-
-// After a throw on the block path: blocks ran ahead of one another, so every block is put
-// back to the call's start and the steps before the first one that threw are taken again,
-// one at a time, leaving the set as before that step (callbacks are pure functions of their
-// block, so the retaken steps give the same bits). A throw while retaking them is the one
-// that propagates.
-template <class T>
-void FixedSteps<T>::recover(StagedPath<T>& staged, StepContext<T>& c, Guard* guard) {
-  std::uint64_t first = kNotRun;
-  for (std::size_t i = 0; i < block_count(c.bodies.padded_size()); ++i) {
-    if (completed_[i] == kNotRun) continue;
-    first = std::min(first, completed_[i]);
-    staged.restore_block(c, block(i, c.bodies.padded_size()));
-  }
-  if (first != kNotRun) run_steps(staged, c, first, guard);
 }
 
 // One pass per step (and per stage where coupled terms need every body's stage state): the

@@ -46,9 +46,31 @@ class FixedSteps {
   void run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard);
   void run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps, Guard* guard);
   void run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard);
-  void run_blocks(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard);
   void run_steps(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard);
-  void recover(StagedPath<T>& staged, StepContext<T>& c, Guard* guard);
+  template <class Set, class Path>
+  void run_blocks(const Workers& w, Set& set, Path& path, std::uint64_t steps, Guard* guard);
+
+  // The block paths as run_blocks takes them: may_throw(), keep, restore and step a block.
+  struct ParticleBlocks {
+    StagedPath<T>& staged;
+    const StepContext<T>& c;
+    bool may_throw() const { return staged.may_throw(); }
+    void keep(Block b) { staged.keep_block(c, b); }
+    void restore(Block b) { staged.restore_block(c, b); }
+    void step(Block b, double t0) {
+      StepContext<T> at = c;
+      at.t0 = t0;
+      staged.step_block(at, b);
+    }
+  };
+  struct RigidBlocks {
+    RigidBlockPath<T>& path;
+    typename RigidBlockPath<T>::Call call;
+    bool may_throw() const { return path.may_throw(); }
+    void keep(Block b) { path.keep_block(call, b); }
+    void restore(Block b) { path.restore_block(call, b); }
+    void step(Block b, double t0) { path.step_block(call, b, t0); }
+  };
   void clamp(ParticleSet<T>& b, Block block) const;
   void clamp(RigidBodySet<T>& b, Block block) const;
 

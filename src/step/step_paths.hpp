@@ -1,7 +1,9 @@
 #pragma once
 // The path a force model and a method take: the fused kernels (one pass per step, every
 // stage in registers) when every term is local and the method built in, else the staged
-// path (one pass per stage).
+// path (one pass per stage; without coupled terms, the block path: every stage of a block
+// while it is in cache). Rigid bodies: fused, or the rigid block path (RigidCallbacks, user
+// tableaus); they take no coupled terms and no particle callbacks.
 
 #include <cstddef>
 #include <memory>
@@ -10,6 +12,7 @@
 #include "kernels/kernels.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/methods.hpp"
+#include "step/rigid_block_path.hpp"
 #include "step/staged_path.hpp"
 
 namespace kinema {
@@ -18,7 +21,8 @@ template <class T>
 struct StepPaths {
   std::unique_ptr<LoweredForces<T>> lowered;  // a fixed address: the staged paths keep references
   kernels::FusedFn<T> fused = nullptr;        // particles, when the fused path applies
-  kernels::RigidFn<T> rigid = nullptr;        // rigid bodies (fused path only)
+  kernels::RigidFn<T> rigid = nullptr;        // rigid bodies, when the fused path applies
+  std::unique_ptr<RigidBlockPath<T>> rigid_block;  // rigid bodies otherwise (no coupled terms)
   kernels::FusedFn<T> fused_applied = nullptr;  // the fused path for sets with applied forces
 
   kernels::FusedFn<T> fused_for(bool applied) const { return applied ? fused_applied : fused; }

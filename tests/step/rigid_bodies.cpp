@@ -272,7 +272,7 @@ TEST_CASE("bad rigid bodies are refused by name", "[rigid][errors]") {
   ForceModel<float> f;
   f.add([](const ParticleBlock<float>&) {});
   Stepper<float> s(f, rk4, test::serial_options());
-  CHECK_THROWS_WITH(s.step(set, 0.01f), Catch::StartsWith("rigid bodies need a built-in method"));
+  CHECK_THROWS_WITH(s.step(set, 0.01f), Catch::StartsWith("rigid bodies need local force terms and RigidCallbacks only"));
 }
 
 namespace {

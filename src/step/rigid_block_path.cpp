@@ -1,0 +1,167 @@
+#include "step/rigid_block_path.hpp"
+
+#include <algorithm>
+
+namespace kinema {
+
+template <class T>
+RigidBlockPath<T>::RigidBlockPath(const ForceModel<T>& forces, const Method& method,
+                                  const kernels::KernelTable<T>& table, const LoweredForces<T>& lowered)
+    : forces_(forces), method_(method), table_(table), lowered_(lowered) {}
+
+template <class T>
+void RigidBlockPath<T>::reserve(std::size_t padded) {
+  if (padded <= capacity_) return;
+  const int stages = method_.kind == MethodKind::runge_kutta ? method_.tableau.stages : 1;
+  auto grow = [&](auto& arrays) {
+    for (AlignedArray<T>& a : arrays) a.resize(padded);
+  };
+  grow(xs_), grow(ls_), grow(omega_), grow(force_), grow(torque_), grow(qs_);
+  for (int s = 0; s < stages; ++s) grow(vs_[s]), grow(kv_[s]), grow(kl_[s]), grow(kq_[s]);
+  if (may_throw()) grow(saved_);
+  capacity_ = padded;
+}
+
+template <class T>
+std::size_t RigidBlockPath<T>::bytes() const {
+  std::size_t n = 0;
+  auto add = [&](const auto& arrays) {
+    for (const AlignedArray<T>& a : arrays) n += a.size() * sizeof(T);
+  };
+  add(xs_), add(ls_), add(omega_), add(force_), add(torque_), add(qs_), add(saved_);
+  for (int s = 0; s < kMaxStages; ++s) add(vs_[s]), add(kv_[s]), add(kl_[s]), add(kq_[s]);
+  return n;
+}
+
+// The state arrays of a set, in the order keep_block saves them.
+template <class T>
+std::array<T*, 13> state_of(RigidBodySet<T>& b) {
+  return {b.position_data(0), b.position_data(1), b.position_data(2), b.velocity_data(0), b.velocity_data(1),
+          b.velocity_data(2), b.q(0), b.q(1), b.q(2), b.q(3), b.l(0), b.l(1), b.l(2)};
+}
+
+template <class T>
+void RigidBlockPath<T>::keep_block(const Call& call, Block b) {
+  const std::array<T*, 13> state = state_of(call.bodies);
+  for (std::size_t a = 0; a < state.size(); ++a) std::copy(state[a] + b.begin, state[a] + b.end, saved_[a].data() + b.begin);
+}
+
+template <class T>
+void RigidBlockPath<T>::restore_block(const Call& call, Block b) {
+  const std::array<T*, 13> state = state_of(call.bodies);
+  for (std::size_t a = 0; a < state.size(); ++a) {
+    std::copy(saved_[a].data() + b.begin, saved_[a].data() + b.end, state[a] + b.begin);
+  }
+}
+
+template <class T>
+kernels::RigidBlockJob<T> RigidBlockPath<T>::job(const Call& call) {
+  RigidBodySet<T>& b = call.bodies;
+  kernels::RigidBlockJob<T> j{};
+  for (int d = 0; d < 3; ++d) {
+    j.x[d] = b.position_data(d), j.v[d] = b.velocity_data(d), j.l[d] = b.l(d);
+    j.inv_inertia[d] = b.inv_inertia(d);
+    j.applied[d] = b.centers().applied_force_data(d);
+    j.applied_torque[d] = b.applied_torque_data(d);
+    j.xs[d] = (xs_[d].data()), j.ls[d] = (ls_[d].data());
+    j.omega[d] = (omega_[d].data());
+    j.force[d] = (force_[d].data()), j.torque[d] = (torque_[d].data());
+  }
+  for (int k = 0; k < 4; ++k) j.q[k] = b.q(k), j.qs[k] = (qs_[k].data());
+  for (int s = 0; s < kMaxStages; ++s) {
+    for (int d = 0; d < 3; ++d) {
+      j.kx[s][d] = vs_[s][d].data();
+      j.kv[s][d] = (kv_[s][d].data()), j.kl[s][d] = (kl_[s][d].data());
+    }
+    for (int k = 0; k < 4; ++k) j.kq[s][k] = (kq_[s][k].data());
+  }
+  j.inv_mass = b.centers().inv_mass();
+  j.forces = lowered_.rigid;
+  j.rotation = lowered_.rotation;
+  j.renormalize = call.renormalize;
+  return j;
+}
+
+template <class T>
+void RigidBlockPath<T>::step_block(const Call& call, Block b, double t0) {
+  kernels::RigidBlockJob<T> j = job(call);
+  if (method_.kind == MethodKind::runge_kutta) return runge_kutta_step(j, b, t0, call.h);
+  kick_drift_step(j, b, t0, call.h);
+}
+
+template <class T>
+RigidBlock<T> RigidBlockPath<T>::view(const kernels::RigidBlockJob<T>& j, Block b, double t) const {
+  const std::size_t i = b.begin;
+  RigidBlock<T> v;
+  v.begin = i, v.count = b.end - b.begin, v.t = t;
+  v.px = j.xs[0] + i, v.py = j.xs[1] + i, v.pz = j.xs[2] + i;
+  v.vx = j.vs[0] + i, v.vy = j.vs[1] + i, v.vz = j.vs[2] + i;
+  v.qw = j.qs[0] + i, v.qx = j.qs[1] + i, v.qy = j.qs[2] + i, v.qz = j.qs[3] + i;
+  v.wx = j.omega[0] + i, v.wy = j.omega[1] + i, v.wz = j.omega[2] + i;
+  v.lx = j.ls[0] + i, v.ly = j.ls[1] + i, v.lz = j.ls[2] + i;
+  v.inv_mass = j.inv_mass + i;
+  v.inv_ix = j.inv_inertia[0] + i, v.inv_iy = j.inv_inertia[1] + i, v.inv_iz = j.inv_inertia[2] + i;
+  v.fx = j.force[0] + i, v.fy = j.force[1] + i, v.fz = j.force[2] + i;
+  v.tx = j.torque[0] + i, v.ty = j.torque[1] + i, v.tz = j.torque[2] + i;
+  return v;
+}
+
+template <class T>
+void RigidBlockPath<T>::evaluate(kernels::RigidBlockJob<T>& j, int s, Block b, double t) {
+  for (int d = 0; d < 3; ++d) j.vs[d] = vs_[s][d].data();
+  table_.rigid_block_stage(j, b.begin, b.end);
+  const RigidBlock<T> v = view(j, b, t);
+  for (const auto& callback : forces_.rigid_callbacks()) callback(v);
+  j.stage = s;
+  table_.rigid_block_rates[lowered_.rigid.has_quadratic()][lowered_.rigid.has_central()](j, b.begin, b.end);
+}
+
+// Stage s from y0 + h sum_j a_sj k_j, then y1 = y0 + h sum_j b_j k_j.
+template <class T>
+void RigidBlockPath<T>::runge_kutta_step(kernels::RigidBlockJob<T>& j, Block b, double t0, T h) {
+  const ButcherTableau& tab = method_.tableau;
+  for (int s = 0; s < tab.stages; ++s) {
+    j.terms = s;
+    for (int k = 0; k < s; ++k) j.weight[k] = T(tab.a[s][k]) * h;
+    evaluate(j, s, b, t0 + tab.c[s] * double(h));
+  }
+  j.terms = tab.stages;
+  for (int k = 0; k < tab.stages; ++k) j.weight[k] = T(tab.b[k]) * h;
+  table_.rigid_block_finish(j, b.begin, b.end);
+}
+
+// Kicks change v and L by w h times the rates at the bodies' state; drifts move x with v and
+// turn q with L (Euler for first-order schemes, the midpoint rule for second-order ones), as
+// the fused kick-drift kernels do.
+template <class T>
+void RigidBlockPath<T>::kick_drift_step(kernels::RigidBlockJob<T>& j, Block b, double t0, T h) {
+  const KickDriftScheme& scheme = method_.scheme;
+  j.terms = 0;
+  for (int k = 0; k < scheme.count; ++k) {
+    const T step = T(scheme.ops[k].weight) * h;
+    if (scheme.ops[k].kind == OpKind::kick) {
+      evaluate(j, 0, b, t0 + scheme.ops[k].time * double(h));
+      combine(j.v, j.kv[0], step, b);
+      combine(j.l, j.kl[0], step, b);
+    } else {
+      combine(j.x, j.v, step, b);
+      j.turn_step = step;
+      j.turn_order = method_.order >= 2 ? 2 : 1;
+      table_.rigid_block_turn(j, b.begin, b.end);
+    }
+  }
+}
+
+template <class T>
+void RigidBlockPath<T>::combine(T* const out[3], const T* const rate[3], T step, Block b) const {
+  kernels::CombineJob<T> c{};
+  for (int d = 0; d < 3; ++d) c.c.in[d] = c.c.out[d] = out[d];
+  c.c.set(kernels::row_sum({1}), 1, [&](int) { return std::array<const T*, 3>{rate[0], rate[1], rate[2]}; });
+  c.c.step = step;
+  table_.combine(c, b.begin, b.end);
+}
+
+template class RigidBlockPath<float>;
+template class RigidBlockPath<double>;
+
+}  // namespace kinema
