@@ -2,7 +2,7 @@
 // linear drag, a spring) as built-in terms; the same with a force applied to every body; with
 // gravity moved into a one-line callback (the block path); with a coupled term that adds
 // nothing (the staged path); and rigid bodies plain, with applied forces and torques, and
-// with a callback torque. Each iteration is one advance of kSteps steps, as a frame of a
+// with their angular drag in a one-line callback (the rigid block path). Each iteration is one advance of kSteps steps, as a frame of a
 // fixed-step loop that catches up, on 1 thread at the best ISA.
 #include <benchmark/benchmark.h>
 
@@ -85,6 +85,19 @@ Scene rigid_scene(std::size_t count) {
   return s;
 }
 
+// The rigid scene's model, its angular drag given by a one-line callback where the variant
+// says so.
+template <class T>
+ForceModel<T> rigid_variant_forces(Variant v, Scene scene) {
+  if (v != Variant::callback) return make_forces<T>(scene);
+  scene.forces.pop_back();  // the angular drag
+  ForceModel<T> f = make_forces<T>(scene);
+  f.add([](const RigidBlock<T>& b) {
+    for (std::size_t i = 0; i < b.count; ++i) b.tx[i] -= T(0.05) * b.wx[i], b.ty[i] -= T(0.05) * b.wy[i], b.tz[i] -= T(0.05) * b.wz[i];
+  });
+  return f;
+}
+
 template <class T>
 void rigid_forces(benchmark::State& state, Variant v) {
   const auto n = std::size_t(state.range(0));
@@ -93,7 +106,7 @@ void rigid_forces(benchmark::State& state, Variant v) {
   CaseJobs jobs(1);
   StepperOptions o;
   o.jobs = jobs.get();
-  Stepper<T> stepper(make_forces<T>(scene), rk4, o);
+  Stepper<T> stepper(rigid_variant_forces<T>(v, scene), rk4, o);
   if (v == Variant::applied) {
     bodies.keep_forces(true);
     for (std::size_t i = 0; i < n; ++i) {
@@ -117,7 +130,7 @@ void register_all() {
     benchmark::RegisterBenchmark(name.c_str(), particle_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
   }
-  for (Variant v : {Variant::fused, Variant::applied}) {
+  for (Variant v : {Variant::fused, Variant::applied, Variant::callback}) {
     const std::string name = std::string("game/rigid-") + variant_name(v) + "/rk4/float/" + isa;
     benchmark::RegisterBenchmark(name.c_str(), rigid_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);

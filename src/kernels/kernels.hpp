@@ -65,7 +65,8 @@ using RigidFn = void (*)(const RigidJob<T>& job, std::size_t begin, std::size_t 
 
 // The rigid block path (rigid callbacks, user tableaus): one phase of a step over bodies
 // [begin, end) of one block, the stage state in memory where callbacks read it. Weights are
-// run-time: y_s = y0 + sum_j w_j k_j in j order, one fma per term (w_j = h a_sj, or h b_j).
+// run-time: y_s = y0 + sum_j w_j k_j over the nonzero terms in j order, one fma per term
+// (w_j = h a_sj, or h b_j).
 template <class T>
 struct RigidBlockJob {
   T* x[3];  // the bodies' state, updated by finish, kicks and turns
@@ -89,9 +90,10 @@ struct RigidBlockJob {
   T* kv[kMaxStages][3];
   T* kq[kMaxStages][4];
   T* kl[kMaxStages][3];
-  int terms = 0;
-  int stage = 0;  // rates: the stage whose rates are written
+  int terms = 0;  // nonzero terms: the stages term[0 .. terms) with weight[0 .. terms)
+  std::array<int, kMaxStages> term{};
   std::array<T, kMaxStages> weight{};
+  int stage = 0;  // rates: the stage whose rates are written
   LocalForces<T> forces;
   RotationalForces<T> rotation;
   bool renormalize = true;

@@ -266,13 +266,12 @@ constexpr RigidFn<value_t<V>> rigid_kernel() {
 
 // The rigid block path's kernels (see RigidBlockJob).
 template <class V, int N>
-KINEMA_INLINE Vec<V, N> weighted(const Vec<V, N>& base, const value_t<V>* const (*k)[N], const value_t<V>* w,
-                                 int terms, std::size_t i) {
+KINEMA_INLINE Vec<V, N> weighted(const RigidBlockJob<value_t<V>>& job, const Vec<V, N>& base,
+                                 const value_t<V>* const (*k)[N], std::size_t i) {
   Vec<V, N> sum = base;
-  for (int j = 0; j < terms; ++j) {
-    if (w[j] == 0) continue;
-    const Vec<V, N> kj = load_n<N, V>(k[j], i);
-    for (int d = 0; d < N; ++d) sum.c[d] = mul_add(V(w[j]), kj.c[d], sum.c[d]);
+  for (int j = 0; j < job.terms; ++j) {
+    const Vec<V, N> kj = load_n<N, V>(k[job.term[j]], i);
+    for (int d = 0; d < N; ++d) sum.c[d] = mul_add(V(job.weight[j]), kj.c[d], sum.c[d]);
   }
   return sum;
 }
@@ -285,13 +284,12 @@ KINEMA_INLINE const T* const (*as_const(T* const (*k)[N]))[N] {
 // Stage state y0 + sum_j w_j k_j, its angular velocity, and zeroed outputs.
 template <class V>
 void rigid_block_stage(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
-  const value_t<V>* w = job.weight.data();
   const Vec<V> zero{{V(0), V(0), V(0)}};
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    const Vec<V> x = weighted<V, 3>(load3<V>(job.x, i), job.kx, w, job.terms, i);
-    const Vec<V> v = weighted<V, 3>(load3<V>(job.v, i), as_const<3>(job.kv), w, job.terms, i);
-    const Quat4<V> q = weighted<V, 4>(load_n<4, V>(job.q, i), as_const<4>(job.kq), w, job.terms, i);
-    const Vec<V> l = weighted<V, 3>(load3<V>(job.l, i), as_const<3>(job.kl), w, job.terms, i);
+    const Vec<V> x = weighted<V, 3>(job, load3<V>(job.x, i), job.kx, i);
+    const Vec<V> v = weighted<V, 3>(job, load3<V>(job.v, i), as_const<3>(job.kv), i);
+    const Quat4<V> q = weighted<V, 4>(job, load_n<4, V>(job.q, i), as_const<4>(job.kq), i);
+    const Vec<V> l = weighted<V, 3>(job, load3<V>(job.l, i), as_const<3>(job.kl), i);
     store3(job.xs, i, x);
     store3(job.vs, i, v);
     store_n<4, V>(job.qs, i, q);
@@ -321,21 +319,20 @@ void rigid_block_rates(const RigidBlockJob<value_t<V>>& job, std::size_t begin, 
     if (const Vec<V>* applied = applied_torque_at<V>(job.applied_torque, i, applied_storage)) {
       for (int d = 0; d < 3; ++d) extra.c[d] = extra.c[d] + applied->c[d];
     }
-    store3(job.kl[s], i, torque(rf, body, rotation(q), omega, &extra));
+    // The rotation only where point forces turn with the body.
+    store3(job.kl[s], i, torque(rf, body, rf.point_count > 0 ? rotation(q) : Rotation<V>{}, omega, &extra));
   }
 }
 
 // y1 = y0 + sum_j w_j k_j over every stage; q renormalized.
 template <class V>
 void rigid_block_finish(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
-  const value_t<V>* w = job.weight.data();
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    // Positions first: they read the stage velocities, which may be the bodies' own.
-    store3(job.x, i, weighted<V, 3>(load3<V>(job.x, i), job.kx, w, job.terms, i));
-    store3(job.v, i, weighted<V, 3>(load3<V>(job.v, i), as_const<3>(job.kv), w, job.terms, i));
-    const Quat4<V> q = weighted<V, 4>(load_n<4, V>(job.q, i), as_const<4>(job.kq), w, job.terms, i);
+    store3(job.x, i, weighted<V, 3>(job, load3<V>(job.x, i), job.kx, i));
+    store3(job.v, i, weighted<V, 3>(job, load3<V>(job.v, i), as_const<3>(job.kv), i));
+    const Quat4<V> q = weighted<V, 4>(job, load_n<4, V>(job.q, i), as_const<4>(job.kq), i);
     store_n<4, V>(job.q, i, job.renormalize ? normalized(q) : q);
-    store3(job.l, i, weighted<V, 3>(load3<V>(job.l, i), as_const<3>(job.kl), w, job.terms, i));
+    store3(job.l, i, weighted<V, 3>(job, load3<V>(job.l, i), as_const<3>(job.kl), i));
   }
 }
 

@@ -68,6 +68,7 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
     RigidBlockPath<T>& path = *core_.paths.rigid_block;
     path.reserve(b.padded_size());
     RigidBlocks blocks{path, {b, h, core_.options.renormalize_quaternions}};
+    path.prepare(blocks.call);
     return run_blocks(w, b, blocks, steps, guard);
   }
   const kernels::RigidJob<T> job{center_arrays(b), {b.q(0), b.q(1), b.q(2), b.q(3)},
@@ -103,6 +104,7 @@ void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* gu
   StagedPath<T>& staged = *core_.paths.staged;
   staged.reserve(c.bodies.padded_size());
   if (!staged.blocks_alone()) return run_steps(staged, c, steps, guard);
+  staged.prepare(c);
   ParticleBlocks blocks{staged, c};
   run_blocks(c.workers, c.bodies, blocks, steps, guard);
 }
@@ -127,10 +129,14 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
   try {
     for_each_block(w, n, [&](Block block) {
       std::uint64_t done = 0;
+      // A block's stage state is too large for the L1 cache: each step goes through the
+      // block in slices that fit (same operations per body, so the same bits).
       auto step = [&](Block b) {
         Clock<T> now = start;
         now.steps += done;
-        path.step(b, now.time());
+        for (std::size_t s = b.begin; s < b.end; s += path.slice()) {
+          path.step({s, std::min(s + path.slice(), b.end)}, now.time());
+        }
         ++done;
       };
       if (!may_throw) return run_block(set, block, steps, guard, step);

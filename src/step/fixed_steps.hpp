@@ -50,10 +50,13 @@ class FixedSteps {
   template <class Set, class Path>
   void run_blocks(const Workers& w, Set& set, Path& path, std::uint64_t steps, Guard* guard);
 
-  // The block paths as run_blocks takes them: may_throw(), keep, restore and step a block.
+  // The block paths as run_blocks takes them: may_throw(), keep, restore and step a block,
+  // and the slice of a block whose stage state stays in the L1 cache while every phase of a
+  // step runs over it (a multiple of the widest SIMD width; callbacks see one slice).
   struct ParticleBlocks {
     StagedPath<T>& staged;
     const StepContext<T>& c;
+    static constexpr std::size_t slice() { return 512 / sizeof(T); }
     bool may_throw() const { return staged.may_throw(); }
     void keep(Block b) { staged.keep_block(c, b); }
     void restore(Block b) { staged.restore_block(c, b); }
@@ -66,6 +69,7 @@ class FixedSteps {
   struct RigidBlocks {
     RigidBlockPath<T>& path;
     typename RigidBlockPath<T>::Call call;
+    static constexpr std::size_t slice() { return 512 / sizeof(T); }
     bool may_throw() const { return path.may_throw(); }
     void keep(Block b) { path.keep_block(call, b); }
     void restore(Block b) { path.restore_block(call, b); }

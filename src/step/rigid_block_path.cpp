@@ -57,7 +57,7 @@ void RigidBlockPath<T>::restore_block(const Call& call, Block b) {
 template <class T>
 kernels::RigidBlockJob<T> RigidBlockPath<T>::job(const Call& call) {
   RigidBodySet<T>& b = call.bodies;
-  kernels::RigidBlockJob<T> j{};
+  kernels::RigidBlockJob<T> j{};  // once per call (prepare)
   for (int d = 0; d < 3; ++d) {
     j.x[d] = b.position_data(d), j.v[d] = b.velocity_data(d), j.l[d] = b.l(d);
     j.inv_inertia[d] = b.inv_inertia(d);
@@ -82,11 +82,47 @@ kernels::RigidBlockJob<T> RigidBlockPath<T>::job(const Call& call) {
   return j;
 }
 
+// `base` for stage s (its state into stage s's velocity arrays, its rates into slot s), with
+// the nonzero weights among the first `count` of a tableau row, times h.
+template <class T>
+kernels::RigidBlockJob<T> RigidBlockPath<T>::with_terms(const kernels::RigidBlockJob<T>& base,
+                                                        const std::array<double, kMaxStages>& row, int count, T h,
+                                                        int s) {
+  kernels::RigidBlockJob<T> j = base;
+  for (int d = 0; d < 3; ++d) j.vs[d] = vs_[s][d].data();
+  j.stage = s;
+  j.terms = 0;
+  for (int k = 0; k < count; ++k) {
+    if (row[k] == 0) continue;
+    j.term[j.terms] = k;
+    j.weight[j.terms++] = T(row[k]) * h;
+  }
+  return j;
+}
+
+// Every phase's job for the call, so that a slice of a block only runs kernels.
+template <class T>
+void RigidBlockPath<T>::prepare(const Call& call) {
+  const kernels::RigidBlockJob<T> base = job(call);
+  if (method_.kind == MethodKind::runge_kutta) {
+    const ButcherTableau& tab = method_.tableau;
+    for (int s = 0; s < tab.stages; ++s) stage_jobs_[s] = with_terms(base, tab.a[s], s, call.h, s);
+    finish_job_ = with_terms(base, tab.b, tab.stages, call.h, 0);
+    return;
+  }
+  stage_jobs_[0] = with_terms(base, {}, 0, call.h, 0);  // a kick's rates at the bodies' state
+  for (int k = 0; k < method_.scheme.count; ++k) {
+    op_steps_[k] = T(method_.scheme.ops[k].weight) * call.h;
+    turn_jobs_[k] = base;
+    turn_jobs_[k].turn_step = op_steps_[k];
+    turn_jobs_[k].turn_order = method_.order >= 2 ? 2 : 1;
+  }
+}
+
 template <class T>
 void RigidBlockPath<T>::step_block(const Call& call, Block b, double t0) {
-  kernels::RigidBlockJob<T> j = job(call);
-  if (method_.kind == MethodKind::runge_kutta) return runge_kutta_step(j, b, t0, call.h);
-  kick_drift_step(j, b, t0, call.h);
+  if (method_.kind == MethodKind::runge_kutta) return runge_kutta_step(b, t0, call.h);
+  kick_drift_step(b, t0, call.h);
 }
 
 template <class T>
@@ -107,47 +143,36 @@ RigidBlock<T> RigidBlockPath<T>::view(const kernels::RigidBlockJob<T>& j, Block 
 }
 
 template <class T>
-void RigidBlockPath<T>::evaluate(kernels::RigidBlockJob<T>& j, int s, Block b, double t) {
-  for (int d = 0; d < 3; ++d) j.vs[d] = vs_[s][d].data();
+void RigidBlockPath<T>::evaluate(const kernels::RigidBlockJob<T>& j, Block b, double t) {
   table_.rigid_block_stage(j, b.begin, b.end);
   const RigidBlock<T> v = view(j, b, t);
   for (const auto& callback : forces_.rigid_callbacks()) callback(v);
-  j.stage = s;
   table_.rigid_block_rates[lowered_.rigid.has_quadratic()][lowered_.rigid.has_central()](j, b.begin, b.end);
 }
 
 // Stage s from y0 + h sum_j a_sj k_j, then y1 = y0 + h sum_j b_j k_j.
 template <class T>
-void RigidBlockPath<T>::runge_kutta_step(kernels::RigidBlockJob<T>& j, Block b, double t0, T h) {
+void RigidBlockPath<T>::runge_kutta_step(Block b, double t0, T h) {
   const ButcherTableau& tab = method_.tableau;
-  for (int s = 0; s < tab.stages; ++s) {
-    j.terms = s;
-    for (int k = 0; k < s; ++k) j.weight[k] = T(tab.a[s][k]) * h;
-    evaluate(j, s, b, t0 + tab.c[s] * double(h));
-  }
-  j.terms = tab.stages;
-  for (int k = 0; k < tab.stages; ++k) j.weight[k] = T(tab.b[k]) * h;
-  table_.rigid_block_finish(j, b.begin, b.end);
+  for (int s = 0; s < tab.stages; ++s) evaluate(stage_jobs_[s], b, t0 + tab.c[s] * double(h));
+  table_.rigid_block_finish(finish_job_, b.begin, b.end);
 }
 
 // Kicks change v and L by w h times the rates at the bodies' state; drifts move x with v and
 // turn q with L (Euler for first-order schemes, the midpoint rule for second-order ones), as
 // the fused kick-drift kernels do.
 template <class T>
-void RigidBlockPath<T>::kick_drift_step(kernels::RigidBlockJob<T>& j, Block b, double t0, T h) {
+void RigidBlockPath<T>::kick_drift_step(Block b, double t0, T h) {
   const KickDriftScheme& scheme = method_.scheme;
-  j.terms = 0;
+  const kernels::RigidBlockJob<T>& j = stage_jobs_[0];
   for (int k = 0; k < scheme.count; ++k) {
-    const T step = T(scheme.ops[k].weight) * h;
     if (scheme.ops[k].kind == OpKind::kick) {
-      evaluate(j, 0, b, t0 + scheme.ops[k].time * double(h));
-      combine(j.v, j.kv[0], step, b);
-      combine(j.l, j.kl[0], step, b);
+      evaluate(j, b, t0 + scheme.ops[k].time * double(h));
+      combine(j.v, j.kv[0], op_steps_[k], b);
+      combine(j.l, j.kl[0], op_steps_[k], b);
     } else {
-      combine(j.x, j.v, step, b);
-      j.turn_step = step;
-      j.turn_order = method_.order >= 2 ? 2 : 1;
-      table_.rigid_block_turn(j, b.begin, b.end);
+      combine(j.x, j.v, op_steps_[k], b);
+      table_.rigid_block_turn(turn_jobs_[k], b.begin, b.end);
     }
   }
 }

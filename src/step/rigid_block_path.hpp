@@ -35,6 +35,8 @@ class RigidBlockPath {
     bool renormalize;
   };
   bool may_throw() const { return !forces_.rigid_callbacks().empty(); }
+  // Builds the phases' jobs for the call: before any step_block.
+  void prepare(const Call& call);
   // One step of one block from time t0.
   void step_block(const Call& call, Block b, double t0);
   // Keeps the block's state (save), or puts it back.
@@ -43,10 +45,12 @@ class RigidBlockPath {
 
  private:
   kernels::RigidBlockJob<T> job(const Call& call);
-  void runge_kutta_step(kernels::RigidBlockJob<T>& job, Block b, double t0, T h);
-  void kick_drift_step(kernels::RigidBlockJob<T>& job, Block b, double t0, T h);
-  // Stage s's state, the callbacks at time t, and the stage's rates.
-  void evaluate(kernels::RigidBlockJob<T>& job, int s, Block b, double t);
+  kernels::RigidBlockJob<T> with_terms(const kernels::RigidBlockJob<T>& base, const std::array<double, kMaxStages>& row,
+                                       int count, T h, int s);
+  void runge_kutta_step(Block b, double t0, T h);
+  void kick_drift_step(Block b, double t0, T h);
+  // A stage's state, the callbacks at time t, and the stage's rates.
+  void evaluate(const kernels::RigidBlockJob<T>& job, Block b, double t);
   void combine(T* const out[3], const T* const rate[3], T step, Block b) const;
   RigidBlock<T> view(const kernels::RigidBlockJob<T>& job, Block b, double t) const;
 
@@ -62,6 +66,11 @@ class RigidBlockPath {
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> vs_, kv_, kl_;
   std::array<std::array<AlignedArray<T>, 4>, kMaxStages> kq_;
   std::array<AlignedArray<T>, 13> saved_;
+  // The call's jobs (prepare): per stage, the finish; per kick-drift operation, its step
+  // (w h) and its turn.
+  std::array<kernels::RigidBlockJob<T>, kMaxStages> stage_jobs_{}, turn_jobs_{};
+  kernels::RigidBlockJob<T> finish_job_{};
+  std::array<T, kMaxStages> op_steps_{};
 };
 
 extern template class RigidBlockPath<float>;

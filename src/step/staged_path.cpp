@@ -149,6 +149,7 @@ void StagedPath<T>::copy_state(const StepContext<T>& c, Block b, bool save) {
 
 template <class T>
 void StagedPath<T>::run_phases(const StepContext<T>& c) {
+  prepare(c);
   const std::size_t n = c.bodies.padded_size();
   if (coupled()) {
     for (int p = 0; p < phase_count_; ++p) {
@@ -240,14 +241,37 @@ void StagedPath<T>::run(const StepContext<T>& c, const Phase& p, Block b) {
     case PhaseKind::coupled: return run_coupled(c, p, b);
     case PhaseKind::finish: return run_finish(c, b);
     case PhaseKind::kick:
-    case PhaseKind::drift: return run_kick_drift(c, p, b);
+    case PhaseKind::drift: return run_kick_drift(p, b);
   }
+}
+
+// The jobs of every phase for a call's bodies and step size, built once per call rather than
+// once per block: the block path runs a step's phases over slices of a few hundred bodies.
+template <class T>
+void StagedPath<T>::prepare(const StepContext<T>& c) {
+  const int slots = method_.kind == MethodKind::runge_kutta ? method_.tableau.stages : 1;
+  for (int s = 0; s < slots; ++s) stage_jobs_[s] = stage_job(c, s);
+  if (method_.kind == MethodKind::runge_kutta) {
+    finish_jobs_ = finish_jobs(c);
+    return;
+  }
+  for (int k = 0; k < method_.scheme.count; ++k) kick_drift_jobs_[k] = kick_drift_job(c, k);
 }
 
 template <class T>
 void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) {
   const int s = accel_slot(p);
   if (s == 0 && attempt_ != nullptr && attempt_->reuse_scale > 0) return scale_first_stage(b);
+  table_.stage[local_.has_quadratic()][local_.has_central()](stage_jobs_[s], b.begin, b.end);
+  if (!needs_force_scratch()) return;
+  for (auto& f : force_) std::fill(f.data() + b.begin, f.data() + b.end, T(0));
+  const ParticleBlock<T> view = block_view(c, s, b, phase_time(c, p));
+  for (const auto& callback : forces_.callbacks()) callback(view);
+  if (!coupled()) add_forces(c, s, b);
+}
+
+template <class T>
+kernels::StageJob<T> StagedPath<T>::stage_job(const StepContext<T>& c, int s) {
   kernels::StageJob<T> job{};
   job.accel_scale = c.accel_scale;
   job.inv_mass = c.bodies.inv_mass();
@@ -267,12 +291,7 @@ void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) 
     job.v.set(row, s, [&](int j) { return accelerations(j); });
     set_steps(c, row, job.x, job.v);
   }
-  table_.stage[local_.has_quadratic()][local_.has_central()](job, b.begin, b.end);
-  if (!needs_force_scratch()) return;
-  for (auto& f : force_) std::fill(f.data() + b.begin, f.data() + b.end, T(0));
-  const ParticleBlock<T> view = block_view(c, s, b, phase_time(c, p));
-  for (const auto& callback : forces_.callbacks()) callback(view);
-  if (!coupled()) add_forces(c, s, b);
+  return job;
 }
 
 template <class T>
@@ -338,6 +357,14 @@ void StagedPath<T>::add_springs(const StepContext<T>& c, int s, Block b) {
 
 template <class T>
 void StagedPath<T>::run_finish(const StepContext<T>& c, Block b) {
+  // Positions first: they read the stage-0 velocities, which are the bodies' own.
+  table_.combine(finish_jobs_[0], b.begin, b.end);
+  table_.combine(finish_jobs_[1], b.begin, b.end);
+  if (attempt_ != nullptr) block_error_[b.begin / kBlockBodies] = block_error(c, b);
+}
+
+template <class T>
+std::array<kernels::CombineJob<T>, 2> StagedPath<T>::finish_jobs(const StepContext<T>& c) {
   auto body = arrays(c.bodies);
   kernels::CombineJob<T> x{}, v{};
   for (int d = 0; d < 3; ++d) {
@@ -349,10 +376,7 @@ void StagedPath<T>::run_finish(const StepContext<T>& c, Block b) {
   x.c.set(row, stages, [&](int s) { return velocities(c, s); });
   v.c.set(row, stages, [&](int s) { return accelerations(s); });
   set_steps(c, row, x.c, v.c);
-  // Positions first: they read the stage-0 velocities, which are the bodies' own.
-  table_.combine(x, b.begin, b.end);
-  table_.combine(v, b.begin, b.end);
-  if (attempt_ != nullptr) block_error_[b.begin / kBlockBodies] = block_error(c, b);
+  return {x, v};
 }
 
 // The block's sum of squared weighted errors over its six components, e = h sum_s (b_s -
@@ -386,15 +410,20 @@ double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
 }
 
 template <class T>
-void StagedPath<T>::run_kick_drift(const StepContext<T>& c, const Phase& p, Block b) {
+void StagedPath<T>::run_kick_drift(const Phase& p, Block b) {
+  table_.combine(kick_drift_jobs_[p.index], b.begin, b.end);
+}
+
+template <class T>
+kernels::CombineJob<T> StagedPath<T>::kick_drift_job(const StepContext<T>& c, int op) const {
   auto body = arrays(c.bodies);
-  const bool kick = p.kind == PhaseKind::kick;
+  const bool kick = method_.scheme.ops[op].kind == OpKind::kick;
   kernels::CombineJob<T> job{};
   for (int d = 0; d < 3; ++d) job.c.in[d] = job.c.out[d] = kick ? body.v[d] : body.x[d];
   // One term of weight 1, the step the operation's weight times h.
   job.c.set(kernels::row_sum({1}), 1, [&](int) { return kick ? accelerations(0) : velocities(c, 0); });
-  job.c.step = T(method_.scheme.ops[p.index].weight) * c.h;
-  table_.combine(job, b.begin, b.end);
+  job.c.step = T(method_.scheme.ops[op].weight) * c.h;
+  return job;
 }
 
 template class StagedPath<float>;

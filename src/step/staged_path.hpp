@@ -65,6 +65,8 @@ class StagedPath {
   // the others, so the bits are those of step().
   bool blocks_alone() const { return !coupled(); }
   bool may_throw() const { return !forces_.callbacks().empty() || !forces_.coupled_terms().empty(); }
+  // Builds the phases' jobs for the call's bodies and step size: before any step_block.
+  void prepare(const StepContext<T>& c);
   void step_block(const StepContext<T>& c, Block b) { run_block(c, b); }
   // Keeps the block's positions and velocities (save), or puts them back.
   void keep_block(const StepContext<T>& c, Block b) { copy_state(c, b, true); }
@@ -104,7 +106,10 @@ class StagedPath {
   void add_gravity(const StepContext<T>& c, int s, Block b);
   void add_springs(const StepContext<T>& c, int s, Block b);
   void run_finish(const StepContext<T>& c, Block b);
-  void run_kick_drift(const StepContext<T>& c, const Phase& p, Block b);
+  void run_kick_drift(const Phase& p, Block b);
+  kernels::StageJob<T> stage_job(const StepContext<T>& c, int s);
+  std::array<kernels::CombineJob<T>, 2> finish_jobs(const StepContext<T>& c);
+  kernels::CombineJob<T> kick_drift_job(const StepContext<T>& c, int op) const;
   void add_forces(const StepContext<T>& c, int s, Block b);
   void set_steps(const StepContext<T>& c, const kernels::RowSum& row, kernels::Combination<T>& x,
                  kernels::Combination<T>& v) const;
@@ -122,6 +127,10 @@ class StagedPath {
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> stage_x_, stage_v_, stage_a_;
   std::array<AlignedArray<T>, 3> force_;
   std::array<std::array<AlignedArray<T>, 3>, 2> saved_;  // x and v before a step that may throw
+  // The call's jobs (prepare): per stage slot, the finish (x, v), per kick-drift operation.
+  std::array<kernels::StageJob<T>, kMaxStages> stage_jobs_{};
+  std::array<kernels::CombineJob<T>, 2> finish_jobs_{};
+  std::array<kernels::CombineJob<T>, kMaxStages> kick_drift_jobs_{};
   // The attempt in progress (error control), and each block's sum of squared weighted errors.
   const Attempt* attempt_ = nullptr;
   bool first_stage_only_ = false;
