@@ -1,6 +1,7 @@
 #pragma once
 // Collects one instruction set's kernels into its table.
 
+#include "kernels/block_kernels.hpp"
 #include "kernels/coupled_kernels.hpp"
 #include "kernels/kernel_impl.hpp"
 #include "kernels/rigid_kernels.hpp"
@@ -18,6 +19,10 @@ KernelTable<value_t<V>> make_table(Isa isa) {
       t.fused[m][0][v] = fused_kernel<method, false, v, V>();
       t.fused[m][1][v] = fused_kernel<method, true, v, V>();
     });
+    if constexpr (method.kind == MethodKind::runge_kutta) {
+      t.block_stage[m] = &block_stage<method, V>;
+      t.block_finish[m] = &block_finish<method, V>;
+    }
     t.rigid[m][0][0] = rigid_kernel<method, false, false, V>();
     t.rigid[m][0][1] = rigid_kernel<method, false, true, V>();
     t.rigid[m][1][0] = rigid_kernel<method, true, false, V>();
@@ -32,6 +37,15 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.nbody = &nbody<V>;
   t.springs = &springs<V>;
   t.interpolate = &interpolate<V>;
+  t.block_rates[0][0] = &block_rates<false, false, V>;
+  t.block_rates[0][1] = &block_rates<false, true, V>;
+  t.block_rates[1][0] = &block_rates<true, false, V>;
+  t.block_rates[1][1] = &block_rates<true, true, V>;
+  t.block_kick[0][0] = &block_kick<false, false, V>;
+  t.block_kick[0][1] = &block_kick<false, true, V>;
+  t.block_kick[1][0] = &block_kick<true, false, V>;
+  t.block_kick[1][1] = &block_kick<true, true, V>;
+  t.block_drift = &block_drift<V>;
   t.rigid_block_stage = &rigid_block_stage<V>;
   t.rigid_block_rates[0][0] = &rigid_block_rates<false, false, V>;
   t.rigid_block_rates[0][1] = &rigid_block_rates<false, true, V>;

@@ -103,6 +103,27 @@ struct RigidBlockJob {
 template <class T>
 using RigidBlockFn = void (*)(const RigidBlockJob<T>& job, std::size_t begin, std::size_t end);
 
+// The particle block path (callbacks with a built-in method): the phases of a step over bodies
+// [begin, end), stage state in memory where callbacks read it, the method's weights compile
+// time constants as in the fused kernels. Stage 0's state is the bodies' own.
+template <class T>
+struct BlockJob {
+  BodyArrays<T> bodies;    // updated by finish, kicks and drifts
+  T* xs[kMaxStages][3];    // stage positions (stage 0: the bodies')
+  T* vs[kMaxStages][3];    // stage velocities, the position rates (stage 0: the bodies')
+  T* kv[kMaxStages][3];    // stage accelerations, times accel_scale
+  T* force[3];             // what callbacks add
+  LocalForces<T> forces;
+  T h;
+  T accel_scale;  // sigma h (see acceleration_scale); 1 for kicks
+};
+template <class T>
+using BlockStageFn = void (*)(const BlockJob<T>& job, int stage, std::size_t begin, std::size_t end);
+template <class T>
+using BlockFn = void (*)(const BlockJob<T>& job, std::size_t begin, std::size_t end);
+template <class T>
+using BlockStepFn = void (*)(const BlockJob<T>& job, T step, std::size_t begin, std::size_t end);
+
 // One fused step over bodies [begin, end) (multiples of the SIMD width).
 template <class T>
 struct FusedJob {
@@ -326,6 +347,14 @@ struct KernelTable {
   NBodyFn<T> nbody;
   SpringFn<T> springs;
   InterpolateFn<T> interpolate;
+  // The particle block path, Runge-Kutta methods: a stage's state (zeroing the callbacks'
+  // forces); its accelerations [quadratic][central]; the final combination. Kick-drift
+  // methods: a kick [quadratic][central] and a drift. Null where a method is kick-drift.
+  BlockStageFn<T> block_stage[kBuiltinCount];
+  BlockStageFn<T> block_rates[2][2];
+  BlockFn<T> block_finish[kBuiltinCount];
+  BlockStepFn<T> block_kick[2][2];
+  BlockStepFn<T> block_drift;
   // The rigid block path: stage state and the callbacks' view; the stage's rates
   // [quadratic drag][central terms]; the final combination; a drift's turn of q.
   RigidBlockFn<T> rigid_block_stage;

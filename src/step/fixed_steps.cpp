@@ -89,6 +89,13 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   check_reach(lowered.coupled, b);
   StepContext<T> c = core_.start(b, h, lowered.particle, w);
   const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
+  if (core_.paths.block) {
+    BlockPath<T>& path = *core_.paths.block;
+    path.reserve(b.padded_size());
+    path.prepare(c);
+    BlockPathBlocks blocks{path};
+    return run_blocks(w, b, blocks, steps, guard);
+  }
   if (fused_fn == nullptr) return run_staged(c, steps, guard);
   // Local, time-independent forces: each block can take all its steps while it sits in
   // cache. Every body sees the same operations as step by step, so the bits agree.

@@ -66,6 +66,14 @@ class FixedSteps {
       staged.step_block(at, b);
     }
   };
+  struct BlockPathBlocks {
+    BlockPath<T>& path;
+    static constexpr std::size_t slice() { return 512 / sizeof(T); }
+    bool may_throw() const { return path.may_throw(); }
+    void keep(Block b) { path.keep_block(b); }
+    void restore(Block b) { path.restore_block(b); }
+    void step(Block b, double t0) { path.step_block(b, t0); }
+  };
   struct RigidBlocks {
     RigidBlockPath<T>& path;
     typename RigidBlockPath<T>::Call call;

@@ -19,6 +19,9 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
   if (builtin >= 0 && f.fusable() && !force_staged) {
     paths.fused = table.fused[builtin][quad][kernels::fused_variant(l.particle, false)];
     paths.fused_applied = table.fused[builtin][quad][kernels::fused_variant(l.particle, true)];
+  } else if (builtin >= 0 && !f.coupled() && !force_staged) {
+    paths.block = std::make_unique<BlockPath<T>>(f, method, builtin, table, l.particle);
+    paths.block->reserve(staged_capacity);
   } else {
     paths.staged = std::make_unique<StagedPath<T>>(f, method, table, l.particle, l.coupled);
     paths.staged->reserve(staged_capacity);

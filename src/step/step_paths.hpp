@@ -12,6 +12,7 @@
 #include "kernels/kernels.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/methods.hpp"
+#include "step/block_path.hpp"
 #include "step/rigid_block_path.hpp"
 #include "step/staged_path.hpp"
 
@@ -26,7 +27,8 @@ struct StepPaths {
   kernels::FusedFn<T> fused_applied = nullptr;  // the fused path for sets with applied forces
 
   kernels::FusedFn<T> fused_for(bool applied) const { return applied ? fused_applied : fused; }
-  std::unique_ptr<StagedPath<T>> staged;      // particles, when the fused path does not apply
+  std::unique_ptr<BlockPath<T>> block;        // particles: callbacks, a built-in method, no coupling
+  std::unique_ptr<StagedPath<T>> staged;      // particles otherwise
   std::unique_ptr<StagedPath<T>> probe;       // evaluates accelerations alone (made on demand)
 };
 

@@ -153,6 +153,7 @@ template <class T>
 void Stepper<T>::reserve(std::size_t bodies) {
   if (impl_->core.paths.staged) impl_->core.paths.staged->reserve(padded_count<T>(bodies));
   if (impl_->core.paths.rigid_block) impl_->core.paths.rigid_block->reserve(padded_count<T>(bodies));
+  if (impl_->core.paths.block) impl_->core.paths.block->reserve(padded_count<T>(bodies));
 }
 
 template <class T>
@@ -161,7 +162,8 @@ std::size_t Stepper<T>::scratch_bytes() const {
   const std::size_t staged = core.paths.staged ? core.paths.staged->bytes() : 0;
   const std::size_t probe = core.paths.probe ? core.paths.probe->bytes() : 0;
   const std::size_t rigid = core.paths.rigid_block ? core.paths.rigid_block->bytes() : 0;
-  return staged + probe + rigid + core.lowered().coupled.springs.bytes() + impl_->fixed.checkpoint_bytes();
+  const std::size_t block = core.paths.block ? core.paths.block->bytes() : 0;
+  return staged + probe + rigid + block + core.lowered().coupled.springs.bytes() + impl_->fixed.checkpoint_bytes();
 }
 
 template <class T>

@@ -256,3 +256,56 @@ TEST_CASE("error control steps applied forces too", "[adaptive][applied]") {
   CHECK(b.position(0)[0] == Approx(1.5).epsilon(1e-12));
   CHECK_FALSE(b.has_applied_forces());
 }
+
+namespace {
+
+// Gravity and a pull toward the origin given by a callback, the rest built in.
+template <class T>
+ForceModel<T> callback_model(bool with_callback) {
+  ForceModel<T> f;
+  f.add(LinearDrag{0.3}).add(QuadraticDrag{0.05});
+  if (!with_callback) return f.add(Gravity{{0.5, -9.81, 0}}).add(Spring{{0, 0, 0}, 2, 0});
+  return f.add([](const ParticleBlock<T>& b) {
+    for (std::size_t i = 0; i < b.count; ++i) {
+      if (b.inv_mass[i] == 0) continue;
+      const T m = T(1) / b.inv_mass[i];
+      b.fx[i] += T(0.5) * m - 2 * b.px[i], b.fy[i] += T(-9.81) * m - 2 * b.py[i], b.fz[i] -= 2 * b.pz[i];
+    }
+  });
+}
+
+}  // namespace
+
+TEST_CASE("the block path: a callback moves bodies as the equivalent built-in terms do", "[forces][callbacks]") {
+  for (const Method* m : builtin_methods) {
+    INFO(m->name);
+    ParticleSet<double> a = test::cloud<double>(3000), b = a;
+    Stepper<double> built_in(callback_model<double>(false), *m, test::serial_options());
+    Stepper<double> by_callback(callback_model<double>(true), *m, test::serial_options());
+    REQUIRE(built_in.fused());
+    built_in.advance(a, 0.01, 50);
+    by_callback.advance(b, 0.01, 50);
+    double worst = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      worst = std::max(worst, test::distance(a.position(i), b.position(i)) + test::distance(a.velocity(i), b.velocity(i)));
+    }
+    CHECK(worst < 1e-11);
+  }
+}
+
+TEST_CASE("the block path: the same bits on every ISA, thread count and job system", "[determinism][callbacks]") {
+  for (const Method* m : {&rk4, &midpoint, &velocity_verlet}) {
+    INFO(m->name);
+    test::check_same_bits_everywhere(
+        [&](StepperOptions o, std::size_t n) {
+          ParticleSet<float> b = test::cloud<float>(n);
+          apply_game_forces(b);
+          ForceModel<float> f = callback_model<float>(true);
+          f.add(Central{{7, 3, -5}, 4});
+          Stepper<float> s(f, *m, o);
+          s.advance(b, 0.01f, 10);
+          return test::state_hash(b);
+        },
+        2000, 9000);
+  }
+}

@@ -1,0 +1,62 @@
+#pragma once
+// The particle block path: a built-in method with callbacks and no coupled terms. A slice of
+// a block runs each stage (or kick) with the fused kernels' arithmetic, the stage state in
+// memory where the callbacks read it; a block takes every step of a call while in cache (the
+// driver, FixedSteps, runs the blocks).
+
+#include <array>
+#include <cstddef>
+
+#include "kernels/kernels.hpp"
+#include "kinema/bodies.hpp"
+#include "kinema/forces.hpp"
+#include "kinema/methods.hpp"
+#include "parallel/blocks.hpp"
+#include "step/step_context.hpp"
+
+namespace kinema {
+
+template <class T>
+class BlockPath {
+ public:
+  // Keeps references: every argument must outlive the path. `builtin`: the method's index in
+  // builtin_methods.
+  BlockPath(const ForceModel<T>& forces, const Method& method, int builtin, const kernels::KernelTable<T>& table,
+            const kernels::LocalForces<T>& local);
+
+  void reserve(std::size_t padded);  // scratch for `padded` bodies; allocates only to grow
+  std::size_t bytes() const;
+
+  bool may_throw() const { return !forces_.callbacks().empty(); }
+  // Builds the call's job (arrays, step size): before any step_block.
+  void prepare(const StepContext<T>& c);
+  // One step of bodies [b.begin, b.end) from time t0.
+  void step_block(Block b, double t0);
+  void keep_block(Block b);     // saves the bodies' positions and velocities
+  void restore_block(Block b);  // puts them back
+
+ private:
+  void runge_kutta_step(Block b, double t0);
+  void kick_drift_step(Block b, double t0);
+  void call_back(int s, Block b, double t) const;
+
+  const ForceModel<T>& forces_;
+  const Method& method_;
+  const kernels::KernelTable<T>& table_;
+  const kernels::LocalForces<T>& local_;
+  kernels::BlockStageFn<T> stage_fn_;
+  kernels::BlockStageFn<T> rates_fn_;
+  kernels::BlockFn<T> finish_fn_;
+  kernels::BlockStepFn<T> kick_fn_;
+  kernels::BlockJob<T> job_{};
+  std::array<T, kMaxStages> op_steps_{};  // kick-drift: w h per operation
+  std::size_t capacity_ = 0;
+  std::array<std::array<AlignedArray<T>, 3>, kMaxStages> xs_, vs_, kv_;
+  std::array<AlignedArray<T>, 3> force_;
+  std::array<AlignedArray<T>, 6> saved_;
+};
+
+extern template class BlockPath<float>;
+extern template class BlockPath<double>;
+
+}  // namespace kinema
