@@ -59,8 +59,7 @@ template <class T>
 void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard) {
   const kernels::RigidFn<T> rigid_fn = core_.paths.rigid;
   if (rigid_fn == nullptr && !core_.paths.rigid_block) {
-    throw Error("rigid bodies need local force terms and RigidCallbacks only (no ForceCallback, no coupled "
-                "terms)");
+    throw Error("rigid bodies take no coupled terms (N-body gravity, springs, CoupledTerm)");
   }
   const LoweredForces<T>& lowered = core_.lowered();
   core_.begin(h, lowered.rigid);

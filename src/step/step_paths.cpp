@@ -11,9 +11,10 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
   const LoweredForces<T>& l = *paths.lowered;
   const int quad = l.particle.has_quadratic();
   const int builtin = builtin_index(method);
-  if (builtin >= 0 && f.fusable() && f.rigid_callbacks().empty()) {
+  // Rigid bodies ignore particle callbacks, as particles ignore rigid ones.
+  if (builtin >= 0 && !f.coupled() && f.rigid_callbacks().empty()) {
     paths.rigid = table.rigid[builtin][l.rigid.has_quadratic()][l.rigid.has_central()];
-  } else if (f.fusable()) {
+  } else if (!f.coupled()) {
     paths.rigid_block = std::make_unique<RigidBlockPath<T>>(f, method, table, l);
   }
   if (builtin >= 0 && f.fusable() && !force_staged) {

@@ -3,7 +3,7 @@
 // stage in registers) when every term is local and the method built in, else the staged
 // path (one pass per stage; without coupled terms, the block path: every stage of a block
 // while it is in cache). Rigid bodies: fused, or the rigid block path (RigidCallbacks, user
-// tableaus); they take no coupled terms and no particle callbacks.
+// tableaus); they take no coupled terms.
 
 #include <cstddef>
 #include <memory>

@@ -119,3 +119,31 @@ TEST_CASE("guarded steps allocate nothing after the first", "[allocation]") {
     }
   }
 }
+
+TEST_CASE("applied forces and rigid callbacks allocate nothing in steps", "[allocation]") {
+  for (bool tbb : {false, true}) {
+    TbbJobSystem jobs(2);
+    StepperOptions o = tbb ? StepperOptions{} : test::serial_options();
+    if (tbb) o.jobs = &jobs, o.workers = WorkerChoice::all;
+    ParticleSet<float> particles = test::cloud<float>(20000);
+    particles.keep_forces(true);
+    for (std::size_t i = 0; i < particles.size(); i += 3) particles.apply_force(i, {1, 2, 3});
+    RigidBodySet<float> rigid;
+    for (std::size_t i = 0; i < 5000; ++i) rigid.add({{float(i % 9), 0, 0}, {}, {1, 0, 0.1f, 0}, {0.2f, 0, 0}, 1, {1, 2, 3}});
+    rigid.keep_forces(true);
+    rigid.apply_torque(7, {0, 1, 0});
+    ForceModel<float> f = with_callback(test::all_local_terms<float>());
+    f.add([](const RigidBlock<float>& b) {
+      for (std::size_t i = 0; i < b.count; ++i) b.tz[i] -= 0.1f * b.wz[i];
+    });
+    for (const Method* m : {&rk4, &velocity_verlet}) {
+      INFO(m->name << (tbb ? " on tbb" : " serial"));
+      Stepper<float> sp(test::all_local_terms<float>(), *m, o), sr(f, *m, o), sc(f, *m, o);
+      sp.step(particles, 0.01f), sr.step(rigid, 0.01f), sc.step(particles, 0.01f);
+      const long before = g_allocations.load();
+      sp.advance(particles, 0.01f, 5), sr.advance(rigid, 0.01f, 5), sc.advance(particles, 0.01f, 5);
+      sp.step(particles, 0.01f), sr.step(rigid, 0.01f), sc.step(particles, 0.01f);
+      CHECK(g_allocations.load() - before == 0);
+    }
+  }
+}

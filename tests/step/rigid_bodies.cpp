@@ -270,9 +270,9 @@ TEST_CASE("bad rigid bodies are refused by name", "[rigid][errors]") {
                     "rigid body 1: inertia moments must be positive");
   CHECK(set.size() == 1);
   ForceModel<float> f;
-  f.add([](const ParticleBlock<float>&) {});
+  f.add(NBody{1, 0});
   Stepper<float> s(f, rk4, test::serial_options());
-  CHECK_THROWS_WITH(s.step(set, 0.01f), Catch::StartsWith("rigid bodies need local force terms and RigidCallbacks only"));
+  CHECK_THROWS_WITH(s.step(set, 0.01f), Catch::StartsWith("rigid bodies take no coupled terms"));
 }
 
 namespace {

@@ -164,12 +164,18 @@ TEST_CASE("a rigid callback that throws leaves the set as before the step that t
   }
 }
 
-TEST_CASE("particles ignore rigid callbacks; rigid bodies refuse particle callbacks", "[rigid][callbacks][errors]") {
+TEST_CASE("particles ignore rigid callbacks, rigid bodies particle callbacks", "[rigid][callbacks]") {
   ForceModel<float> f = test::all_local_terms<float>();
-  f.add([](const RigidBlock<float>&) { throw std::runtime_error("called"); });
+  f.add([](const RigidBlock<float>&) { throw std::runtime_error("rigid callback called"); });
   Stepper<float> s(f, rk4, test::serial_options());
   CHECK(s.fused());
   ParticleSet<float> p = test::cloud<float>(100);
   s.step(p, 0.01f);
+  ForceModel<float> g = test::all_local_terms<float>();
+  g.add([](const ParticleBlock<float>&) { throw std::runtime_error("particle callback called"); });
+  RigidBodySet<float> r = tumbling<float>(100), fused = r;
+  Stepper<float>(g, rk4, test::serial_options()).step(r, 0.01f);
+  Stepper<float>(test::all_local_terms<float>(), rk4, test::serial_options()).step(fused, 0.01f);
+  CHECK(rigid_hash(r) == rigid_hash(fused));
   CHECK_THROWS_WITH(f.add(RigidCallback<float>{}), Catch::Contains("empty"));
 }
