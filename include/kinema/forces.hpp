@@ -2,9 +2,10 @@
 // Force terms and the ForceModel that sums them.
 //
 // Local terms depend on one body's own state only; a model made of local terms alone is
-// stepped by the fused single-pass kernels. Callback terms (user code over a block of
-// bodies) and coupled terms (forces between bodies) switch the stepper to the staged path:
-// one pass per stage, all bodies' stage state in memory.
+// stepped by the fused single-pass kernels. Callbacks (user code over a slice of bodies)
+// take the block path: every stage of a slice in cache, the callbacks between stages.
+// Coupled terms (forces between bodies) take the staged path: one pass per stage, all
+// bodies' stage state in memory.
 
 #include <cstddef>
 #include <cstdint>
@@ -103,8 +104,8 @@ using LocalTerm = std::variant<Gravity, LinearDrag, QuadraticDrag, Spring, Centr
 inline constexpr int kMaxCentralTerms = 4;
 inline constexpr int kMaxPointForces = 4;
 
-// What a callback or coupled term sees: the bodies [begin, begin + count) of one block at
-// one stage, as SoA pointers already offset to `begin`. It adds forces into fx, fy, fz
+// What a callback or coupled term sees: the bodies [begin, begin + count) of one slice of a
+// block (at most kBlockBodies) at one stage, as SoA pointers already offset to `begin`. It adds forces into fx, fy, fz
 // (zeroed before the call); they are divided by mass afterwards. Counts include the inert
 // padding bodies at the end of the set (at the origin, inv_mass 0); forces on them are
 // ignored.

@@ -2,8 +2,10 @@
 // Stepper: advances a ParticleSet under a ForceModel with a Method.
 //
 // It picks the path once, at construction: the fused path (one pass per step, all stages
-// in registers) when the model is local and the method built in, else the staged path
-// (one parallel pass per stage). All scratch is allocated at construction or at the first
+// in registers) when the model is local and the method built in; the block path (every stage
+// of a slice of bodies in cache, callbacks between stages) for callbacks or a method of the
+// user's own without coupled terms; else the staged path (one parallel pass per stage).
+// Forces applied to single bodies (ParticleSet::apply_force, ...) act on every path. All scratch is allocated at construction or at the first
 // step that sees a larger body count (see reserve); a step allocates nothing, starts no
 // thread and throws only on a bad argument, before any body moves, or, under a finiteness
 // guard, a NonFiniteError with the bodies put back to the last finite state.
@@ -107,9 +109,10 @@ class Stepper {
   // Throws kinema::Error for a method without a pair, bad tolerances, t_end before time(),
   // or a step that would underflow.
   AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances);
-  // Rigid bodies: the same, with orientation and angular momentum. They take the fused
-  // path only: a built-in method and local force terms (kinema::Error otherwise). Use one
-  // stepper per body set: each keeps its own clock.
+  // Rigid bodies: the same, with orientation and angular momentum: the fused path for a
+  // built-in method and local terms, the rigid block path for RigidCallbacks or another
+  // method; coupled terms are refused (kinema::Error). Use one stepper per body set: each
+  // keeps its own clock.
   void step(RigidBodySet<T>& io_bodies, T h);
   void advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps);
   // Throws the kinema::Error a step of size h would throw (h not positive and finite in T,
