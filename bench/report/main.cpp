@@ -38,6 +38,7 @@ void print_sections(const report::Results& results, report::Rk4Csv* csv) {
   report::print_frame_loop_table(results, noise);
   report::print_isa_table(results);
   report::print_rigid_table(results);
+  report::print_game_table(results, noise);
   report::print_paired_scaling(results);
   report::print_coupled_table(results, noise);
   report::print_frame_table(results, noise);

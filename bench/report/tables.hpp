@@ -14,6 +14,7 @@ void print_bounds_table(const Results& results, Noise& noise);
 void print_frame_loop_table(const Results& results, Noise& noise);
 void print_isa_table(const Results& results);
 void print_rigid_table(const Results& results);
+void print_game_table(const Results& results, Noise& noise);
 void print_paired_scaling(const Results& results);
 void print_coupled_table(const Results& results, Noise& noise);
 void print_frame_table(const Results& results, Noise& noise);
