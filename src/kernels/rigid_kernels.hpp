@@ -162,7 +162,7 @@ struct Dynamic {
   M dynamic;  // what torque() reads of a body
 };
 
-template <const Method& M, int U, class V>
+template <const Method& M, int U, bool Applied, class V>
 KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotational<V>& rf, std::size_t i) {
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
@@ -178,7 +178,7 @@ KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotatio
     l0[u] = load3<V>(job.l, i + u * W);
     inv_inertia[u] = load3<V>(job.inv_inertia, i + u * W);
     body[u].dynamic = load<V>(job.bodies.inv_mass + i + u * W) != V(0);
-    applied[u] = applied_torque<V>(job, i + u * W, applied_storage[u]);
+    applied[u] = Applied ? applied_torque<V>(job, i + u * W, applied_storage[u]) : nullptr;
   }
   static_for<S>([&](auto s) {
     constexpr Weights row = tab.a[s];
@@ -198,17 +198,30 @@ KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotatio
   }
 }
 
+// The rotation of bodies [begin, end), with or without applied torques: one function per
+// method, shared by the kernel's variants (it does not depend on the centre's terms).
+template <const Method& M, bool Applied, class V>
+void rotation_pass(const RigidJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  constexpr std::size_t W = Lane<V>::width;
+  const Rotational<V> rf(job.rotation);
+  std::size_t i = begin;
+  for (; i + 2 * W <= end; i += 2 * W) rigid_rotation<M, 2, Applied>(job, rf, i);
+  if (i < end) rigid_rotation<M, 1, Applied>(job, rf, i);
+}
+
 template <const Method& M, bool Quadratic, bool Central, class V>
 void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, std::size_t end) {
   const RigidJob<value_t<V>> job = shared;  // a copy: stores cannot alias its pointers
   constexpr double sigma = acceleration_scale(M.tableau);
   const Forces<V> f(job.forces, value_t<V>(sigma) * job.h);
-  const Rotational<V> rf(job.rotation);
   constexpr std::size_t W = Lane<V>::width;
-  for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true, Applied::if_present>(job.bodies, f, job.h, i);
-  std::size_t i = begin;
-  for (; i + 2 * W <= end; i += 2 * W) rigid_rotation<M, 2>(job, rf, i);
-  if (i < end) rigid_rotation<M, 1>(job, rf, i);
+  if (job.bodies.applied[0] != nullptr) {
+    for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true, Applied::always>(job.bodies, f, job.h, i);
+  } else {
+    for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true, Applied::never>(job.bodies, f, job.h, i);
+  }
+  if (job.torque[0] != nullptr) return rotation_pass<M, true, V>(job, begin, end);
+  rotation_pass<M, false, V>(job, begin, end);
 }
 
 // Kick-drift for rigid bodies: a kick updates v and L; a drift moves x and turns q with the

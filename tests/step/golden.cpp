@@ -94,6 +94,12 @@ const std::map<std::string, std::uint64_t> kGolden = {
 
 }  // namespace
 
+#ifdef KINEMA_SANITIZED
+constexpr unsigned kThreadCounts[] = {1, 2};
+#else
+constexpr unsigned kThreadCounts[] = {1, 2, 3};
+#endif
+
 TEST_CASE("shipped scenes hash to their stored values on every ISA, thread count and path", "[golden]") {
   const char* names[] = {"damped_spring", "drag_field",      "kepler_circular", "kepler_eccentric",
                          "projectiles",   "spinning_debris", "tumbling_book",   "binary_orbit",
@@ -115,7 +121,7 @@ TEST_CASE("shipped scenes hash to their stored values on every ISA, thread count
       CHECK((stored != kGolden.end() && reference == stored->second));
       for (const Isa isa : {Isa::sse2, Isa::avx2, Isa::avx512}) {
         if (!isa_available(isa)) continue;
-        for (const unsigned threads : {1u, 2u, 3u}) {
+        for (const unsigned threads : kThreadCounts) {
           StepperOptions o;
           o.isa = isa;
           o.threads = threads;
