@@ -70,15 +70,17 @@ constexpr std::size_t padded_count(std::size_t count) {
 }
 
 // Vectors applied to single bodies from outside the force model (the game's forces and
-// torques), three component arrays of the set's capacity. A set allocates them at its first
-// apply and never before: a set that applies nothing carries and reads no such arrays.
-// clear() only marks them unused (no pass over memory); the next add zeroes them first.
+// torques): three component arrays, none or all at least as long as the set's capacity (so
+// kernels may read them to padded_size()). A set allocates them at its first apply and never
+// before: a set that applies nothing carries and reads no such arrays. clear() only marks
+// them unused (no pass over memory); the next add zeroes them first. Every change that
+// allocates does so before anything changes.
 template <class T>
 class AppliedVectors {
  public:
   AppliedVectors() = default;
-  AppliedVectors(const AppliedVectors&) = default;
-  AppliedVectors& operator=(const AppliedVectors&) = default;
+  AppliedVectors(const AppliedVectors&) = default;  // the source's lengths: its set's capacity
+  AppliedVectors& operator=(const AppliedVectors&) = delete;  // see fits and assign
   // A moved-from value holds nothing.
   AppliedVectors(AppliedVectors&& other) noexcept
       : arrays_(std::move(other.arrays_)), active_(std::exchange(other.active_, false)) {}
@@ -91,15 +93,23 @@ class AppliedVectors {
   // Component d's array while active, else nullptr (what the kernels test).
   const T* data(int d) const { return active_ ? arrays_[d].data() : nullptr; }
   Vec3<T> at(std::size_t i) const;  // zero when not active
-  // Adds v to body i, whose set has `capacity` elements per array; kinema::Error naming the
-  // body and `field` when v or the sum is not finite (nothing changes then).
+  // Throws the kinema::Error add(i, v, ...) would throw (v or the sum not finite, naming the
+  // body and `field`), changing nothing.
+  void check_add(std::size_t i, const Vec3<T>& v, const char* field) const;
+  // Adds v to body i, whose set has `capacity` elements per array (checked as check_add).
   void add(std::size_t i, const Vec3<T>& v, std::size_t capacity, const char* field);
   void clear() { active_ = false; }
-  void grow(std::size_t capacity);  // keeps the arrays as long as the set's
+  void grow(std::size_t capacity);  // keeps arrays, if any, as long as the set's
+  // Whether assign(other) needs no allocation for a set of `capacity`.
+  bool fits(const AppliedVectors& other, std::size_t capacity) const;
+  void assign(const AppliedVectors& other);  // only where fits: allocates nothing
   void copy_body(std::size_t from, std::size_t to);
   void clear_body(std::size_t i);
 
  private:
+  bool allocated() const { return arrays_[0].size() > 0; }
+  void ensure(std::size_t capacity);  // all three at least `capacity` long, contents kept
+
   std::array<AlignedArray<T>, 3> arrays_;
   bool active_ = false;
 };
@@ -166,9 +176,10 @@ class ParticleSet {
   void set_kinematic(std::size_t i);     // forces stop moving it (inv_mass 0)
 
   // Forces from the game, per body. An applied force acts, constant, over every step of the
-  // next Stepper::step or advance (or advance_to) call, as part of the body's acceleration
-  // (F inv_mass), and is cleared when that call returns, unless keep_forces(true) keeps it
-  // for later calls too. A call that throws leaves the forces applied. Forces on one body
+  // next Stepper::step or advance (or advance_to) call that takes a step, as part of the
+  // body's acceleration (F inv_mass), and is cleared when that call returns, unless
+  // keep_forces(true) keeps it for later calls too. A call that throws, or takes no step,
+  // leaves the forces applied. Forces on one body
   // add up. Bodies with inv_mass 0 (kinematic) ignore them. The first apply allocates the
   // set's force arrays; a set that never applies a force carries none, and its steps cost
   // what they cost without this feature. kinema::Error for a bad index or a non-finite value.
@@ -197,6 +208,10 @@ class ParticleSet {
  private:
   friend class RigidBodySet<T>;
   void check_index(std::size_t i) const;
+  // Whether copying `other` in place needs no allocation.
+  bool copy_fits(const ParticleSet& other) const {
+    return capacity() >= other.capacity() && applied_.fits(other.applied_, capacity());
+  }
   // Copies body `from` to `to` in every array, or clears `to` to inert padding.
   void copy_body(std::size_t from, std::size_t to);
   void clear_body(std::size_t i);

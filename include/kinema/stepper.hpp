@@ -128,11 +128,12 @@ class Stepper {
   // (JobSystem::wake), so that they may be awake when the call comes. Otherwise nothing
   // happens. Whether it pays depends on how long the job system keeps woken workers awake.
   void prepare();
-  // Allocates the staged path's scratch for up to `bodies` bodies ahead of time.
+  // Allocates the scratch of the stepper's paths (staged, block, rigid block) for up to
+  // `bodies` bodies ahead of time.
   void reserve(std::size_t bodies);
-  // Bytes the stepper holds for stepping: the staged path's stage state, the lowered spring
-  // network, the finiteness guard's copy of the state, and the scratch of the accelerations
-  // probe once accelerations() (or advance_to's stable-step cap) has used it.
+  // Bytes the stepper holds for stepping: the staged and block paths' stage state, the
+  // lowered spring network, the finiteness guard's copy of the state, and the scratch of the
+  // accelerations probe once accelerations() (or advance_to's stable-step cap) has used it.
   std::size_t scratch_bytes() const;
   // Replaces the force model between steps (new gravity, wind, anchors, torques): checked
   // here, before anything changes (kinema::Error, the stepper as it was), with no new job

@@ -122,34 +122,63 @@ Vec3<T> AppliedVectors<T>::at(std::size_t i) const {
 }
 
 template <class T>
-void AppliedVectors<T>::add(std::size_t i, const Vec3<T>& v, std::size_t capacity, const char* field) {
+void AppliedVectors<T>::check_add(std::size_t i, const Vec3<T>& v, const char* field) const {
   check_finite(v, i, field);
   const Vec3<T> old = at(i);
   const Vec3<T> sum{old[0] + v[0], old[1] + v[1], old[2] + v[2]};
   check_finite(sum, i, (std::string(field) + " summed with the one already applied").c_str());
-  for (auto& a : arrays_) a.resize(capacity);  // may throw: nothing has changed yet
+}
+
+template <class T>
+void AppliedVectors<T>::add(std::size_t i, const Vec3<T>& v, std::size_t capacity, const char* field) {
+  check_add(i, v, field);
+  ensure(capacity);
   if (!active_) {
     for (auto& a : arrays_) std::fill(a.data(), a.data() + a.size(), T(0));
     active_ = true;
   }
-  for (int d = 0; d < 3; ++d) arrays_[d][i] = sum[d];
+  for (int d = 0; d < 3; ++d) arrays_[d][i] += v[d];
+}
+
+// New arrays first, moved in once all three exist: a failed allocation changes nothing.
+template <class T>
+void AppliedVectors<T>::ensure(std::size_t capacity) {
+  if (allocated() && arrays_[0].size() >= capacity) return;
+  std::array<AlignedArray<T>, 3> grown;
+  for (int d = 0; d < 3; ++d) {
+    grown[d] = AlignedArray<T>(std::max(capacity, arrays_[d].size()));
+    if (allocated()) grown[d] = arrays_[d];  // fits: no allocation
+  }
+  arrays_ = std::move(grown);
 }
 
 template <class T>
 void AppliedVectors<T>::grow(std::size_t capacity) {
-  if (arrays_[0].size() == 0) return;  // never applied: stays without arrays
-  for (auto& a : arrays_) a.resize(capacity);
+  if (allocated()) ensure(capacity);  // never applied: stays without arrays
+}
+
+template <class T>
+bool AppliedVectors<T>::fits(const AppliedVectors& other, std::size_t capacity) const {
+  return !other.allocated() || (allocated() && arrays_[0].size() >= std::max(capacity, other.arrays_[0].size()));
+}
+
+template <class T>
+void AppliedVectors<T>::assign(const AppliedVectors& other) {
+  if (other.allocated()) {
+    for (int d = 0; d < 3; ++d) arrays_[d] = other.arrays_[d];  // fits: copies, zeroes the rest
+  }
+  active_ = other.active_;
 }
 
 template <class T>
 void AppliedVectors<T>::copy_body(std::size_t from, std::size_t to) {
-  if (arrays_[0].size() == 0) return;
+  if (!allocated()) return;
   for (auto& a : arrays_) a[to] = a[from];
 }
 
 template <class T>
 void AppliedVectors<T>::clear_body(std::size_t i) {
-  if (arrays_[0].size() == 0) return;
+  if (!allocated()) return;
   for (auto& a : arrays_) a[i] = 0;
 }
 
@@ -175,8 +204,8 @@ void ParticleSet<T>::grow_to(std::size_t count) {
   std::size_t capacity = px_.size();
   if (count <= capacity) return;
   std::size_t target = std::max(count, capacity * 2);
+  applied_.grow(target);  // first: arrays longer than the capacity are harmless, shorter not
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(target);
-  applied_.grow(target);
 }
 
 template <class T>
@@ -218,8 +247,8 @@ void ParticleSet<T>::add(std::span<const ParticleDesc<T>> bodies) {
 template <class T>
 ParticleSet<T>& ParticleSet<T>::operator=(const ParticleSet& other) {
   if (this == &other) return *this;
-  if (capacity() < other.capacity()) return *this = ParticleSet(other);  // all or nothing
-  applied_ = other.applied_;  // the one copy that may allocate: before anything else changes
+  if (!copy_fits(other)) return *this = ParticleSet(other);  // all or nothing
+  applied_.assign(other.applied_);
   keep_forces_ = other.keep_forces_;
   for (auto [to, from] : {std::pair{&px_, &other.px_}, {&py_, &other.py_}, {&pz_, &other.pz_}, {&vx_, &other.vx_},
                           {&vy_, &other.vy_}, {&vz_, &other.vz_}, {&inv_mass_, &other.inv_mass_}}) {
@@ -243,8 +272,8 @@ ParticleSet<T>& ParticleSet<T>::operator=(ParticleSet&& other) noexcept {
 
 template <class T>
 void ParticleSet<T>::reserve(std::size_t count) {
+  applied_.grow(padded_count<T>(count));
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(count);
-  applied_.grow(capacity());
 }
 
 template <class T>

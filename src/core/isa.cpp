@@ -1,5 +1,4 @@
-// Which instruction sets this CPU runs: xsimd::dispatch walks the list best first and stops
-// at the first set this CPU supports.
+// Which instruction sets this CPU runs and this build has kernels for.
 #include "kinema/isa.hpp"
 
 #include <string>
@@ -11,42 +10,56 @@
 namespace kinema {
 namespace {
 
-struct BestIsa {
-  Isa operator()(xsimd::avx512f) const { return Isa::avx512; }
-  Isa operator()(xsimd::fma3<xsimd::avx2>) const { return Isa::avx2; }
-  Isa operator()(xsimd::sse2) const { return Isa::sse2; }
-};
+// Whether this build has the kernels of a set (KINEMA_KERNEL_ISAS in CMake).
+constexpr bool built(Isa isa) {
+  switch (isa) {
+#ifdef KINEMA_KERNELS_SSE2
+    case Isa::sse2: return true;
+#endif
+#ifdef KINEMA_KERNELS_AVX2
+    case Isa::avx2: return true;
+#endif
+#ifdef KINEMA_KERNELS_AVX512
+    case Isa::avx512: return true;
+#endif
+    case Isa::automatic:
+    case Isa::scalar: return true;
+    default: return false;
+  }
+}
+
+bool cpu_has(Isa isa) {
+  const auto cpu = xsimd::available_architectures();
+  switch (isa) {
+    case Isa::sse2: return cpu.sse2;
+    case Isa::avx2: return cpu.fma3_avx2;
+    case Isa::avx512: return cpu.avx512f;
+    default: return true;
+  }
+}
 
 }  // namespace
 
 Isa best_isa() {
-  static const Isa best =
-      xsimd::dispatch<xsimd::arch_list<xsimd::avx512f, xsimd::fma3<xsimd::avx2>, xsimd::sse2>>(
-          BestIsa{})();
+  static const Isa best = [] {
+    for (Isa isa : {Isa::avx512, Isa::avx2, Isa::sse2}) {
+      if (isa_available(isa)) return isa;
+    }
+    return Isa::scalar;
+  }();
   return best;
 }
 
 bool isa_available(Isa isa) {
-  const auto cpu = xsimd::available_architectures();
-  switch (isa) {
-    case Isa::automatic:
-    case Isa::scalar:
-      return true;
-    case Isa::sse2:
-      return cpu.sse2;
-    case Isa::avx2:
-      return cpu.fma3_avx2;
-    case Isa::avx512:
-      return cpu.avx512f;
-  }
-  return false;
+  return built(isa) && cpu_has(isa);
 }
 
 Isa resolve_isa(Isa requested) {
   if (requested == Isa::automatic) return best_isa();
   if (!isa_available(requested)) {
-    throw Error("isa " + std::string(isa_name(requested)) + " is not supported by this CPU (best: " +
-                std::string(isa_name(best_isa())) + ")");
+    const char* why = built(requested) ? "is not supported by this CPU" : "has no kernels in this build";
+    throw Error("isa " + std::string(isa_name(requested)) + " " + why + " (best: " + std::string(isa_name(best_isa())) +
+                ")");
   }
   return requested;
 }

@@ -160,10 +160,10 @@ void RigidBodySet<T>::grow_rotation_arrays() {
   // Match the centre arrays' capacity; new padding gets the identity orientation.
   const std::size_t target = centers_.capacity(), old = q_[0].size();
   if (target <= old) return;
+  torques_.grow(target);  // first: arrays longer than the capacity are harmless, shorter not
   for (auto& a : q_) a.resize(target);
   for (auto& a : l_) a.resize(target);
   for (auto& a : inv_inertia_) a.resize(target);
-  torques_.grow(target);
   for (std::size_t i = old; i < target; ++i) q_[0][i] = 1;
 }
 
@@ -205,10 +205,11 @@ void RigidBodySet<T>::pad_rotation_arrays(std::size_t from) {
 template <class T>
 RigidBodySet<T>& RigidBodySet<T>::operator=(const RigidBodySet& other) {
   if (this == &other) return *this;
-  if (centers_.capacity() < other.centers_.capacity() || q_[0].size() < other.q_[0].size()) {
+  if (!centers_.copy_fits(other.centers_) || q_[0].size() < other.q_[0].size() ||
+      !torques_.fits(other.torques_, centers_.capacity())) {
     return *this = RigidBodySet(other);  // all or nothing
   }
-  torques_ = other.torques_;  // the one copy that may allocate: before anything else changes
+  torques_.assign(other.torques_);  // each fits: no allocation from here on
   centers_ = other.centers_;
   q_ = other.q_, l_ = other.l_, inv_inertia_ = other.inv_inertia_;
   pad_rotation_arrays(other.q_[0].size());  // past the copied arrays: inert padding
@@ -292,8 +293,9 @@ void RigidBodySet<T>::apply_torque(std::size_t i, const Vec3<T>& torque) {
 template <class T>
 void RigidBodySet<T>::apply_force_at(std::size_t i, const Vec3<T>& force, const Vec3<T>& world_point) {
   const Vec3<T> moment = moment_about(i, force, world_point, "force");
-  centers_.apply_force(i, force);
+  centers_.applied_.check_add(i, force, "force");  // both checked before either changes
   torques_.add(i, moment, centers_.capacity(), "torque");
+  centers_.apply_force(i, force);
 }
 
 template <class T>
@@ -309,8 +311,15 @@ void RigidBodySet<T>::apply_angular_impulse(std::size_t i, const Vec3<T>& impuls
 template <class T>
 void RigidBodySet<T>::apply_impulse_at(std::size_t i, const Vec3<T>& impulse, const Vec3<T>& world_point) {
   const Vec3<T> moment = moment_about(i, impulse, world_point, "impulse");
-  apply_angular_impulse(i, moment);
-  centers_.apply_impulse(i, impulse);
+  if (centers_.inv_mass()[i] == 0) return;  // kinematic
+  const T inv_mass = centers_.inv_mass()[i];
+  const Vec3<T> v0 = centers_.velocity(i), l0 = angular_momentum(i);
+  const Vec3<T> v{v0[0] + impulse[0] * inv_mass, v0[1] + impulse[1] * inv_mass, v0[2] + impulse[2] * inv_mass};
+  const Vec3<T> l{l0[0] + moment[0], l0[1] + moment[1], l0[2] + moment[2]};
+  check_finite(v, i, "velocity after the impulse");  // both checked before either changes
+  check_finite(l, i, "angular momentum after the impulse");
+  for (int d = 0; d < 3; ++d) l_[d][i] = l[d];
+  centers_.set_velocity(i, v);
 }
 
 template <class T>

@@ -6,10 +6,16 @@ namespace kernels {
 
 template <class T>
 const KernelTable<T>& kernel_table(Isa isa, bool relaxed) {
-  switch (resolve_isa(isa)) {
+  switch (resolve_isa(isa)) {  // only the sets this build has get past it
+#ifdef KINEMA_KERNELS_AVX512
     case Isa::avx512: return avx512_table<T>();
+#endif
+#ifdef KINEMA_KERNELS_AVX2
     case Isa::avx2: return avx2_table<T>();
+#endif
+#ifdef KINEMA_KERNELS_SSE2
     case Isa::sse2: return relaxed ? sse2_relaxed_table<T>() : sse2_table<T>();
+#endif
     default: return relaxed ? scalar_relaxed_table<T>() : scalar_table<T>();
   }
 }

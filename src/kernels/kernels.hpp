@@ -326,8 +326,9 @@ inline constexpr std::size_t kBuiltinCount = builtin_methods.size();
 // The fused particle kernels come in three variants, so that a model pays only for what it
 // uses: plain; with central attractors (their count known at run time), which also reads
 // applied forces where the set has them; with applied forces. Variants give the same bits
-// wherever more than one applies. The rigid kernels and the stage kernel read applied forces
-// and torques where present (a test per batch), and take [central] only.
+// wherever more than one applies. The rigid kernels take [central] only: the Runge-Kutta ones
+// choose per call whether to read applied forces and torques, the kick-drift ones and the
+// stage kernel test for them per batch.
 inline constexpr int kPlainVariant = 0, kCentralVariant = 1, kAppliedVariant = 2, kFusedVariants = 3;
 template <class T>
 constexpr int fused_variant(const LocalForces<T>& f, bool applied) {

@@ -349,7 +349,8 @@ void rigid_block_finish(const RigidBlockJob<value_t<V>>& job, std::size_t begin,
   }
 }
 
-// A drift's turn of q with the current L, as the fused kick-drift kernels turn it.
+// A drift's turn of q with the current L (Euler, or the midpoint rule), as the fused
+// kick-drift kernels turn it; q is renormalized after each drift, not once per step.
 template <class V>
 void rigid_block_turn(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   const V step(job.turn_step), half(value_t<V>(0.5) * job.turn_step);

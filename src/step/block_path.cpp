@@ -101,6 +101,7 @@ void BlockPath<T>::kick_drift_step(Block b, double t0) {
       table_.block_drift(job_, op_steps_[k], b.begin, b.end);
       continue;
     }
+    // A kick's state is the bodies' own: no stage kernel runs to zero the forces.
     for (T* f : job_.force) std::fill(f + b.begin, f + b.end, T(0));
     call_back(0, b, t0 + scheme.ops[k].time * double(job_.h));
     kick_fn_(job_, op_steps_[k], b.begin, b.end);

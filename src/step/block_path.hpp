@@ -26,6 +26,7 @@ class BlockPath {
 
   void reserve(std::size_t padded);  // scratch for `padded` bodies; allocates only to grow
   std::size_t bytes() const;
+  std::size_t capacity() const { return capacity_; }
 
   bool may_throw() const { return !forces_.callbacks().empty(); }
   // Builds the call's job (arrays, step size): before any step_block.

@@ -128,7 +128,7 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
   const std::size_t n = set.padded_size();
   const bool may_throw = path.may_throw();
   if (may_throw) {
-    completed_.resize(std::max(completed_.size(), block_count(n)));
+    reserve_blocks(n);
     std::fill(completed_.begin(), completed_.end(), kNotRun);
   }
   const Clock<T> start = core_.clock;
@@ -140,8 +140,8 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
       auto step = [&](Block b) {
         Clock<T> now = start;
         now.steps += done;
-        for (std::size_t s = b.begin; s < b.end; s += path.slice()) {
-          path.step({s, std::min(s + path.slice(), b.end)}, now.time());
+        for (std::size_t s = b.begin; s < b.end; s += kSliceBodies) {
+          path.step({s, std::min(s + kSliceBodies, b.end)}, now.time());
         }
         ++done;
       };
@@ -157,6 +157,7 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
       completed = done;
     });
   } catch (...) {
+    if (!may_throw) throw;  // a host job system's own failure: nothing of ours to put back
     std::uint64_t first = kNotRun;
     for (std::size_t i = 0; i < block_count(n); ++i) {
       if (completed_[i] == kNotRun) continue;

@@ -63,17 +63,17 @@ kernels::RigidBlockJob<T> RigidBlockPath<T>::job(const Call& call) {
     j.inv_inertia[d] = b.inv_inertia(d);
     j.applied[d] = b.centers().applied_force_data(d);
     j.applied_torque[d] = b.applied_torque_data(d);
-    j.xs[d] = (xs_[d].data()), j.ls[d] = (ls_[d].data());
-    j.omega[d] = (omega_[d].data());
-    j.force[d] = (force_[d].data()), j.torque[d] = (torque_[d].data());
+    j.xs[d] = xs_[d].data(), j.ls[d] = ls_[d].data();
+    j.omega[d] = omega_[d].data();
+    j.force[d] = force_[d].data(), j.torque[d] = torque_[d].data();
   }
-  for (int k = 0; k < 4; ++k) j.q[k] = b.q(k), j.qs[k] = (qs_[k].data());
+  for (int k = 0; k < 4; ++k) j.q[k] = b.q(k), j.qs[k] = qs_[k].data();
   for (int s = 0; s < kMaxStages; ++s) {
     for (int d = 0; d < 3; ++d) {
       j.kx[s][d] = vs_[s][d].data();
-      j.kv[s][d] = (kv_[s][d].data()), j.kl[s][d] = (kl_[s][d].data());
+      j.kv[s][d] = kv_[s][d].data(), j.kl[s][d] = kl_[s][d].data();
     }
-    for (int k = 0; k < 4; ++k) j.kq[s][k] = (kq_[s][k].data());
+    for (int k = 0; k < 4; ++k) j.kq[s][k] = kq_[s][k].data();
   }
   j.inv_mass = b.centers().inv_mass();
   j.forces = lowered_.rigid;

@@ -27,6 +27,7 @@ class RigidBlockPath {
   // Scratch for `padded` bodies (a padded count); allocates only when it grows.
   void reserve(std::size_t padded);
   std::size_t bytes() const;
+  std::size_t capacity() const { return capacity_; }
 
   // What one call steps: the set, the step size, whether q is renormalized after a step.
   struct Call {

@@ -3,8 +3,13 @@
 namespace kinema {
 
 template <class T>
+std::size_t StepPaths<T>::particle_capacity() const {
+  return staged ? staged->capacity() : block ? block->capacity() : 0;
+}
+
+template <class T>
 StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const kernels::KernelTable<T>& table,
-                         bool force_staged, std::size_t staged_capacity) {
+                         bool force_staged, PathCapacity capacity) {
   StepPaths<T> paths;
   paths.lowered = std::make_unique<LoweredForces<T>>(lower_forces<T>(f.local_terms()));
   paths.lowered->coupled = lower_coupled<T>(f);
@@ -16,23 +21,25 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
     paths.rigid = table.rigid[builtin][l.rigid.has_quadratic()][l.rigid.has_central()];
   } else if (!f.coupled()) {
     paths.rigid_block = std::make_unique<RigidBlockPath<T>>(f, method, table, l);
+    paths.rigid_block->reserve(capacity.rigid);
   }
   if (builtin >= 0 && f.fusable() && !force_staged) {
     paths.fused = table.fused[builtin][quad][kernels::fused_variant(l.particle, false)];
     paths.fused_applied = table.fused[builtin][quad][kernels::fused_variant(l.particle, true)];
   } else if (builtin >= 0 && !f.coupled() && !force_staged) {
     paths.block = std::make_unique<BlockPath<T>>(f, method, builtin, table, l.particle);
-    paths.block->reserve(staged_capacity);
+    paths.block->reserve(capacity.particles);
   } else {
     paths.staged = std::make_unique<StagedPath<T>>(f, method, table, l.particle, l.coupled);
-    paths.staged->reserve(staged_capacity);
+    paths.staged->reserve(capacity.particles);
   }
   return paths;
 }
 
 #define KINEMA_STEP_PATHS(T)                                                                                    \
+  template struct StepPaths<T>;                                                                                \
   template StepPaths<T> build_paths(const ForceModel<T>&, const Method&, const kernels::KernelTable<T>&, bool,  \
-                                    std::size_t);
+                                    PathCapacity);
 KINEMA_STEP_PATHS(float)
 KINEMA_STEP_PATHS(double)
 #undef KINEMA_STEP_PATHS

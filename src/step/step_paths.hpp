@@ -22,21 +22,29 @@ template <class T>
 struct StepPaths {
   std::unique_ptr<LoweredForces<T>> lowered;  // a fixed address: the staged paths keep references
   kernels::FusedFn<T> fused = nullptr;        // particles, when the fused path applies
-  kernels::RigidFn<T> rigid = nullptr;        // rigid bodies, when the fused path applies
-  std::unique_ptr<RigidBlockPath<T>> rigid_block;  // rigid bodies otherwise (no coupled terms)
-  kernels::FusedFn<T> fused_applied = nullptr;  // the fused path for sets with applied forces
-
-  kernels::FusedFn<T> fused_for(bool applied) const { return applied ? fused_applied : fused; }
+  kernels::FusedFn<T> fused_applied = nullptr;  // the same, for sets with applied forces
   std::unique_ptr<BlockPath<T>> block;        // particles: callbacks, a built-in method, no coupling
   std::unique_ptr<StagedPath<T>> staged;      // particles otherwise
   std::unique_ptr<StagedPath<T>> probe;       // evaluates accelerations alone (made on demand)
+  kernels::RigidFn<T> rigid = nullptr;        // rigid bodies, when the fused path applies
+  std::unique_ptr<RigidBlockPath<T>> rigid_block;  // rigid bodies otherwise (no coupled terms)
+
+  kernels::FusedFn<T> fused_for(bool applied) const { return applied ? fused_applied : fused; }
+  // Bodies the particle paths' scratch holds, and the rigid block path's.
+  std::size_t particle_capacity() const;
+  std::size_t rigid_capacity() const { return rigid_block ? rigid_block->capacity() : 0; }
 };
 
-// Lowers `forces` and picks their kernels. The staged path, if taken, keeps references to
-// `forces`, `method` and `table`, and gets scratch for `staged_capacity` bodies. Throws
-// kinema::Error for parameters that overflow T.
+// Scratch to carry from old paths to new ones (Stepper::set_forces keeps it).
+struct PathCapacity {
+  std::size_t particles = 0, rigid = 0;
+};
+
+// Lowers `forces` and picks their kernels. The paths taken keep references to `forces`,
+// `method` and `table`, and get scratch for `capacity` bodies. Throws kinema::Error for
+// parameters that overflow T.
 template <class T>
 StepPaths<T> build_paths(const ForceModel<T>& forces, const Method& method, const kernels::KernelTable<T>& table,
-                         bool force_staged, std::size_t staged_capacity);
+                         bool force_staged, PathCapacity capacity);
 
 }  // namespace kinema

@@ -154,6 +154,7 @@ void Stepper<T>::reserve(std::size_t bodies) {
   if (impl_->core.paths.staged) impl_->core.paths.staged->reserve(padded_count<T>(bodies));
   if (impl_->core.paths.rigid_block) impl_->core.paths.rigid_block->reserve(padded_count<T>(bodies));
   if (impl_->core.paths.block) impl_->core.paths.block->reserve(padded_count<T>(bodies));
+  impl_->fixed.reserve_blocks(padded_count<T>(bodies));
 }
 
 template <class T>

@@ -18,7 +18,7 @@ StepperCore<T>::StepperCore(std::shared_ptr<const ForceModel<T>> f, const Method
 template <class T>
 void StepperCore<T>::use(std::shared_ptr<const ForceModel<T>> f) {
   if (!f) throw Error("stepper: null force model");
-  const std::size_t capacity = paths.staged ? paths.staged->capacity() : 0;
+  const PathCapacity capacity{paths.particle_capacity(), paths.rigid_capacity()};
   StepPaths<T> fresh = build_paths(*f, method, *table, options.force_staged, capacity);
   paths = std::move(fresh);
   forces_ = std::move(f);

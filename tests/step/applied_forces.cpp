@@ -133,6 +133,25 @@ TEST_CASE("applied forces move with their body on removal and copy with the set"
   CHECK_FALSE(copy.has_applied_forces());
 }
 
+TEST_CASE("a copy into a larger set keeps force arrays as long as that set", "[bodies][applied]") {
+  ParticleSet<float> small;
+  for (int i = 0; i < 3; ++i) small.add({float(i), 0, 0}, {}, 1);
+  small.apply_force(2, {0, 4, 0});
+  for (bool had_forces : {false, true}) {
+    INFO("the larger set had force arrays: " << had_forces);
+    ParticleSet<float> large = test::cloud<float>(5000);
+    if (had_forces) large.apply_force(0, {1, 1, 1}), large.clear_forces();
+    large = small;  // in place where large's arrays fit, else a new copy
+    for (int i = 0; i < 4000; ++i) large.add({0, float(i), 0}, {}, 1);  // past small's capacity
+    large.apply_force(4002, {1, 0, 0});
+    large.remove(1);  // the last body, 4002, moves into 1 with its force
+    Stepper<float>(ForceModel<float>{}, rk4, test::serial_options()).step(large, 0.5f);
+    CHECK(large.velocity(2)[1] == 2);  // body 2's force: a = F / m over h
+    CHECK(large.velocity(1)[0] == 0.5f);
+    CHECK(large.velocity(1000)[0] == 0);
+  }
+}
+
 TEST_CASE("bad applied forces are refused by body and field", "[bodies][applied][errors]") {
   ParticleSet<float> b;
   b.add({0, 0, 0}, {}, 1);
@@ -291,6 +310,30 @@ TEST_CASE("the block path: a callback moves bodies as the equivalent built-in te
     }
     CHECK(worst < 1e-11);
   }
+}
+
+TEST_CASE("the block paths read applied forces and torques", "[forces][callbacks]") {
+  ParticleSet<double> a = test::cloud<double>(2000), b = a;
+  for (ParticleSet<double>* set : {&a, &b}) set->keep_forces(true), apply_game_forces(*set);
+  Stepper<double> built_in(callback_model<double>(false), rk4, test::serial_options());
+  Stepper<double> by_callback(callback_model<double>(true), rk4, test::serial_options());
+  built_in.advance(a, 0.01, 30);
+  by_callback.advance(b, 0.01, 30);
+  for (std::size_t i = 0; i < a.size(); ++i) CHECK(test::distance(a.velocity(i), b.velocity(i)) < 1e-11);
+
+  RigidBodySet<double> r, s;
+  for (RigidBodySet<double>* set : {&r, &s}) {
+    set->add({{0, 0, 0}, {}, {1, 0, 0, 0}, {}, 2, {0.5, 1, 2}});
+    set->keep_forces(true);
+    set->apply_force_at(0, {0, 3, 0}, {0.5, 0, 0});  // and the torque (0, 0, 1.5)
+  }
+  ForceModel<double> idle;
+  idle.add([](const RigidBlock<double>&) {});  // takes the rigid block path, adds nothing
+  Stepper<double>(ForceModel<double>{}, rk4, test::serial_options()).advance(r, 0.01, 50);
+  Stepper<double>(idle, rk4, test::serial_options()).advance(s, 0.01, 50);
+  CHECK(s.angular_momentum(0)[2] == Approx(1.5 * 0.5).epsilon(1e-12));
+  CHECK(s.centers().velocity(0)[1] == Approx(3 * 0.5 / 2).epsilon(1e-12));
+  CHECK(s.angular_velocity(0)[2] == Approx(r.angular_velocity(0)[2]).epsilon(1e-12));
 }
 
 TEST_CASE("the block path: the same bits on every ISA, thread count and job system", "[determinism][callbacks]") {
