@@ -24,6 +24,17 @@ inline Scene bench_scene(std::size_t count) {
   return s;
 }
 
+// The same scene as rigid bodies: orientation and angular momentum added, and angular drag.
+inline Scene rigid_bench_scene(std::size_t count) {
+  Scene s = bench_scene(count);
+  s.generate->rigid = true;
+  s.generate->inertia = {0.5, 0.8, 1.1};
+  s.generate->angular_velocity_min = {-3, -3, -3};
+  s.generate->angular_velocity_max = {3, 3, 3};
+  s.forces.push_back(AngularDrag{0.05});
+  return s;
+}
+
 // State bytes a particle step reads and writes: 7 arrays in, 6 out.
 template <class T>
 constexpr double particle_step_bytes() {

@@ -75,16 +75,6 @@ void particle_forces(benchmark::State& state, Variant v) {
   report_body_steps(state, double(n) * double(kSteps), particle_step_bytes<T>());
 }
 
-Scene rigid_scene(std::size_t count) {
-  Scene s = bench_scene(count);
-  s.generate->rigid = true;
-  s.generate->inertia = {0.5, 0.8, 1.1};
-  s.generate->angular_velocity_min = {-3, -3, -3};
-  s.generate->angular_velocity_max = {3, 3, 3};
-  s.forces.push_back(AngularDrag{0.05});
-  return s;
-}
-
 // The rigid scene's model, its angular drag given by a one-line callback where the variant
 // says so.
 template <class T>
@@ -101,7 +91,7 @@ ForceModel<T> rigid_variant_forces(Variant v, Scene scene) {
 template <class T>
 void rigid_forces(benchmark::State& state, Variant v) {
   const auto n = std::size_t(state.range(0));
-  const Scene scene = rigid_scene(n);
+  const Scene scene = rigid_bench_scene(n);
   RigidBodySet<T> bodies = make_rigid_bodies<T>(scene);
   CaseJobs jobs(1);
   StepperOptions o;

@@ -9,16 +9,6 @@
 namespace kinema::bench {
 namespace {
 
-Scene rigid_scene(std::size_t count) {
-  Scene s = bench_scene(count);
-  s.generate->rigid = true;
-  s.generate->inertia = {0.5, 0.8, 1.1};
-  s.generate->angular_velocity_min = {-3, -3, -3};
-  s.generate->angular_velocity_max = {3, 3, 3};
-  s.forces.push_back(AngularDrag{0.05});
-  return s;
-}
-
 // State bytes per rigid step: 17 arrays in (centre 7, q 4, L 3, inverse inertia 3), 13 out.
 template <class T>
 constexpr double rigid_step_bytes() {
@@ -35,13 +25,13 @@ constexpr double kRigidRk4Flops = 597;
 
 template <class T>
 const RigidBodySet<T>& cached_rigid(std::size_t count) {
-  return cached<RigidBodySet<T>>(count, [](std::size_t n) { return make_rigid_bodies<T>(rigid_scene(n)); });
+  return cached<RigidBodySet<T>>(count, [](std::size_t n) { return make_rigid_bodies<T>(rigid_bench_scene(n)); });
 }
 
 template <class T>
 void rigid_steps(benchmark::State& state, unsigned threads, bool blocked) {
   const auto n = std::size_t(state.range(0));
-  const Scene scene = rigid_scene(n);
+  const Scene scene = rigid_bench_scene(n);
   RigidBodySet<T> bodies = cached_rigid<T>(n);
   CaseJobs jobs(threads);
   StepperOptions o;
