@@ -20,6 +20,10 @@ using Vec3 = std::array<T, 3>;
 template <class T>
 class RigidBodySet;
 
+namespace detail {
+struct CheckpointCodec;  // reads and writes the sets' arrays as they are (kinema/checkpoint.hpp)
+}
+
 // Storage alignment and padding unit, in bytes: one AVX-512 register.
 inline constexpr std::size_t kSimdBytes = 64;
 
@@ -107,6 +111,7 @@ class AppliedVectors {
   void clear_body(std::size_t i);
 
  private:
+  friend struct detail::CheckpointCodec;
   bool allocated() const { return arrays_[0].size() > 0; }
   void ensure(std::size_t capacity);  // all three at least `capacity` long, contents kept
 
@@ -207,6 +212,7 @@ class ParticleSet {
 
  private:
   friend class RigidBodySet<T>;
+  friend struct detail::CheckpointCodec;
   void check_index(std::size_t i) const;
   // Whether copying `other` in place needs no allocation.
   bool copy_fits(const ParticleSet& other) const {
@@ -319,6 +325,7 @@ class RigidBodySet {
   Vec3<double> angular_velocity(std::size_t i) const;
 
  private:
+  friend struct detail::CheckpointCodec;
   void grow_rotation_arrays();
   void pad_rotation_arrays(std::size_t from);  // identity orientation from `from` on
   // (p - x_i) x v in double, checked finite in T.

@@ -200,6 +200,10 @@ class ForceModel {
   // True when every term is local and built in: the fused path applies (to particles; to
   // rigid bodies when there is no RigidCallback either).
   bool fusable() const { return callbacks_.empty() && !coupled(); }
+  // A 64-bit hash of every built-in term's kind and parameters (spring pairs included) and of
+  // how many callbacks and coupled terms of the user's own the model holds (their code cannot
+  // be hashed): what a checkpoint names the model it was taken under by.
+  std::uint64_t fingerprint() const;
 
  private:
   std::vector<LocalTerm> local_;

@@ -5,8 +5,10 @@
 
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
+#include "kinema/checkpoint.hpp"
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
+#include "kinema/files.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/frame_loop.hpp"
 #include "kinema/isa.hpp"

@@ -71,6 +71,16 @@ struct StepperOptions {
   double max_angular_speed = 50;   // clamp, rigid bodies: radians per second, finite and > 0
 };
 
+// A stepper's clock exactly as it counts (time() = origin + steps * h, each step k of a call
+// at origin + (steps + k) h), and the step its last advance_to call proposed
+// (AdaptiveStats::next_step; 0 before any): what a checkpoint keeps of a stepper.
+struct StepperClock {
+  double origin = 0;
+  std::uint64_t steps = 0;
+  double h = 0;  // the last step size, a value of T
+  double proposed_step = 0;
+};
+
 // `options` with every step run on the calling thread: no worker thread is involved.
 inline StepperOptions on_calling_thread(StepperOptions options = {}) {
   options.jobs = &calling_thread_jobs();
@@ -143,9 +153,14 @@ class Stepper {
   // Simulated time: origin + steps_since_origin * h. Changing h moves the origin.
   double time() const;
   void set_time(double t);
+  StepperClock clock() const;
+  // kinema::Error (nothing changed) for a value that is not finite or negative, or an h that
+  // T cannot hold exactly.
+  void set_clock(const StepperClock& clock);
 
   const Method& method() const;
   const ForceModel<T>& forces() const;
+  const StepperOptions& options() const;
   Isa isa() const;           // the resolved instruction set the kernels use
   bool fused() const;        // true when steps take the fused single-pass path
   unsigned threads() const;  // workers of the job system in use

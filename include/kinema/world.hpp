@@ -7,6 +7,7 @@
 
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
+#include "kinema/checkpoint.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/scene.hpp"
@@ -31,6 +32,11 @@ class World {
   double time() const;
   double total_energy() const;  // kinetic (with rotation) + potential, both sets
   bool finite() const;
+  // Checkpoints (kinema/checkpoint.hpp): save adds two records, the particles and the rigid
+  // bodies with their steppers; restore takes both back, all or nothing (kinema::Error, the
+  // world as it was, for a checkpoint of another scene, model, method or precision).
+  void save(CheckpointWriter& out) const;
+  void restore(const CheckpointReader& in);
 
   const ForceModel<T>& forces() const { return *forces_; }
   const Stepper<T>& particle_stepper() const { return particle_stepper_; }

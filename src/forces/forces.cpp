@@ -168,6 +168,45 @@ ForceModel<T>& ForceModel<T>::add(Springs&& term) {
   return *this;
 }
 
+namespace {
+
+// FNV-1a, 64 bits, over values' bit patterns: equal models give equal hashes on every machine
+// of one byte order.
+class Fnv {
+ public:
+  template <class V>
+  void add(const V& value) {
+    const auto* bytes = reinterpret_cast<const unsigned char*>(&value);
+    for (std::size_t i = 0; i < sizeof(V); ++i) hash_ = (hash_ ^ bytes[i]) * 1099511628211ull;
+  }
+  std::uint64_t value() const { return hash_; }
+
+ private:
+  std::uint64_t hash_ = 14695981039346656037ull;
+};
+
+void add_term(Fnv& fnv, const LocalTerm& term) {
+  fnv.add(std::uint64_t(term.index()));
+  visit_term(term, [&](const auto& t, auto info) {
+    for_each_field(info, [&](const auto& field) { fnv.add(t.*field.member); });
+  });
+}
+
+}  // namespace
+
+template <class T>
+std::uint64_t ForceModel<T>::fingerprint() const {
+  Fnv fnv;
+  fnv.add(std::uint64_t(local_.size()));
+  for (const LocalTerm& term : local_) add_term(fnv, term);
+  for (const std::size_t count : {callbacks_.size(), rigid_callbacks_.size(), coupled_.size()}) fnv.add(std::uint64_t(count));
+  fnv.add(bool(nbody_));
+  if (nbody_) fnv.add(nbody_->G), fnv.add(nbody_->softening);
+  fnv.add(std::uint64_t(springs_.size()));
+  for (const SpringPair& p : springs_) fnv.add(p.i), fnv.add(p.j), fnv.add(p.rest), fnv.add(p.k), fnv.add(p.damping);
+  return fnv.value();
+}
+
 template class ForceModel<float>;
 template class ForceModel<double>;
 

@@ -41,6 +41,36 @@ bool World<T>::finite() const {
   return all_finite(particles) && all_finite(rigid);
 }
 
+template <class T>
+void World<T>::save(CheckpointWriter& out) const {
+  out.add(particles, particle_stepper_);
+  out.add(rigid, rigid_stepper_);
+}
+
+template <class T>
+void World<T>::restore(const CheckpointReader& in) {
+  if (in.records() != 2) {
+    throw Error("checkpoint: " + std::to_string(in.records()) + " records where a world has 2 (particles, rigid bodies)");
+  }
+  ParticleSet<T> p = in.particles(0, particle_stepper_);
+  RigidBodySet<T> r = in.rigid_bodies(1, rigid_stepper_);
+  if (p.size() != particles.size() || r.size() != rigid.size()) {
+    throw Error("checkpoint: " + std::to_string(p.size()) + " particles and " + std::to_string(r.size()) +
+                " rigid bodies where this world has " + std::to_string(particles.size()) + " and " +
+                std::to_string(rigid.size()));
+  }
+  const StepperClock before = particle_stepper_.clock();
+  particle_stepper_.set_clock(in.clock(0));  // checks before it changes anything
+  try {
+    rigid_stepper_.set_clock(in.clock(1));
+  } catch (...) {
+    particle_stepper_.set_clock(before);
+    throw;
+  }
+  particles = std::move(p);
+  rigid = std::move(r);
+}
+
 template class World<float>;
 template class World<double>;
 

@@ -58,6 +58,7 @@ struct Stepper<T>::Impl {
       return double(bodies.size()) * double(stats.evaluations);
     });
     if (stats.accepted > 0) forces_used(bodies);
+    if (stats.next_step > 0) proposed_step = stats.next_step;
     return stats;
   }
 
@@ -89,6 +90,7 @@ struct Stepper<T>::Impl {
   StepperCore<T> core;
   MeasuredWorkers workers;
   FixedSteps<T> fixed;
+  double proposed_step = 0;  // the last advance_to's AdaptiveStats::next_step
 };
 
 template <class T>
@@ -181,6 +183,27 @@ template <class T>
 void Stepper<T>::set_time(double t) {
   if (!std::isfinite(t)) throw Error("time must be finite");
   impl_->core.clock.set(t);
+}
+
+template <class T>
+StepperClock Stepper<T>::clock() const {
+  const Clock<T>& c = impl_->core.clock;
+  return {c.origin, c.steps, double(c.h), impl_->proposed_step};
+}
+
+template <class T>
+void Stepper<T>::set_clock(const StepperClock& c) {
+  const bool valid = std::isfinite(c.origin) && std::isfinite(c.h) && c.h >= 0 && double(T(c.h)) == c.h &&
+                     std::isfinite(c.proposed_step) && c.proposed_step >= 0;
+  if (!valid) throw Error("set_clock: the origin, h and proposed step must be finite, h and the proposed step >= 0 "
+                          "and h a value of " + std::string(sizeof(T) == 4 ? "float" : "double"));
+  impl_->core.clock = Clock<T>{c.origin, c.steps, T(c.h)};
+  impl_->proposed_step = c.proposed_step;
+}
+
+template <class T>
+const StepperOptions& Stepper<T>::options() const {
+  return impl_->core.options;
 }
 
 template <class T>

@@ -6,11 +6,11 @@ cmake_minimum_required(VERSION 3.25)
 set(layers core parallel kernels forces analysis step scene)
 # Public headers by layer. The umbrellas (kinema.hpp: the runtime, scenes.hpp: it and the
 # scene library) sit above every layer: src never includes them.
-set(public_core bodies error isa methods version)
+set(public_core bodies error files isa methods version)
 set(public_parallel job_system)
 set(public_forces forces)
 set(public_analysis diagnostics stability)
-set(public_step adaptive frame_loop stepper)
+set(public_step adaptive checkpoint frame_loop stepper)
 set(public_scene accuracy scene world)
 set(umbrellas kinema scenes)
 

@@ -1,0 +1,54 @@
+#pragma once
+// Files written whole or not at all, and checksums.
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace kinema {
+
+// A file that a reader sees either as it was before or complete, never half written: the
+// bytes go to a temporary file beside `path` (same directory, so the rename stays on one
+// file system), and commit() flushes and syncs it, renames it over `path` and syncs the
+// directory. A WholeFile destroyed without commit() removes its temporary, and `path` keeps
+// whatever it held. Opening creates the temporary at once, so a directory that cannot be
+// written is refused before any work. Every failure throws kinema::Error naming the path
+// and the reason.
+class WholeFile {
+ public:
+  // `what` names the file in messages ("summary", "checkpoint").
+  WholeFile(std::filesystem::path path, std::string what);
+  ~WholeFile();
+  WholeFile(const WholeFile&) = delete;
+  WholeFile& operator=(const WholeFile&) = delete;
+
+  void write(std::span<const std::byte> bytes);
+  void write(std::string_view text) { write(std::as_bytes(std::span(text.data(), text.size()))); }
+  void commit();
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  [[noreturn]] void fail(const char* doing, int error);
+
+  std::filesystem::path path_, temporary_;
+  std::string what_;
+  int fd_ = -1;
+};
+
+// Writes `bytes` to `path` as one WholeFile.
+void write_whole_file(const std::filesystem::path& path, std::span<const std::byte> bytes, const std::string& what);
+
+// The regular file at `path`, read whole; kinema::Error for anything else (a directory, a
+// FIFO, a device, a file past `max_bytes`), naming the path and `what` it should have been.
+std::vector<std::byte> read_regular_file(const std::filesystem::path& path, std::size_t max_bytes,
+                                         const std::string& what);
+
+// CRC-32 (the ISO-HDLC polynomial zlib, gzip and PNG use) of `bytes`, continuing from `crc`.
+std::uint32_t crc32(std::span<const std::byte> bytes, std::uint32_t crc = 0);
+
+}  // namespace kinema

@@ -1,0 +1,147 @@
+#include "kinema/files.hpp"
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <string>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include "kinema/error.hpp"
+
+namespace kinema {
+namespace {
+
+std::atomic<unsigned> next_temporary{0};
+
+// Beside the file a symbolic link points to, so that the rename replaces the file, not the link.
+std::filesystem::path resolved(const std::filesystem::path& path) {
+  std::error_code ignored;
+  const std::filesystem::path real = std::filesystem::weakly_canonical(path, ignored);
+  return real.empty() ? path : real;
+}
+
+std::filesystem::path temporary_beside(const std::filesystem::path& path) {
+  std::string name(1, '.');  // appended piece by piece: GCC 12 warns (-Wrestrict) on "." + string
+  name.append(path.filename().string()).append(".tmp-").append(std::to_string(::getpid()));
+  name.append("-").append(std::to_string(next_temporary++));
+  return path.parent_path() / name;
+}
+
+// The directory's entry reaches the disk too: without it a crash may lose the rename.
+void sync_directory(const std::filesystem::path& file) {
+  const std::filesystem::path dir = file.parent_path().empty() ? "." : file.parent_path();
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);  // some file systems refuse a directory sync (EINVAL): the rename stands anyway
+  ::close(fd);
+}
+
+}  // namespace
+
+WholeFile::WholeFile(std::filesystem::path path, std::string what) : what_(std::move(what)) {
+  path_ = resolved(path);
+  struct stat existing{};
+  const bool exists = ::stat(path_.c_str(), &existing) == 0;
+  if (exists && S_ISDIR(existing.st_mode)) fail("cannot write", EISDIR);
+  if (exists && !S_ISREG(existing.st_mode)) {
+    // A device or a FIFO (/dev/stdout, /dev/null) cannot be replaced: it is written as it is.
+    // O_NONBLOCK: a FIFO without a reader fails at once (ENXIO) instead of blocking.
+    fd_ = ::open(path_.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd_ < 0) fail("cannot write", errno);
+    ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK);
+    return;
+  }
+  temporary_ = temporary_beside(path_);
+  fd_ = ::open(temporary_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd_ < 0) fail("cannot write", errno);
+  if (exists) ::fchmod(fd_, existing.st_mode & 07777);  // the file it replaces keeps its mode
+}
+
+WholeFile::~WholeFile() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!temporary_.empty()) ::unlink(temporary_.c_str());
+}
+
+void WholeFile::fail(const char* doing, int error) {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  if (!temporary_.empty()) ::unlink(temporary_.c_str());
+  temporary_.clear();
+  throw Error(printable(path_.string()) + ": " + doing + " the " + what_ + ": " + std::strerror(error));
+}
+
+void WholeFile::write(std::span<const std::byte> bytes) {
+  if (fd_ < 0) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
+  while (!bytes.empty()) {
+    const ssize_t n = ::write(fd_, bytes.data(), bytes.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) fail("cannot write", n < 0 ? errno : ENOSPC);
+    bytes = bytes.subspan(std::size_t(n));
+  }
+}
+
+void WholeFile::commit() {
+  if (fd_ < 0) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
+  if (temporary_.empty()) {  // a device: nothing to rename
+    const int error = ::close(fd_) == 0 ? 0 : errno;
+    fd_ = -1;
+    if (error != 0) fail("cannot write", error);
+    return;
+  }
+  if (::fsync(fd_) != 0) fail("cannot sync", errno);
+  const int error = ::close(fd_) == 0 ? 0 : errno;
+  fd_ = -1;
+  if (error != 0) fail("cannot write", error);
+  if (::rename(temporary_.c_str(), path_.c_str()) != 0) fail("cannot rename into place", errno);
+  temporary_.clear();
+  sync_directory(path_);
+}
+
+void write_whole_file(const std::filesystem::path& path, std::span<const std::byte> bytes, const std::string& what) {
+  WholeFile file(path, what);
+  file.write(bytes);
+  file.commit();
+}
+
+std::vector<std::byte> read_regular_file(const std::filesystem::path& path, std::size_t max_bytes,
+                                         const std::string& what) {
+  const auto fail = [&](const std::string& why) {
+    return Error(printable(path.string()) + ": cannot read the " + what + ": " + why);
+  };
+  // O_NONBLOCK: opening a FIFO without a writer must not wait for one.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) throw fail(std::strerror(errno));
+  struct stat st{};
+  const bool stated = ::fstat(fd, &st) == 0;
+  std::string refusal = !stated                ? std::strerror(errno)
+                        : S_ISDIR(st.st_mode)  ? "it is a directory"
+                        : !S_ISREG(st.st_mode) ? "it is not a regular file"
+                        : std::size_t(st.st_size) > max_bytes
+                            ? std::to_string(st.st_size) + " bytes, more than the " + std::to_string(max_bytes) + " allowed"
+                            : "";
+  if (!refusal.empty()) {
+    ::close(fd);
+    throw fail(refusal);
+  }
+  std::vector<std::byte> data(std::size_t(st.st_size));
+  std::size_t done = 0;
+  while (done < data.size()) {
+    const ssize_t n = ::read(fd, data.data() + done, data.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;  // shorter than fstat said: it changed under us; the caller checks lengths
+    done += std::size_t(n);
+  }
+  ::close(fd);
+  data.resize(done);
+  return data;
+}
+
+std::uint32_t crc32(std::span<const std::byte> bytes, std::uint32_t crc) {
+  if (bytes.empty()) return crc;  // zlib answers a null buffer with its initial value, 0
+  return std::uint32_t(::crc32_z(crc, reinterpret_cast<const Bytef*>(bytes.data()), bytes.size()));
+}
+
+}  // namespace kinema

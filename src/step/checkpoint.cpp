@@ -1,0 +1,448 @@
+#include "kinema/checkpoint.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <string_view>
+
+#include "kinema/diagnostics.hpp"
+#include "kinema/error.hpp"
+#include "kinema/files.hpp"
+
+namespace kinema {
+namespace {
+
+constexpr char kMagic[8] = {'k', 'i', 'n', 'e', 'm', 'a', 'C', 'K'};
+constexpr std::size_t kTrailerBytes = 4;
+constexpr std::size_t kMethodNameBytes = 32;
+
+enum class SetKind : std::uint8_t { particles = 1, rigid = 2 };
+enum Flags : std::uint8_t { kForces = 1, kTorques = 2, kKeepForces = 4 };
+constexpr std::size_t kParticleArrays = 7, kRigidArrays = 17;  // + 3 for forces, + 3 for torques
+
+// Field offsets in the 48-byte header and the 128-byte record header.
+namespace head {
+constexpr std::size_t version = 8, records = 12, total = 16, user = 24, crc = 44;
+}
+namespace rec {
+constexpr std::size_t kind = 0, scalar = 1, flags = 2, guard = 3, bodies = 8, model = 16, method = 24, origin = 32,
+                      steps = 40, h = 48, proposed = 56, max_speed = 64, max_angular = 72, name = 80, crc = 124;
+}
+
+template <class V>
+void put(std::byte* at, V value) {
+  std::memcpy(at, &value, sizeof(V));
+}
+template <class V>
+V get(const std::byte* at) {
+  V value;
+  std::memcpy(&value, at, sizeof(V));
+  return value;
+}
+
+std::uint32_t crc_of(const std::byte* data, std::size_t bytes) { return crc32({data, bytes}); }
+
+class Fnv {
+ public:
+  template <class V>
+  void add(V value) {
+    const auto* bytes = reinterpret_cast<const unsigned char*>(&value);
+    for (std::size_t i = 0; i < sizeof(V); ++i) hash_ = (hash_ ^ bytes[i]) * 1099511628211ull;
+  }
+  std::uint64_t value() const { return hash_; }
+
+ private:
+  std::uint64_t hash_ = 14695981039346656037ull;
+};
+
+// The method as data (tableau or kick-drift scheme), field by field: equal methods, equal hashes.
+std::uint64_t method_fingerprint(const Method& m) {
+  Fnv fnv;
+  fnv.add(int(m.kind)), fnv.add(m.order), fnv.add(m.embedded_order), fnv.add(m.tableau.stages);
+  for (const auto& row : m.tableau.a) for (double a : row) fnv.add(a);
+  for (const auto* weights : {&m.tableau.b, &m.tableau.c, &m.tableau.b_hat}) for (double w : *weights) fnv.add(w);
+  fnv.add(m.scheme.count);
+  for (const KickDriftOp& op : m.scheme.ops) fnv.add(int(op.kind)), fnv.add(op.weight), fnv.add(op.time);
+  return fnv.value();
+}
+
+std::string_view guard_name(std::uint8_t g) { return g == 0 ? "off" : g == 1 ? "check" : "clamp"; }
+
+std::string precision_of(std::size_t scalar) { return scalar == 4 ? "float" : "double"; }
+
+}  // namespace
+
+// The sets' arrays as they are stored: n values each, in a fixed order.
+struct detail::CheckpointCodec {
+  template <class T>
+  static void arrays(const ParticleSet<T>& b, std::vector<const T*>& out) {
+    for (const AlignedArray<T>* a : {&b.px_, &b.py_, &b.pz_, &b.vx_, &b.vy_, &b.vz_, &b.inv_mass_}) out.push_back(a->data());
+  }
+  template <class T>
+  static void arrays(const RigidBodySet<T>& b, std::vector<const T*>& out) {
+    arrays(b.centers_, out);
+    for (const auto& a : b.q_) out.push_back(a.data());
+    for (const auto& a : b.l_) out.push_back(a.data());
+    for (const auto& a : b.inv_inertia_) out.push_back(a.data());
+  }
+  template <class T>
+  static void applied(const AppliedVectors<T>& v, std::vector<const T*>& out) {
+    for (int d = 0; d < 3; ++d) out.push_back(v.data(d));
+  }
+  template <class T>
+  static const AppliedVectors<T>& forces(const ParticleSet<T>& b) { return b.applied_; }
+  template <class T>
+  static const AppliedVectors<T>& forces(const RigidBodySet<T>& b) { return b.centers_.applied_; }
+  template <class T>
+  static const AppliedVectors<T>* torques(const ParticleSet<T>&) { return nullptr; }
+  template <class T>
+  static const AppliedVectors<T>* torques(const RigidBodySet<T>& b) { return &b.torques_; }
+
+  // Copies `n` values into each array from `at` on, advancing it.
+  template <class T>
+  static void fill(AlignedArray<T>& a, std::size_t n, const std::byte*& at) {
+    std::memcpy(a.data(), at, n * sizeof(T));
+    at += n * sizeof(T);
+  }
+  template <class T>
+  static void fill(AppliedVectors<T>& v, std::size_t n, std::size_t capacity, const std::byte*& at) {
+    v.ensure(capacity);
+    for (auto& a : v.arrays_) fill(a, n, at);
+    v.active_ = true;
+  }
+
+  template <class T>
+  static ParticleSet<T> particles(std::size_t n, const std::byte*& at) {
+    ParticleSet<T> b;
+    b.reserve(n);
+    for (AlignedArray<T>* a : {&b.px_, &b.py_, &b.pz_, &b.vx_, &b.vy_, &b.vz_, &b.inv_mass_}) fill(*a, n, at);
+    b.size_ = n;
+    return b;
+  }
+  template <class T>
+  static void finish(ParticleSet<T>& b, std::uint8_t flags, const std::byte*& at) {
+    if (flags & kForces) fill(b.applied_, b.size_, b.capacity(), at);
+    b.keep_forces_ = (flags & kKeepForces) != 0;
+  }
+  template <class T>
+  static RigidBodySet<T> rigid(std::size_t n, std::uint8_t flags, const std::byte*& at) {
+    RigidBodySet<T> b;
+    b.reserve(n);
+    ParticleSet<T>& c = b.centers_;
+    for (AlignedArray<T>* a : {&c.px_, &c.py_, &c.pz_, &c.vx_, &c.vy_, &c.vz_, &c.inv_mass_}) fill(*a, n, at);
+    c.size_ = n;
+    for (auto& a : b.q_) fill(a, n, at);
+    for (auto& a : b.l_) fill(a, n, at);
+    for (auto& a : b.inv_inertia_) fill(a, n, at);
+    finish(c, flags, at);
+    if (flags & kTorques) fill(b.torques_, n, c.capacity(), at);
+    return b;
+  }
+};
+
+namespace {
+
+template <class T, class Set>
+CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& stepper, SetKind kind) {
+  using Codec = detail::CheckpointCodec;
+  std::vector<const T*> arrays;
+  Codec::arrays(bodies, arrays);
+  const AppliedVectors<T>& forces = Codec::forces(bodies);
+  const AppliedVectors<T>* torques = Codec::torques(bodies);
+  std::uint8_t flags = bodies.keeps_forces() ? kKeepForces : 0;
+  if (forces.active()) flags |= kForces, Codec::applied(forces, arrays);
+  if (torques != nullptr && torques->active()) flags |= kTorques, Codec::applied(*torques, arrays);
+
+  CheckpointWriter::Record r{};
+  std::byte* h = r.header.data();
+  const StepperOptions& o = stepper.options();
+  const StepperClock clock = stepper.clock();
+  put(h + rec::kind, std::uint8_t(kind));
+  put(h + rec::scalar, std::uint8_t(sizeof(T)));
+  put(h + rec::flags, flags);
+  put(h + rec::guard, std::uint8_t(o.guard));
+  put(h + rec::bodies, std::uint64_t(bodies.size()));
+  put(h + rec::model, stepper.forces().fingerprint());
+  put(h + rec::method, method_fingerprint(stepper.method()));
+  put(h + rec::origin, clock.origin);
+  put(h + rec::steps, clock.steps);
+  put(h + rec::h, clock.h);
+  put(h + rec::proposed, clock.proposed_step);
+  put(h + rec::max_speed, o.max_speed);
+  put(h + rec::max_angular, o.max_angular_speed);
+  const std::string_view name = stepper.method().name;
+  std::memcpy(h + rec::name, name.data(), std::min(name.size(), kMethodNameBytes - 1));
+  put(h + rec::crc, crc_of(h, rec::crc));
+  for (const T* a : arrays) r.arrays.emplace_back(reinterpret_cast<const std::byte*>(a), bodies.size() * sizeof(T));
+  return r;
+}
+
+// Appends to a byte vector.
+struct VectorSink {
+  std::vector<std::byte>& out;
+  void operator()(std::span<const std::byte> bytes) { out.insert(out.end(), bytes.begin(), bytes.end()); }
+};
+
+struct FileSink {
+  WholeFile& file;
+  void operator()(std::span<const std::byte> bytes) { file.write(bytes); }
+};
+
+}  // namespace
+
+template <class T>
+void CheckpointWriter::add(const ParticleSet<T>& bodies, const Stepper<T>& stepper) {
+  records_.push_back(make_record(bodies, stepper, SetKind::particles));
+}
+
+template <class T>
+void CheckpointWriter::add(const RigidBodySet<T>& bodies, const Stepper<T>& stepper) {
+  records_.push_back(make_record(bodies, stepper, SetKind::rigid));
+}
+
+std::size_t CheckpointWriter::size() const {
+  std::size_t bytes = kCheckpointHeaderBytes + user_.size() + kTrailerBytes;
+  for (const Record& r : records_) {
+    bytes += r.header.size();
+    for (const auto& a : r.arrays) bytes += a.size();
+  }
+  return bytes;
+}
+
+// Every byte through `sink` in order, the running CRC-32 last.
+template <class Sink>
+void CheckpointWriter::emit(Sink& sink) const {
+  std::array<std::byte, kCheckpointHeaderBytes> h{};
+  std::memcpy(h.data(), kMagic, sizeof kMagic);
+  put(h.data() + head::version, kCheckpointVersion);
+  put(h.data() + head::records, std::uint32_t(records_.size()));
+  put(h.data() + head::total, std::uint64_t(size()));
+  put(h.data() + head::user, std::uint64_t(user_.size()));
+  put(h.data() + head::crc, crc_of(h.data(), head::crc));
+  std::uint32_t crc = 0;
+  const auto out = [&](std::span<const std::byte> bytes) {
+    crc = crc32(bytes, crc);
+    sink(bytes);
+  };
+  out(h);
+  for (const Record& r : records_) {
+    out(r.header);
+    for (const auto& a : r.arrays) out(a);
+  }
+  out(user_);
+  std::array<std::byte, kTrailerBytes> trailer;
+  put(trailer.data(), crc);
+  sink(trailer);
+}
+
+std::vector<std::byte> CheckpointWriter::bytes() const {
+  std::vector<std::byte> out;
+  out.reserve(size());
+  VectorSink sink{out};
+  emit(sink);
+  return out;
+}
+
+void CheckpointWriter::save(const std::filesystem::path& path) const {
+  WholeFile file(path, "checkpoint");
+  FileSink sink{file};
+  emit(sink);
+  file.commit();
+}
+
+namespace {
+
+[[noreturn]] void refuse(const std::string& why) { throw Error("not a usable checkpoint: " + why); }
+
+std::size_t arrays_of(SetKind kind, std::uint8_t flags) {
+  std::size_t n = kind == SetKind::particles ? kParticleArrays : kRigidArrays;
+  if (flags & kForces) n += 3;
+  if (flags & kTorques) n += 3;
+  return n;
+}
+
+// Checks one record header at `at` (with `left` bytes from there to the user data) and
+// returns its length, header included.
+std::size_t check_record_header(const std::byte* h, std::size_t left, std::size_t index) {
+  const std::string which = "record " + std::to_string(index);
+  if (left < kCheckpointRecordBytes) refuse(which + " is cut short");
+  if (get<std::uint32_t>(h + rec::crc) != crc_of(h, rec::crc)) refuse(which + ": its header is damaged (checksum)");
+  const auto kind = SetKind(get<std::uint8_t>(h + rec::kind));
+  const auto scalar = get<std::uint8_t>(h + rec::scalar), flags = get<std::uint8_t>(h + rec::flags);
+  const bool known = (kind == SetKind::particles || kind == SetKind::rigid) && (scalar == 4 || scalar == 8) &&
+                     flags < 8 && !(kind == SetKind::particles && (flags & kTorques)) && get<std::uint8_t>(h + rec::guard) < 3;
+  if (!known) refuse(which + ": unknown kind, precision or flags");
+  const std::uint64_t bodies = get<std::uint64_t>(h + rec::bodies);
+  const std::size_t per_body = arrays_of(kind, flags) * scalar;
+  const std::size_t room = left - kCheckpointRecordBytes;
+  if (bodies > room / per_body) {
+    refuse(which + " counts " + std::to_string(bodies) + " bodies (" + std::to_string(per_body) +
+           " bytes each), more than its " + std::to_string(room) + " bytes of data can hold");
+  }
+  return kCheckpointRecordBytes + std::size_t(bodies) * per_body;
+}
+
+}  // namespace
+
+CheckpointReader::CheckpointReader(std::vector<std::byte> data) : data_(std::move(data)) {
+  const std::size_t size = data_.size();
+  const std::byte* d = data_.data();
+  if (size == 0) refuse("the file is empty");
+  if (size < kCheckpointHeaderBytes + kTrailerBytes || std::memcmp(d, kMagic, sizeof kMagic) != 0) {
+    refuse(size < sizeof kMagic || std::memcmp(d, kMagic, sizeof kMagic) != 0
+               ? "not a kinema checkpoint (no \"kinemaCK\" at its start)"
+               : std::to_string(size) + " bytes, too short for a checkpoint");
+  }
+  if (get<std::uint32_t>(d + head::crc) != crc_of(d, head::crc)) refuse("its header is damaged (checksum)");
+  const auto version = get<std::uint32_t>(d + head::version);
+  if (version != kCheckpointVersion) {
+    refuse("version " + std::to_string(version) + "; this kinema reads version " + std::to_string(kCheckpointVersion));
+  }
+  const auto total = get<std::uint64_t>(d + head::total), user = get<std::uint64_t>(d + head::user);
+  if (total != size) {
+    refuse((total > size ? "truncated: " : "longer than it says: ") + std::to_string(size) +
+           " bytes where its header says " + std::to_string(total));
+  }
+  if (user > size - kCheckpointHeaderBytes - kTrailerBytes) refuse("its user data is longer than the file");
+  const std::size_t end = size - kTrailerBytes - std::size_t(user);
+  std::size_t at = kCheckpointHeaderBytes;
+  const auto count = get<std::uint32_t>(d + head::records);
+  if (count > (end - at) / kCheckpointRecordBytes) refuse("it counts more records than its data holds");
+  for (std::uint32_t k = 0; k < count; ++k) {
+    const std::size_t length = check_record_header(d + at, end - at, k);
+    records_.push_back({at, at + kCheckpointRecordBytes, get<std::uint64_t>(d + at + rec::bodies)});
+    at += length;
+  }
+  if (at != end) refuse("its records and user data do not add up to its length");
+  if (get<std::uint32_t>(d + end + user) != crc_of(d, size - kTrailerBytes)) refuse("its data is damaged (checksum)");
+  user_offset_ = end, user_bytes_ = std::size_t(user);
+}
+
+CheckpointReader CheckpointReader::load(const std::filesystem::path& path, std::size_t max_bytes) {
+  std::vector<std::byte> data = read_regular_file(path, max_bytes, "checkpoint");
+  try {
+    return CheckpointReader(std::move(data));
+  } catch (const Error& e) {
+    throw Error(printable(path.string()) + ": " + e.what());
+  }
+}
+
+std::span<const std::byte> CheckpointReader::user_data() const { return {data_.data() + user_offset_, user_bytes_}; }
+
+template <class T>
+void CheckpointReader::check_record(std::size_t k, bool rigid, const Stepper<T>& stepper) const {
+  if (k >= records_.size()) {
+    throw Error("checkpoint: no record " + std::to_string(k) + " (it has " + std::to_string(records_.size()) + ")");
+  }
+  const std::byte* h = data_.data() + records_[k].header;
+  const std::string which = "checkpoint record " + std::to_string(k);
+  const auto kind = SetKind(get<std::uint8_t>(h + rec::kind));
+  if ((kind == SetKind::rigid) != rigid) {
+    throw Error(which + " holds " + (rigid ? "particles" : "rigid bodies") + ", not " + (rigid ? "rigid bodies" : "particles"));
+  }
+  const std::size_t scalar = get<std::uint8_t>(h + rec::scalar);
+  if (scalar != sizeof(T)) throw Error(which + " was taken in " + precision_of(scalar) + ", not " + precision_of(sizeof(T)));
+  char name[kMethodNameBytes + 1] = {};
+  std::memcpy(name, h + rec::name, kMethodNameBytes - 1);
+  if (get<std::uint64_t>(h + rec::method) != method_fingerprint(stepper.method())) {
+    throw Error(which + " was taken with method " + printable(name) + ", not " + std::string(stepper.method().name));
+  }
+  if (get<std::uint64_t>(h + rec::model) != stepper.forces().fingerprint()) {
+    throw Error(which + " was taken under another force model (its terms or their parameters differ)");
+  }
+  const StepperOptions& o = stepper.options();
+  const auto guard = get<std::uint8_t>(h + rec::guard);
+  const bool same_clamp = o.guard != FiniteGuard::clamp || (get<double>(h + rec::max_speed) == o.max_speed &&
+                                                           get<double>(h + rec::max_angular) == o.max_angular_speed);
+  if (guard != std::uint8_t(o.guard) || !same_clamp) {
+    throw Error(which + " was taken under the finiteness guard " + std::string(guard_name(guard)) +
+                " with other settings than this stepper's (" + std::string(guard_name(std::uint8_t(o.guard))) + ")");
+  }
+}
+
+StepperClock CheckpointReader::clock(std::size_t k) const {
+  if (k >= records_.size()) throw Error("checkpoint: no record " + std::to_string(k));
+  const std::byte* h = data_.data() + records_[k].header;
+  return {get<double>(h + rec::origin), get<std::uint64_t>(h + rec::steps), get<double>(h + rec::h),
+          get<double>(h + rec::proposed)};
+}
+
+namespace {
+
+// A checksum guards against damage, not against a file made to pass it: the state must be
+// finite and the inverse masses and moments finite and >= 0, as a set's setters keep them.
+void check_inverse(const char* name, std::size_t k, const auto* values, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(values[i] >= 0 && values[i] <= std::numeric_limits<std::decay_t<decltype(values[i])>>::max())) {
+      throw Error("checkpoint record " + std::to_string(k) + ": body " + std::to_string(i) + "'s " + name +
+                  " is not finite and >= 0");
+    }
+  }
+}
+
+template <class Set>
+void check_values(const Set& b, std::size_t k) {
+  if (const auto bad = first_non_finite(b)) {
+    throw Error("checkpoint record " + std::to_string(k) + ": body " + std::to_string(bad->body) + "'s " +
+                bad->field + " is not finite");
+  }
+  if constexpr (requires { b.centers(); }) {
+    check_inverse("inverse mass", k, b.centers().inv_mass(), b.size());
+    for (int d = 0; d < 3; ++d) check_inverse("inverse moment", k, b.inv_inertia(d), b.size());
+  } else {
+    check_inverse("inverse mass", k, b.inv_mass(), b.size());
+  }
+}
+
+}  // namespace
+
+template <class T>
+ParticleSet<T> CheckpointReader::particles(std::size_t k, const Stepper<T>& stepper) const {
+  check_record(k, false, stepper);
+  const std::uint8_t flags = get<std::uint8_t>(data_.data() + records_[k].header + rec::flags);
+  const std::byte* at = data_.data() + records_[k].arrays;
+  ParticleSet<T> b = detail::CheckpointCodec::particles<T>(records_[k].bodies, at);
+  detail::CheckpointCodec::finish(b, flags, at);
+  check_values(b, k);
+  return b;
+}
+
+template <class T>
+RigidBodySet<T> CheckpointReader::rigid_bodies(std::size_t k, const Stepper<T>& stepper) const {
+  check_record(k, true, stepper);
+  const std::uint8_t flags = get<std::uint8_t>(data_.data() + records_[k].header + rec::flags);
+  const std::byte* at = data_.data() + records_[k].arrays;
+  RigidBodySet<T> b = detail::CheckpointCodec::rigid<T>(records_[k].bodies, flags, at);
+  check_values(b, k);
+  return b;
+}
+
+template <class T>
+void CheckpointReader::restore(std::size_t k, ParticleSet<T>& bodies, Stepper<T>& stepper) const {
+  ParticleSet<T> restored = particles(k, stepper);
+  stepper.set_clock(clock(k));  // checks the values: throws before the set changes
+  bodies = std::move(restored);
+}
+
+template <class T>
+void CheckpointReader::restore(std::size_t k, RigidBodySet<T>& bodies, Stepper<T>& stepper) const {
+  RigidBodySet<T> restored = rigid_bodies(k, stepper);
+  stepper.set_clock(clock(k));
+  bodies = std::move(restored);
+}
+
+template void CheckpointWriter::add(const ParticleSet<float>&, const Stepper<float>&);
+template void CheckpointWriter::add(const ParticleSet<double>&, const Stepper<double>&);
+template void CheckpointWriter::add(const RigidBodySet<float>&, const Stepper<float>&);
+template void CheckpointWriter::add(const RigidBodySet<double>&, const Stepper<double>&);
+template void CheckpointReader::restore(std::size_t, ParticleSet<float>&, Stepper<float>&) const;
+template void CheckpointReader::restore(std::size_t, ParticleSet<double>&, Stepper<double>&) const;
+template void CheckpointReader::restore(std::size_t, RigidBodySet<float>&, Stepper<float>&) const;
+template void CheckpointReader::restore(std::size_t, RigidBodySet<double>&, Stepper<double>&) const;
+template ParticleSet<float> CheckpointReader::particles(std::size_t, const Stepper<float>&) const;
+template ParticleSet<double> CheckpointReader::particles(std::size_t, const Stepper<double>&) const;
+template RigidBodySet<float> CheckpointReader::rigid_bodies(std::size_t, const Stepper<float>&) const;
+template RigidBodySet<double> CheckpointReader::rigid_bodies(std::size_t, const Stepper<double>&) const;
+
+}  // namespace kinema

@@ -1,0 +1,290 @@
+// Checkpoints: k steps, save, restore into new objects, n - k more steps gives the bits of n
+// steps straight; damaged or foreign checkpoints are refused with one line and change nothing.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+namespace {
+
+template <class T>
+RigidBodySet<T> tumbling(std::size_t count) {
+  Scene scene;
+  scene.generate = GenerateSpec{count, 5, {-3, -3, -3}, {3, 3, 3}, {-1, -1, -1}, {1, 1, 1}, 2, true, {1, 2, 3},
+                                {-2, -2, -2}, {2, 2, 2}};
+  return make_rigid_bodies<T>(scene);
+}
+
+template <class T>
+ForceModel<T> chain_and_cluster(std::size_t n) {
+  ForceModel<T> f = test::all_local_terms<T>(false, false);
+  Springs chain;
+  for (std::uint32_t i = 1; i < std::uint32_t(n); ++i) chain.pairs.push_back({i - 1, i, 0.5, 20, 0.1});
+  f.add(chain);
+  f.add(NBody{0.01, 0.1});
+  return f;
+}
+
+template <class T>
+ForceModel<T> rotational_terms() {
+  ForceModel<T> f = test::all_local_terms<T>();
+  f.add(Torque{{0.1, 0.2, -0.3}}).add(AngularDrag{0.05}).add(PointForce{{0.5, 0, 0}, {0, 1, 0}});
+  return f;
+}
+
+// The bytes of a checkpoint of one set: every state bit and the clock.
+template <class Set, class T>
+std::vector<std::byte> bits(const Set& b, const Stepper<T>& s) {
+  CheckpointWriter out;
+  out.add(b, s);
+  return out.bytes();
+}
+
+// A run of `calls` calls of `advance` (steps each) straight, against the same run saved after
+// `k` calls and restored into a new set and stepper made with `resumed_options`.
+template <class Set, class T, class Make, class Call>
+void check_resume(Make&& make, const ForceModel<T>& forces, const Method& method, Call&& call, int calls, int k,
+                  const StepperOptions& resumed_options) {
+  Set straight = make();
+  Stepper<T> a(forces, method, test::serial_options());
+  for (int c = 0; c < calls; ++c) call(a, straight, c);
+
+  Set first = make();
+  Stepper<T> b(forces, method, test::serial_options());
+  for (int c = 0; c < k; ++c) call(b, first, c);
+  const std::vector<std::byte> saved = bits(first, b);
+
+  Set resumed;  // empty: the checkpoint brings every body
+  Stepper<T> r(forces, method, resumed_options);
+  CheckpointReader(saved).restore(0, resumed, r);
+  CHECK(bits(resumed, r) == saved);
+  for (int c = k; c < calls; ++c) call(r, resumed, c);
+  CHECK(r.time() == a.time());
+  CHECK(bits(resumed, r) == bits(straight, a));
+}
+
+StepperOptions two_tbb_threads() {
+  static TbbJobSystem tbb(2);
+  StepperOptions o;
+  o.jobs = &tbb;
+  o.workers = WorkerChoice::all;
+  return o;
+}
+
+std::vector<StepperOptions> resumed_options() {
+  std::vector<StepperOptions> all{test::serial_options(Isa::scalar), two_tbb_threads()};
+  for (Isa isa : {Isa::sse2, Isa::avx2, Isa::avx512}) {
+    if (isa_available(isa)) all.push_back(test::serial_options(isa));
+  }
+  return all;
+}
+
+// Seven steps of 2 ms per call.
+const auto fixed_steps = [](auto& stepper, auto& bodies, int) { stepper.advance(bodies, 2e-3, 7); };
+
+}  // namespace
+
+TEST_CASE("a checkpoint resumes fixed steps bit for bit on every ISA and thread count", "[checkpoint]") {
+  for (const StepperOptions& o : resumed_options()) {
+    INFO("isa " << isa_name(o.isa) << ", " << (o.jobs ? "2 threads" : "serial"));
+    // Particles under local terms (the fused path), float and double.
+    check_resume<ParticleSet<float>>([] { return test::cloud<float>(700); }, test::all_local_terms<float>(), rk4,
+                                     fixed_steps, 6, 2, o);
+    check_resume<ParticleSet<double>>([] { return test::cloud<double>(300); }, test::all_local_terms<double>(),
+                                      velocity_verlet, fixed_steps, 5, 3, o);
+    // Coupled terms (springs and N-body: the staged path).
+    check_resume<ParticleSet<float>>([] { return test::cloud<float>(400); }, chain_and_cluster<float>(400),
+                                     velocity_verlet, fixed_steps, 5, 2, o);
+    // Rigid bodies under rotational terms.
+    check_resume<RigidBodySet<float>>([] { return tumbling<float>(500); }, rotational_terms<float>(), rk4,
+                                      fixed_steps, 5, 1, o);
+    check_resume<RigidBodySet<double>>([] { return tumbling<double>(200); }, rotational_terms<double>(), midpoint,
+                                       fixed_steps, 4, 3, o);
+  }
+}
+
+TEST_CASE("a checkpoint resumes error-controlled steps bit for bit", "[checkpoint][adaptive]") {
+  // Each call starts from the step the last one proposed, as kinema run makes its calls.
+  const auto to = [](Stepper<double>& s, ParticleSet<double>& b, int c) {
+    Tolerances tol{1e-6, 1e-6};
+    tol.initial_step = s.clock().proposed_step;
+    s.advance_to(b, 0.05 * (c + 1), tol);
+  };
+  for (const bool coupled : {false, true}) {
+    INFO((coupled ? "springs and N-body" : "local terms"));
+    const ForceModel<double> f = coupled ? chain_and_cluster<double>(300) : test::all_local_terms<double>();
+    for (const StepperOptions& o : resumed_options()) {
+      check_resume<ParticleSet<double>>([] { return test::cloud<double>(300); }, f, dopri5, to, 6, 3, o);
+    }
+  }
+}
+
+TEST_CASE("a checkpoint keeps applied forces, the keep flag and kinematic bodies", "[checkpoint]") {
+  const auto make = [] {
+    ParticleSet<float> b = test::cloud<float>(200);
+    b.set_kinematic(17);
+    b.keep_forces(true);
+    for (std::size_t i = 0; i < b.size(); i += 3) b.apply_force(i, {float(i) * 0.01f, -1, 0.5f});
+    return b;
+  };
+  check_resume<ParticleSet<float>>(make, test::all_local_terms<float>(), rk4, fixed_steps, 4, 2,
+                                   test::serial_options());
+  const auto make_rigid = [] {
+    RigidBodySet<double> b = tumbling<double>(100);
+    b.keep_forces(true);
+    for (std::size_t i = 0; i < b.size(); i += 4) b.apply_force_at(i, {0, 2, 0}, {1, 0, 0});
+    b.set_kinematic(5);
+    return b;
+  };
+  check_resume<RigidBodySet<double>>(make_rigid, rotational_terms<double>(), rk4, fixed_steps, 4, 2,
+                                     test::serial_options());
+  // Forces for the next call only come back as such.
+  ParticleSet<float> b = test::cloud<float>(50);
+  b.keep_forces(false);  // scenes keep theirs
+  b.apply_force(3, {1, 2, 3});
+  Stepper<float> s(test::all_local_terms<float>(), rk4, test::serial_options());
+  ParticleSet<float> r;
+  CheckpointReader(bits(b, s)).restore(0, r, s);
+  CHECK(r.applied_force(3) == Vec3<float>{1, 2, 3});
+  CHECK_FALSE(r.keeps_forces());
+}
+
+namespace {
+
+struct Saved {
+  std::vector<std::byte> bytes;
+  ParticleSet<float> bodies;
+};
+
+Saved small_checkpoint() {
+  ParticleSet<float> b = test::cloud<float>(3);
+  Stepper<float> s(test::all_local_terms<float>(), rk4, test::serial_options());
+  s.advance(b, 0.01f, 3);
+  CheckpointWriter out;
+  out.add(b, s);
+  out.set_user_data({std::byte{1}, std::byte{2}});
+  return {out.bytes(), b};
+}
+
+template <class V>
+void patch(std::vector<std::byte>& data, std::size_t at, V value) {
+  std::memcpy(data.data() + at, &value, sizeof(V));
+}
+
+// The header's and record 0's own checksums made right again after a patch.
+void reseal(std::vector<std::byte>& data) {
+  patch(data, 44, crc32({data.data(), 44}));
+  patch(data, kCheckpointHeaderBytes + 124, crc32({data.data() + kCheckpointHeaderBytes, 124}));
+  patch(data, data.size() - 4, crc32({data.data(), data.size() - 4}));
+}
+
+std::string refusal(std::vector<std::byte> data) {
+  ParticleSet<float> b = test::cloud<float>(5);
+  const ParticleSet<float> before = b;
+  Stepper<float> s(test::all_local_terms<float>(), rk4, test::serial_options());
+  s.set_time(7);
+  try {
+    CheckpointReader(std::move(data)).restore(0, b, s);
+  } catch (const Error& e) {
+    CHECK(test::state_hash(b) == test::state_hash(before));
+    CHECK(s.time() == 7);
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST_CASE("a damaged checkpoint is refused with one line at every length and every byte", "[checkpoint]") {
+  const Saved saved = small_checkpoint();
+  REQUIRE(refusal(saved.bytes).empty());
+  for (std::size_t n = 0; n < saved.bytes.size(); ++n) {
+    const std::string why = refusal({saved.bytes.begin(), saved.bytes.begin() + std::ptrdiff_t(n)});
+    INFO("cut to " << n << " bytes");
+    CHECK_FALSE(why.empty());
+    CHECK(why.find('\n') == std::string::npos);
+  }
+  for (std::size_t i = 0; i < saved.bytes.size(); ++i) {
+    for (const std::byte flip : {std::byte{0x01}, std::byte{0x80}}) {
+      std::vector<std::byte> damaged = saved.bytes;
+      damaged[i] ^= flip;
+      INFO("byte " << i << " flipped");
+      CHECK_FALSE(refusal(damaged).empty());
+    }
+  }
+  CHECK_THAT(refusal({}), Catch::Contains("empty"));
+}
+
+TEST_CASE("a checkpoint of another version, size, scene, method or precision is refused by name", "[checkpoint]") {
+  const Saved saved = small_checkpoint();
+  std::vector<std::byte> other_version = saved.bytes;
+  patch(other_version, 8, std::uint32_t(2));
+  reseal(other_version);
+  CHECK_THAT(refusal(other_version), Catch::Contains("version 2") && Catch::Contains("version 1"));
+
+  std::vector<std::byte> too_many = saved.bytes;
+  patch(too_many, kCheckpointHeaderBytes + 8, std::uint64_t(1) << 40);  // bodies past the data
+  reseal(too_many);
+  CHECK_THAT(refusal(too_many), Catch::Contains("more than its"));
+
+  ParticleSet<float> b = saved.bodies;
+  Stepper<float> other_model(test::all_local_terms<float>(false), rk4, test::serial_options());
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, b, other_model), Catch::Contains("another force model"));
+  Stepper<float> other_method(test::all_local_terms<float>(), heun, test::serial_options());
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, b, other_method),
+                    Catch::Contains("method rk4, not heun"));
+  ParticleSet<double> d;
+  Stepper<double> in_double(test::all_local_terms<double>(), rk4, test::serial_options());
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, d, in_double), Catch::Contains("in float, not double"));
+  RigidBodySet<float> rigid;
+  Stepper<float> same(test::all_local_terms<float>(), rk4, test::serial_options());
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, rigid, same), Catch::Contains("holds particles"));
+  StepperOptions guarded = test::serial_options();
+  guarded.guard = FiniteGuard::check;
+  Stepper<float> with_guard(test::all_local_terms<float>(), rk4, guarded);
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, b, with_guard), Catch::Contains("guard off"));
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(1, b, same), Catch::Contains("no record 1"));
+}
+
+TEST_CASE("a checkpoint made to pass its checksums with a state no set can hold is refused", "[checkpoint]") {
+  const Saved saved = small_checkpoint();
+  std::vector<std::byte> bad = saved.bytes;
+  const std::size_t arrays = kCheckpointHeaderBytes + kCheckpointRecordBytes;
+  patch(bad, arrays + 4 * 3 * 2 + 4, std::numeric_limits<float>::quiet_NaN());  // body 1's pz
+  reseal(bad);
+  CHECK_THAT(refusal(bad), Catch::Contains("body 1") && Catch::Contains("not finite"));
+  std::vector<std::byte> negative = saved.bytes;
+  patch(negative, arrays + 4 * 3 * 6, -1.0f);  // body 0's inverse mass
+  reseal(negative);
+  CHECK_THAT(refusal(negative), Catch::Contains("inverse mass"));
+}
+
+TEST_CASE("checkpoint files: written whole, read only when regular", "[checkpoint][files]") {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("kinema-ckpt-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const Saved saved = small_checkpoint();
+  const std::filesystem::path file = dir / "a.ckpt";
+  write_whole_file(file, saved.bytes, "checkpoint");
+  CHECK(CheckpointReader::load(file).user_data().size() == 2);
+  {
+    // A write that never commits leaves the earlier file as it was, and no temporary behind.
+    WholeFile unfinished(file, "checkpoint");
+    unfinished.write(std::string_view("half"));
+  }
+  CHECK(CheckpointReader::load(file).records() == 1);
+  CHECK(std::distance(std::filesystem::directory_iterator(dir), std::filesystem::directory_iterator()) == 1);
+  CHECK_THROWS_WITH(CheckpointReader::load(dir), Catch::Contains("is a directory"));
+  CHECK_THROWS_WITH(CheckpointReader::load(dir / "missing"), Catch::Contains("No such file"));
+  const std::filesystem::path fifo = dir / "fifo";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  CHECK_THROWS_WITH(CheckpointReader::load(fifo), Catch::Contains("not a regular file"));
+  CHECK_THROWS_WITH(CheckpointReader::load(file, 16), Catch::Contains("more than the 16 allowed"));
+  CHECK_THROWS_WITH(WholeFile(dir, "checkpoint"), Catch::Contains("Is a directory"));
+  std::filesystem::remove_all(dir);
+}
