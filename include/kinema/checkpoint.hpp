@@ -55,6 +55,9 @@ class CheckpointWriter {
   void set_user_data(std::vector<std::byte> data) { user_ = std::move(data); }
 
   std::size_t size() const;  // bytes, trailer included
+  // The CRC-32 the checkpoint ends with, computed without writing it: equal values for equal
+  // bits of every record (and user data).
+  std::uint32_t crc() const;
   std::vector<std::byte> bytes() const;
   void save(const std::filesystem::path& path) const;  // as a WholeFile ("checkpoint")
 

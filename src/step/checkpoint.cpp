@@ -236,6 +236,15 @@ void CheckpointWriter::emit(Sink& sink) const {
   sink(trailer);
 }
 
+std::uint32_t CheckpointWriter::crc() const {
+  std::uint32_t last = 0;
+  const auto keep_trailer = [&](std::span<const std::byte> bytes) {
+    if (bytes.size() == kTrailerBytes) last = get<std::uint32_t>(bytes.data());
+  };
+  emit(keep_trailer);
+  return last;
+}
+
 std::vector<std::byte> CheckpointWriter::bytes() const {
   std::vector<std::byte> out;
   out.reserve(size());

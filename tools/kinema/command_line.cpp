@@ -61,6 +61,20 @@ const CLI::Validator not_empty(
 
 constexpr std::uint64_t kMaxCount = std::numeric_limits<std::uint64_t>::max();
 
+void add_checkpoint_options(CLI::App& command, CheckpointOptions& o) {
+  auto* path = command.add_option("--checkpoint", o.path,
+                                  "Save the run to FILE (written whole) every --checkpoint-every seconds, at the "
+                                  "end and when a signal stops it")
+                   ->check(not_empty);
+  command.add_option("--checkpoint-every", o.every, "Seconds of wall clock between checkpoints (default 60)")
+      ->transform(positive_finite)
+      ->needs(path);
+  command.add_option("--resume", o.resume_path,
+                     "Go on from a checkpoint of this run (the same scene and options): the results are "
+                     "the bits of a run never stopped")
+      ->check(not_empty);
+}
+
 void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string& precision) {
   CLI::App* run = app.add_subcommand("run", "Step a scene and print a summary of the run");
   run->add_option("scene", o.scene_path, "Scene file (JSON); see tools/scenes/")
@@ -105,6 +119,7 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_flag("--strict", o.strict,
                 "Refuse (exit 1) a dt past the method's largest stable step on this scene, which "
                 "otherwise is a warning");
+  add_checkpoint_options(*run, o.checkpoint);
 }
 
 // The options chart and stability share.
@@ -180,6 +195,7 @@ void add_stress_command(CLI::App& app, StressOptions& o, std::string& isa, std::
   s->add_option("--isa", isa, "Instruction set: auto, scalar, sse2, avx2, avx512")
       ->check(CLI::IsMember({"auto", "scalar", "sse2", "avx2", "avx512"}));
   s->add_flag("--quiet,-q", o.quiet, "Print nothing but errors");
+  add_checkpoint_options(*s, o.checkpoint);
 }
 
 }  // namespace

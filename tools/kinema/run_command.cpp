@@ -241,7 +241,73 @@ struct Stepped {
   double wall_seconds = 0;  // stepping only: loading, checking and writing are not timed
   std::optional<BlowUp> blow_up;
   AdaptiveStats adaptive;
+  std::optional<std::uint64_t> resumed_at;  // the step a checkpoint resumed the run from
+  std::uint64_t checkpoints = 0;            // written by this process
+  std::optional<std::string> error;         // what ended the run early
 };
+
+// What the run's results depend on beyond the bodies: the scene file and the options that
+// change them (not --threads or --isa: every count and instruction set gives the same bits).
+std::string run_fingerprint(const RunOptions& o, const Scene& scene) {
+  char text[400];
+  std::snprintf(text, sizeof text, "method=%s dt=%a steps=%llu precision=%d rtol=%a atol=%a tolerance=%a every=%llu "
+                "trajectory=%d relaxed=%d", scene.method.c_str(), scene.dt, static_cast<unsigned long long>(scene.steps),
+                int(scene.precision), scene.rtol.value_or(-1), scene.atol.value_or(-1), scene.tolerance.value_or(-1),
+                static_cast<unsigned long long>(o.every), int(!o.trajectory_path.empty()), int(o.relaxed_fma));
+  return fingerprint_of(o.scene_path, text);
+}
+
+// The run's record in a checkpoint: its progress and what it measured so far.
+RunRecord run_record(const RunOptions& o, const Scene& scene, const Stepped& s, double initial_energy,
+                     std::optional<std::uint64_t> trajectory_bytes) {
+  const AdaptiveStats& a = s.adaptive;
+  nlohmann::json f = {{"done", s.done}, {"calls", s.calls}, {"wall_seconds", exact(s.wall_seconds)},
+                      {"accepted", a.accepted}, {"rejected", a.rejected}, {"evaluations", a.evaluations},
+                      {"smallest_step", exact(a.smallest_step)}, {"largest_step", exact(a.largest_step)},
+                      {"next_step", exact(a.next_step)}, {"initial_energy", exact(initial_energy)}};
+  if (trajectory_bytes) f["trajectory_bytes"] = *trajectory_bytes;
+  return {"run", run_fingerprint(o, scene), f};
+}
+
+// How far a checkpoint's run got, as the run goes on from it.
+struct Resumed {
+  Stepped stepped;
+  double initial_energy = 0;
+  std::optional<std::uint64_t> trajectory_bytes;
+};
+
+Resumed resumed_from(const nlohmann::json& f) {
+  Resumed r;
+  Stepped& s = r.stepped;
+  s.done = f.at("done"), s.calls = f.at("calls"), s.wall_seconds = exact(f.at("wall_seconds").get<std::uint64_t>());
+  AdaptiveStats& a = s.adaptive;
+  a.accepted = f.at("accepted"), a.rejected = f.at("rejected"), a.evaluations = f.at("evaluations");
+  a.smallest_step = exact(f.at("smallest_step").get<std::uint64_t>());
+  a.largest_step = exact(f.at("largest_step").get<std::uint64_t>());
+  a.next_step = exact(f.at("next_step").get<std::uint64_t>());
+  r.initial_energy = exact(f.at("initial_energy").get<std::uint64_t>());
+  if (f.contains("trajectory_bytes")) r.trajectory_bytes = f.at("trajectory_bytes").get<std::uint64_t>();
+  s.resumed_at = s.done;
+  return r;
+}
+
+// The world as the checkpoint left it, and the run's progress then.
+template <class T>
+Resumed resume(World<T>& world, const Scene& scene, const RunOptions& o) {
+  const std::string& path = o.checkpoint.resume_path;
+  const CheckpointReader in = CheckpointReader::load(path);
+  const RunRecord record = decode(in.user_data(), "run", run_fingerprint(o, scene), path);
+  try {
+    world.restore(in);
+    Resumed r = resumed_from(record.fields);
+    if (r.stepped.done > scene.steps) throw Error("it is past the run's last step");
+    return r;
+  } catch (const nlohmann::json::exception&) {
+    throw Error(printable(path) + ": its run record is incomplete");
+  } catch (const Error& e) {
+    throw Error(printable(path) + ": " + e.what());
+  }
+}
 
 // Steps from `done` to done + n (error control: over that span), timed.
 template <class T>
@@ -262,13 +328,28 @@ bool trajectory_due(const Scene& scene, const RunOptions& o, std::uint64_t done,
   return done % o.every == 0 || done == scene.steps || !finite;
 }
 
+// Writes the world's checkpoint with the run's record, the trajectory synced first so that the
+// length it records is on disk.
 template <class T>
-Stepped step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const StepperOptions& options,
-                   const std::optional<Tolerances>& tolerances, std::optional<TrajectoryWriter>& trajectory) {
+void save_checkpoint(const World<T>& world, const Scene& scene, const RunOptions& o, Stepped& s, double initial_energy,
+                     std::optional<TrajectoryWriter>& trajectory) {
+  std::optional<std::uint64_t> length;
+  if (trajectory) length = trajectory->sync();
+  CheckpointWriter out;
+  world.save(out);
+  out.set_user_data(encode(run_record(o, scene, s, initial_energy, length)));
+  out.save(o.checkpoint.path);
+  ++s.checkpoints;
+}
+
+template <class T>
+void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const StepperOptions& options,
+                const std::optional<Tolerances>& tolerances, std::optional<TrajectoryWriter>& trajectory,
+                double initial_energy, Stepped& s) {
   const std::uint64_t chunk = steps_per_call(scene, body_count(world), tolerances.has_value());
   Progress progress("kinema run", o.quiet);
-  Stepped s;
-  if (trajectory) trajectory->write(0, world.time(), world.particles, world.rigid);
+  CheckpointTimer checkpoints(o.checkpoint);
+  if (trajectory && !s.resumed_at) trajectory->write(0, world.time(), world.particles, world.rigid);
   while (s.done < scene.steps && interrupting_signal() == 0) {
     std::uint64_t n = std::min(chunk, scene.steps - s.done);
     if (trajectory) n = std::min(n, o.every - s.done % o.every);  // stop at each K-th step
@@ -280,11 +361,13 @@ Stepped step_scene(World<T>& world, const Scene& scene, const RunOptions& o, con
     if (trajectory && trajectory_due(scene, o, s.done, finite)) {
       trajectory->write(s.done, world.time(), world.particles, world.rigid);
     }
-    if (!finite) break;
+    if (!finite) break;  // the last checkpoint stays the last finite state
+    if (checkpoints.due()) save_checkpoint(world, scene, o, s, initial_energy, trajectory), checkpoints.saved();
   }
+  // The end, or where a signal stopped it: what a resume goes on from.
+  if (checkpoints.enabled() && !s.blow_up) save_checkpoint(world, scene, o, s, initial_energy, trajectory);
   if (trajectory) trajectory->close();
   progress.finish();
-  return s;
 }
 
 // The steps the state took: under error control the accepted ones, else every step of dt.
@@ -389,6 +472,22 @@ void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const Ste
   }
 }
 
+// Whether the run did all it was asked, and from where it resumed. state_crc32 is the CRC-32 a
+// checkpoint of the final state would end with: equal values, equal bits (bodies and clocks).
+template <class T>
+void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene, const RunOptions& o,
+                      const Stepped& s) {
+  summary["complete"] = !s.error && !s.blow_up && s.done == scene.steps;
+  if (s.error) summary["error"] = *s.error;
+  if (s.resumed_at) summary["resumed_from"] = {{"checkpoint", o.checkpoint.resume_path}, {"step", *s.resumed_at}};
+  if (!o.checkpoint.path.empty()) summary["checkpoints_written"] = s.checkpoints;
+  CheckpointWriter state;
+  world.save(state);
+  char crc[12];
+  std::snprintf(crc, sizeof crc, "%08x", unsigned(state.crc()));
+  summary["state_crc32"] = crc;
+}
+
 // The unit of every field that has one and does not name it.
 nlohmann::ordered_json units_of(const nlohmann::ordered_json& summary) {
   nlohmann::ordered_json units = nlohmann::ordered_json::object();
@@ -409,6 +508,7 @@ nlohmann::ordered_json summarize(const World<T>& world, const Scene& scene, cons
   describe_steps(summary, world, scene, plan, s);
   describe_cost(summary, world, plan, s, initial_energy, scene.precision);
   describe_end(summary, scene, plan, s);
+  describe_outcome(summary, world, scene, o, s);
   summary["units"] = units_of(summary);
   return summary;
 }
@@ -446,17 +546,45 @@ int finish(const nlohmann::ordered_json& summary, const Scene& scene, const RunO
   return 0;
 }
 
+// What a summary says of a run that could not start (the world or auto's choice failed).
+nlohmann::ordered_json failed_summary(const Scene& scene, const std::string& error) {
+  nlohmann::ordered_json summary;
+  summary["scene"] = scene.name;
+  summary["steps"] = 0;
+  summary["complete"] = false;
+  summary["error"] = error;
+  return summary;
+}
+
+// The run from the world on: any error after the world stands still leaves a summary saying
+// how far it got, and is thrown on.
 template <class T>
-int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context) {
+int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context, ReportFile& summary_file) {
   const StepperOptions options = stepper_options(o);
   World<T> world = build_world<T>(scene, o, options);
-  // Opened once the world stands (a scene that fails leaves no file behind), before the run.
-  ReportFile summary_file(o.summary_path, "summary");
-  const StepPlan plan = plan_steps(scene, o, options);
-  std::optional<TrajectoryWriter> trajectory;
-  if (!o.trajectory_path.empty()) trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
-  const double initial_energy = world.total_energy();
-  const Stepped stepped = step_scene(world, scene, o, options, plan.tolerances, trajectory);
+  double initial_energy = world.total_energy();
+  StepPlan plan;
+  Stepped stepped;
+  try {
+    std::optional<std::uint64_t> trajectory_bytes;
+    if (!o.checkpoint.resume_path.empty()) {
+      Resumed r = resume(world, scene, o);
+      stepped = r.stepped, initial_energy = r.initial_energy, trajectory_bytes = r.trajectory_bytes;
+    }
+    plan = plan_steps(scene, o, options);
+    std::optional<TrajectoryWriter> trajectory;
+    if (!o.trajectory_path.empty() && stepped.resumed_at) {
+      if (!trajectory_bytes) throw Error(o.checkpoint.resume_path + ": the checkpoint was taken without --out");
+      trajectory.emplace(o.trajectory_path, world.rigid.size() > 0, *trajectory_bytes);
+    } else if (!o.trajectory_path.empty()) {
+      trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
+    }
+    step_scene(world, scene, o, options, plan.tolerances, trajectory, initial_energy, stepped);
+  } catch (const std::exception& e) {
+    stepped.error = e.what();
+    summary_file.write(summarize(world, scene, o, plan, stepped, initial_energy, context));
+    throw;
+  }
   const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);
   summary_file.write(summary);
   if (!o.quiet) print_summary(summary);
@@ -467,9 +595,22 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
 
 int run_scene(const RunOptions& o) {
   Scene scene = scene_with_overrides(o);
-  RunContext context;
-  if (scene.method == "auto") context.auto_choice = apply_auto_choice(scene, o.scene_path).record;
-  return with_precision(scene.precision, [&]<class T>() { return run_typed<T>(scene, o, context); });
+  // Before any work: a path that cannot be written is refused now.
+  ReportFile summary_file(o.summary_path, "summary");
+  try {
+    RunContext context;
+    if (scene.method == "auto") context.auto_choice = apply_auto_choice(scene, o.scene_path).record;
+    return with_precision(scene.precision,
+                          [&]<class T>() { return run_typed<T>(scene, o, context, summary_file); });
+  } catch (const std::exception& e) {
+    if (!summary_file.written()) {
+      try {
+        summary_file.write(failed_summary(scene, e.what()));
+      } catch (const std::exception&) {  // the summary's own failure: the first error is the one to report
+      }
+    }
+    throw;
+  }
 }
 
 }  // namespace kinema::cli

@@ -7,6 +7,7 @@
 
 #include "kinema/isa.hpp"
 #include "kinema/scene.hpp"
+#include "run_checkpoint.hpp"
 
 namespace kinema::cli {
 
@@ -26,6 +27,7 @@ struct RunOptions {
   bool relaxed_fma = false;     // scalar and SSE2 paths: multiply then add
   bool quiet = false;
   bool strict = false;          // a dt past the largest stable step is an error, not a warning
+  CheckpointOptions checkpoint;
 };
 
 // Returns the process exit code: 0, or 3 when the state stopped being finite.

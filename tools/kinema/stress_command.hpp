@@ -10,6 +10,7 @@
 #include "kinema/isa.hpp"
 #include "kinema/scene.hpp"
 #include "kinema/stepper.hpp"
+#include "run_checkpoint.hpp"
 
 namespace kinema::cli {
 
@@ -30,6 +31,7 @@ struct StressOptions {
   double interval = 1;                     // seconds of wall clock per throughput interval
   Isa isa = Isa::automatic;
   bool quiet = false;
+  CheckpointOptions checkpoint;
 };
 
 // Returns the exit code: 0, 3 when a state stopped being finite, 128 + N on signal N.

@@ -2,6 +2,8 @@
 
 #include <cerrno>
 #include <cstring>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "kinema/error.hpp"
 
@@ -18,6 +20,29 @@ TrajectoryWriter::TrajectoryWriter(const std::string& path, bool rigid_columns)
              file_);
   // The header reaches the file before the run: a full device is found here, not at the end.
   if (std::fflush(file_) != 0) fail();
+}
+
+TrajectoryWriter::TrajectoryWriter(const std::string& path, bool rigid_columns, std::uint64_t length)
+    : rigid_columns_(rigid_columns), path_(path) {
+  file_ = std::fopen(path.c_str(), "r+");
+  if (file_ == nullptr) {
+    throw Error(printable(path) + ": cannot continue the trajectory: " + std::strerror(errno));
+  }
+  struct stat st{};
+  if (::fstat(::fileno(file_), &st) != 0 || !S_ISREG(st.st_mode) || std::uint64_t(st.st_size) < length) {
+    std::fclose(file_);
+    file_ = nullptr;
+    throw Error(printable(path) + ": cannot continue the trajectory: it is not a file of at least the " +
+                std::to_string(length) + " bytes it had at the checkpoint");
+  }
+  if (::ftruncate(::fileno(file_), off_t(length)) != 0 || std::fseek(file_, 0, SEEK_END) != 0) fail();
+}
+
+std::uint64_t TrajectoryWriter::sync() {
+  if (std::fflush(file_) != 0 || ::fdatasync(::fileno(file_)) != 0) fail();
+  const long length = std::ftell(file_);
+  if (length < 0) fail();
+  return std::uint64_t(length);
 }
 
 void TrajectoryWriter::fail() {

@@ -1,0 +1,59 @@
+#pragma once
+// What `kinema run` and `kinema stress` keep in a checkpoint beside the bodies (how far the run
+// got, what it has measured so far), and when they write one.
+
+#include <chrono>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace kinema::cli {
+
+// Where to checkpoint and from where to resume (--checkpoint, --checkpoint-every, --resume).
+struct CheckpointOptions {
+  std::string path;         // empty: none
+  double every = 60;        // seconds of wall clock between checkpoints
+  std::string resume_path;  // empty: a fresh run
+};
+
+// A command's own record in a checkpoint's user data: which command and run it belongs to
+// (`fingerprint`: the scene file and every option that changes the results), and its fields.
+struct RunRecord {
+  std::string command;      // "run" or "stress"
+  std::string fingerprint;
+  nlohmann::json fields;    // numbers whose bits matter go through exact()
+};
+
+std::vector<std::byte> encode(const RunRecord& record);
+// kinema::Error naming `path` when the data is not a record of `command` with `fingerprint`.
+RunRecord decode(std::span<const std::byte> data, const std::string& command, const std::string& fingerprint,
+                 const std::string& path);
+
+// A double as its bits, and back: JSON numbers would do, but this says so.
+std::uint64_t exact(double value);
+double exact(std::uint64_t bits);
+
+// FNV-1a of the scene file's bytes and of `options` (the results-changing options as text).
+std::string fingerprint_of(const std::string& scene_path, const std::string& options);
+
+// Whether a checkpoint is due: every `every` seconds from construction or the last save().
+class CheckpointTimer {
+ public:
+  explicit CheckpointTimer(const CheckpointOptions& o) : enabled_(!o.path.empty()), every_(o.every) {}
+  bool enabled() const { return enabled_; }
+  bool due() const {
+    return enabled_ && std::chrono::duration<double>(Clock::now() - last_).count() >= every_;
+  }
+  void saved() { last_ = Clock::now(); }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  bool enabled_;
+  double every_;
+  Clock::time_point last_ = Clock::now();
+};
+
+}  // namespace kinema::cli
