@@ -30,11 +30,9 @@ class AdaptiveRun {
       // No sliver of a last step: one within 1% of the end takes it, if max_step allows.
       const bool last = t + 1.01 * h >= t_end && t_end - t <= max_step;
       const T size = T(last ? t_end - t : h);
-      if (!(size > 0) || t + double(size) == t) {
-        throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
-                    "; the tolerances cannot be met in " + type_name<T>());
-      }
+      if (!(size > 0) || t + double(size) == t) underflow(t);
       const StepContext<T> c = start_attempt(size);
+      last_size_ = size;
       const double err = staged_.attempt(c, {tol_.rtol, tol_.atol, reuse_scale(c)});
       stats_.evaluations += std::uint64_t(method.tableau.stages - (kept_scale_ > 0 ? 1 : 0));
       const bool accepted = err <= 1;
@@ -69,6 +67,25 @@ class AdaptiveRun {
     const bool fsal = core_.method.tableau.first_same_as_last();
     if (fsal) staged_.keep_last_stage();
     kept_scale_ = fsal ? c.accel_scale : T(0);
+  }
+
+  // Names the body and component whose error forced the last step tried down: with thousands
+  // of bodies, the one to look at.
+  [[noreturn]] void underflow(double t) {
+    std::string culprit;
+    if (last_size_ > 0) {
+      // One more attempt of the last size tried, from here, taken back: its errors say who.
+      const StepContext<T> c{bodies_, last_size_, core_.accel_scale(last_size_), t, workers_};
+      staged_.attempt(c, {tol_.rtol, tol_.atol, T(0)});
+      staged_.take_back(c);
+      const auto worst = staged_.worst_error(c, tol_.rtol, tol_.atol);
+      static constexpr const char* kComponents[] = {"px", "py", "pz", "vx", "vy", "vz"};
+      culprit = ": body " + std::to_string(worst.body) + "'s " + kComponents[worst.component] + " has the largest error (" +
+                shortest_text(worst.weighted) + " times its tolerance at the last step tried, " +
+                shortest_text(double(last_size_)) + ")";
+    }
+    throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
+                "; the tolerances cannot be met in " + type_name<T>() + culprit);
   }
 
   void reject(const StepContext<T>& c) {
@@ -111,6 +128,7 @@ class AdaptiveRun {
   const Tolerances& tol_;
   AdaptiveStats stats_;
   T kept_scale_ = 0;  // the acceleration scale stage 0's kept accelerations carry; 0: none
+  T last_size_ = 0;  // of the last attempt
 };
 
 }  // namespace

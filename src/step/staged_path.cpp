@@ -383,9 +383,20 @@ std::array<kernels::CombineJob<T>, 2> StagedPath<T>::finish_jobs(const StepConte
 // b_hat_s) k_s (velocity stages for positions, accelerations, kept times sigma h, for
 // velocities). y0 is the state kept by the attempt.
 template <class T>
-double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
+void StagedPath<T>::error_terms(const StepContext<T>& c, int field, int d, std::array<const T*, kMaxStages>& k,
+                                std::array<double, kMaxStages>& w) const {
   const auto& t = method_.tableau;
   const double sigma = kernels::acceleration_scale(t);
+  for (int s = 0; s < t.stages; ++s) {
+    // A stage that reads the bodies' own velocities reads them as they were: the finish
+    // has moved them on.
+    k[s] = field == 1 ? accelerations(s)[d] : own_state(s) ? saved_[1][d].data() : velocities(c, s)[d];
+    w[s] = (t.b[s] - t.b_hat[s]) * (field == 0 ? double(c.h) : 1 / sigma);
+  }
+}
+
+template <class T>
+double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
   const auto body = arrays(c.bodies);
   double sum = 0;
   for (int field = 0; field < 2; ++field) {
@@ -394,19 +405,34 @@ double StagedPath<T>::block_error(const StepContext<T>& c, Block b) const {
       const T* y1 = (field == 0 ? body.x[d] : body.v[d]) + b.begin;
       std::array<const T*, kMaxStages> k{};
       std::array<double, kMaxStages> w{};
-      for (int s = 0; s < t.stages; ++s) {
-        // A stage that reads the bodies' own velocities reads them as they were: the finish
-        // has moved them on.
-        const T* rates = field == 1 ? accelerations(s)[d] : own_state(s) ? saved_[1][d].data() : velocities(c, s)[d];
-        k[s] = rates + b.begin;
-        w[s] = (t.b[s] - t.b_hat[s]) * (field == 0 ? double(c.h) : 1 / sigma);
-      }
+      error_terms(c, field, d, k, w);
+      for (int s = 0; s < method_.tableau.stages; ++s) k[s] += b.begin;
       // Real bodies only: padding stays at zero.
       const std::size_t n = std::min(b.end, c.bodies.size()) - std::min(b.begin, c.bodies.size());
-      sum += error_squares(y0, y1, k.data(), w.data(), t.stages, attempt_->rtol, attempt_->atol, n);
+      sum += error_squares(y0, y1, k.data(), w.data(), method_.tableau.stages, attempt_->rtol, attempt_->atol, n);
     }
   }
   return sum;
+}
+
+template <class T>
+typename StagedPath<T>::WorstError StagedPath<T>::worst_error(const StepContext<T>& c, double rtol, double atol) const {
+  WorstError worst;
+  for (int field = 0; field < 2; ++field) {
+    for (int d = 0; d < 3; ++d) {
+      std::array<const T*, kMaxStages> k{};
+      std::array<double, kMaxStages> w{};
+      error_terms(c, field, d, k, w);
+      const T* y0 = saved_[field][d].data();
+      for (std::size_t i = 0; i < c.bodies.size(); ++i) {
+        double e = 0;
+        for (int s = 0; s < method_.tableau.stages; ++s) e += w[s] * double(k[s][i]);
+        const double q = std::abs(e) / (atol + rtol * std::abs(double(y0[i])));
+        if (q > worst.weighted) worst = {i, 3 * field + d, q};
+      }
+    }
+  }
+  return worst;
 }
 
 template <class T>

@@ -50,6 +50,14 @@ class StagedPath {
   double attempt(const StepContext<T>& context, const Attempt& a);
   // Puts back the state the last attempt started from.
   void take_back(const StepContext<T>& context);
+  // After a rejected attempt of size context.h (taken back): the body and component (0..5:
+  // x, y, z, vx, vy, vz) whose weighted error was largest, weights from the state kept.
+  struct WorstError {
+    std::size_t body = 0;
+    int component = 0;
+    double weighted = 0;
+  };
+  WorstError worst_error(const StepContext<T>& context, double rtol, double atol) const;
   // After an accepted step of a method whose last stage is evaluated at the new state: that
   // stage's accelerations become the ones kept for the next attempt's stage 0.
   void keep_last_stage();
@@ -101,6 +109,9 @@ class StagedPath {
   bool skipped(const Phase& p) const;
   void scale_first_stage(Block b);
   double block_error(const StepContext<T>& c, Block b) const;
+  // The error's terms for one component: e_i = sum_s w[s] k[s][i] (k offset to body 0).
+  void error_terms(const StepContext<T>& c, int field, int d, std::array<const T*, kMaxStages>& k,
+                   std::array<double, kMaxStages>& w) const;
   void run_stage(const StepContext<T>& c, const Phase& p, Block b);
   void run_coupled(const StepContext<T>& c, const Phase& p, Block b);
   void add_gravity(const StepContext<T>& c, int s, Block b);
