@@ -16,9 +16,10 @@ namespace kinema {
 // bytes go to a temporary file beside `path` (same directory, so the rename stays on one
 // file system), and commit() flushes and syncs it, renames it over `path` and syncs the
 // directory. A WholeFile destroyed without commit() removes its temporary, and `path` keeps
-// whatever it held. Opening creates the temporary at once, so a directory that cannot be
-// written is refused before any work. Every failure throws kinema::Error naming the path
-// and the reason.
+// whatever it held. Construction checks that the directory takes a new file (a path that
+// cannot be written is refused before any work); the temporary is made at the first write.
+// A device or FIFO that exists at `path` (/dev/stdout) is written directly. Every failure
+// throws kinema::Error naming the path and the reason.
 class WholeFile {
  public:
   // `what` names the file in messages ("summary", "checkpoint").
@@ -34,10 +35,13 @@ class WholeFile {
 
  private:
   [[noreturn]] void fail(const char* doing, int error);
+  void open_temporary();
 
   std::filesystem::path path_, temporary_;
   std::string what_;
   int fd_ = -1;
+  unsigned mode_ = 0;  // of the file replaced; 0: a new file
+  bool device_ = false, finished_ = false;
 };
 
 // Writes `bytes` to `path` as one WholeFile.

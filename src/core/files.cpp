@@ -52,12 +52,28 @@ WholeFile::WholeFile(std::filesystem::path path, std::string what) : what_(std::
     fd_ = ::open(path_.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
     if (fd_ < 0) fail("cannot write", errno);
     ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK);
+    device_ = true;
     return;
   }
+  // A probe now, so that a directory that cannot be written is refused before any work; the
+  // temporary itself is made at the first write, so that a process killed before it leaves
+  // nothing behind.
+  const std::filesystem::path probe = temporary_beside(path_);
+  fd_ = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  if (fd_ < 0) fail("cannot write", errno);
+  ::close(fd_), ::unlink(probe.c_str());
+  fd_ = -1;
+  mode_ = exists ? existing.st_mode & 07777 : 0;
+}
+
+void WholeFile::open_temporary() {
   temporary_ = temporary_beside(path_);
   fd_ = ::open(temporary_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-  if (fd_ < 0) fail("cannot write", errno);
-  if (exists) ::fchmod(fd_, existing.st_mode & 07777);  // the file it replaces keeps its mode
+  if (fd_ < 0) {
+    temporary_.clear();
+    fail("cannot write", errno);
+  }
+  if (mode_ != 0) ::fchmod(fd_, mode_);  // the file it replaces keeps its mode
 }
 
 WholeFile::~WholeFile() {
@@ -66,6 +82,7 @@ WholeFile::~WholeFile() {
 }
 
 void WholeFile::fail(const char* doing, int error) {
+  finished_ = true;  // unsuccessfully: nothing more goes in
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;
   if (!temporary_.empty()) ::unlink(temporary_.c_str());
@@ -74,7 +91,8 @@ void WholeFile::fail(const char* doing, int error) {
 }
 
 void WholeFile::write(std::span<const std::byte> bytes) {
-  if (fd_ < 0) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
+  if (finished_) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
+  if (fd_ < 0) open_temporary();
   while (!bytes.empty()) {
     const ssize_t n = ::write(fd_, bytes.data(), bytes.size());
     if (n < 0 && errno == EINTR) continue;
@@ -84,8 +102,10 @@ void WholeFile::write(std::span<const std::byte> bytes) {
 }
 
 void WholeFile::commit() {
-  if (fd_ < 0) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
-  if (temporary_.empty()) {  // a device: nothing to rename
+  if (finished_) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
+  if (fd_ < 0) open_temporary();  // nothing written: an empty file
+  finished_ = true;
+  if (device_) {  // nothing to rename
     const int error = ::close(fd_) == 0 ? 0 : errno;
     fd_ = -1;
     if (error != 0) fail("cannot write", error);

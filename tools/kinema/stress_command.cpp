@@ -183,21 +183,105 @@ StressSetup<T> set_up(const StressOptions& o, const Scene* scene) {
 struct StressOutcome {
   std::uint64_t done = 0;  // steps completed by every group
   double stepping_seconds = 0;
+  double elapsed_seconds = 0;  // since the stepping started, earlier runs of a resumed one included
   std::vector<Interval> intervals;
   std::optional<Failure> failure;
+  std::optional<std::uint64_t> resumed_at;  // the step a checkpoint resumed the run from
+  std::uint64_t checkpoints = 0;
 };
+
+// What the run's results depend on: the scene (file, or the built-in one's size and seed) and
+// the options that change them (not --threads, --isa or --interval).
+std::string stress_fingerprint(const StressOptions& o, const std::string& method, Precision p, double dt) {
+  char text[400];
+  std::snprintf(text, sizeof text, "bodies=%llu seed=%llu method=%s precision=%d dt=%a steps=%lld seconds=%a guard=%d "
+                "max_speed=%a max_angular=%a", static_cast<unsigned long long>(o.scene_path.empty() ? o.bodies : 0),
+                static_cast<unsigned long long>(o.scene_path.empty() ? o.seed : 0), method.c_str(), int(p), dt,
+                o.steps ? static_cast<long long>(*o.steps) : -1LL, o.seconds.value_or(-1), int(o.guard), o.max_speed,
+                o.max_angular_speed);
+  return fingerprint_of(o.scene_path, text);
+}
+
+nlohmann::json drift_record(const Drift& d) {
+  return {exact(d.start), exact(d.scale), exact(d.worst), exact(d.last)};
+}
+Drift drift_from(const nlohmann::json& j) {
+  return {exact(j.at(0).get<std::uint64_t>()), exact(j.at(1).get<std::uint64_t>()), exact(j.at(2).get<std::uint64_t>()),
+          exact(j.at(3).get<std::uint64_t>())};
+}
+
+template <class T>
+RunRecord stress_record(const std::string& fingerprint, const StressOutcome& out,
+                        const std::vector<Conservation<T>>& conservation) {
+  nlohmann::json f = {{"done", out.done}, {"stepping_seconds", exact(out.stepping_seconds)},
+                      {"elapsed_seconds", exact(out.elapsed_seconds)}};
+  for (const Interval& i : out.intervals) {
+    f["intervals"].push_back({exact(i.end_seconds), i.steps, exact(i.body_steps_per_second), exact(i.resident)});
+  }
+  for (const Conservation<T>& c : conservation) {
+    nlohmann::json g = {{"energy", drift_record(c.energy)}, {"momentum", drift_record(c.momentum)}};
+    for (double p : c.momentum_start) g["momentum_start"].push_back(exact(p));
+    f["groups"].push_back(g);
+  }
+  return {"stress", fingerprint, f};
+}
+
+template <class T>
+void resume_from(const nlohmann::json& f, StressOutcome& out, std::vector<Conservation<T>>& conservation) {
+  out.done = f.at("done"), out.resumed_at = out.done;
+  out.stepping_seconds = exact(f.at("stepping_seconds").get<std::uint64_t>());
+  out.elapsed_seconds = exact(f.at("elapsed_seconds").get<std::uint64_t>());
+  if (f.contains("intervals")) {
+    for (const auto& i : f.at("intervals")) {
+      out.intervals.push_back({exact(i.at(0).get<std::uint64_t>()), i.at(1).get<std::uint64_t>(),
+                               exact(i.at(2).get<std::uint64_t>()), exact(i.at(3).get<std::uint64_t>())});
+    }
+  }
+  const auto& groups = f.at("groups");
+  if (groups.size() != conservation.size()) throw Error("its groups are not this run's");
+  for (std::size_t k = 0; k < conservation.size(); ++k) {
+    conservation[k].energy = drift_from(groups[k].at("energy"));
+    conservation[k].momentum = drift_from(groups[k].at("momentum"));
+    for (int d = 0; d < 3; ++d) conservation[k].momentum_start[d] = exact(groups[k].at("momentum_start").at(d).get<std::uint64_t>());
+  }
+}
+
+// The groups as the checkpoint left them, and the run's progress and drifts then.
+template <class T>
+StressOutcome resume_stress(const std::string& path, const std::string& fingerprint, std::vector<StressGroup<T>>& groups,
+                            std::vector<Conservation<T>>& conservation) {
+  const CheckpointReader in = CheckpointReader::load(path);
+  const RunRecord record = decode(in.user_data(), "stress", fingerprint, path);
+  StressOutcome out;
+  try {
+    if (in.records() != groups.size()) throw Error("it holds " + std::to_string(in.records()) + " groups, this run " +
+                                                   std::to_string(groups.size()));
+    for (std::size_t k = 0; k < groups.size(); ++k) groups[k].restore(in, k);
+    resume_from(record.fields, out, conservation);
+  } catch (const nlohmann::json::exception&) {
+    throw Error(printable(path) + ": its run record is incomplete");
+  } catch (const Error& e) {
+    throw Error(printable(path) + ": " + e.what());
+  }
+  return out;
+}
 
 // Steps every group in chunks of about kChunkSeconds until the steps, the wall-clock budget,
 // a failure or a signal ends it, closing a throughput interval every o.interval seconds.
 template <class T>
 class StressLoop {
  public:
-  StressLoop(const StressOptions& o, StressSetup<T>& setup, std::vector<Conservation<T>>& conservation)
-      : o_(o), setup_(setup), conservation_(conservation) {}
+  // `resumed`: where a checkpoint left the run (a fresh one: nothing done).
+  StressLoop(const StressOptions& o, StressSetup<T>& setup, std::vector<Conservation<T>>& conservation,
+             StressOutcome resumed, std::string fingerprint)
+      : o_(o), setup_(setup), conservation_(conservation), out_(std::move(resumed)),
+        fingerprint_(std::move(fingerprint)), checkpoints_(o.checkpoint) {}
 
   StressOutcome run() {
     Progress progress("kinema stress", o_.quiet);
-    start_ = Clock::now();
+    // Time goes on from where a resumed run stopped: intervals and the --seconds budget count it.
+    start_ = Clock::now() - std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(out_.elapsed_seconds));
+    open_.start = out_.elapsed_seconds;
     std::uint64_t chunk = 1;
     while (!stopped()) {
       const std::uint64_t n = std::min(chunk, setup_.steps - out_.done);
@@ -205,7 +289,10 @@ class StressLoop {
       const double now = seconds_since(start_);
       if (interval_due(now)) close_interval(now);
       progress.update(o_.seconds ? std::min(1.0, now / *o_.seconds) : double(out_.done) / double(setup_.steps));
+      if (checkpoints_.due() && !out_.failure) save_checkpoint(), checkpoints_.saved();
     }
+    // The end, or where a signal stopped it; a failure keeps the last checkpoint before it.
+    if (checkpoints_.enabled() && !out_.failure) save_checkpoint();
     progress.finish();
     return out_;
   }
@@ -277,12 +364,23 @@ class StressLoop {
     std::uint64_t steps = 0;
   };
 
+  void save_checkpoint() {
+    out_.elapsed_seconds = seconds_since(start_);
+    CheckpointWriter out;
+    for (const auto& g : setup_.groups) g.save(out);
+    out.set_user_data(encode(stress_record(fingerprint_, out_, conservation_)));
+    out.save(o_.checkpoint.path);
+    ++out_.checkpoints;
+  }
+
   const StressOptions& o_;
   StressSetup<T>& setup_;
   std::vector<Conservation<T>>& conservation_;
   Clock::time_point start_;
   OpenInterval open_;
   StressOutcome out_;
+  std::string fingerprint_;
+  CheckpointTimer checkpoints_;
 };
 
 template <class T>
@@ -334,6 +432,16 @@ Json intervals_report(const std::vector<Interval>& intervals) {
   return j;
 }
 
+// The CRC-32 a checkpoint of every group would end with: equal values, equal bits.
+template <class T>
+std::string state_crc(const std::vector<StressGroup<T>>& groups) {
+  CheckpointWriter state;
+  for (const auto& g : groups) g.save(state);
+  char crc[12];
+  std::snprintf(crc, sizeof crc, "%08x", unsigned(state.crc()));
+  return crc;
+}
+
 template <class T>
 Json stress_report(const StressOptions& o, const StressSetup<T>& setup, const std::vector<Conservation<T>>& conservation,
                    const StressOutcome& out, const Memory& at_start) {
@@ -358,6 +466,10 @@ Json stress_report(const StressOptions& o, const StressSetup<T>& setup, const st
   j["finite"] = !out.failure;
   if (out.failure) j["first_non_finite"] = failure_report(*out.failure, o.guard);
   if (interrupting_signal() != 0 && !out.failure) j["interrupted"] = signal_name(interrupting_signal());
+  j["complete"] = !out.failure && interrupting_signal() == 0;
+  if (out.resumed_at) j["resumed_from"] = {{"checkpoint", o.checkpoint.resume_path}, {"step", *out.resumed_at}};
+  if (!o.checkpoint.path.empty()) j["checkpoints_written"] = out.checkpoints;
+  j["state_crc32"] = state_crc(setup.groups);
   j["intervals"] = intervals_report(out.intervals);
   return j;
 }
@@ -431,7 +543,19 @@ int run_stress(const StressOptions& o, const Scene* scene) {
   ReportFile report(o.report_path, "report");
   std::vector<Conservation<T>> conservation;
   for (const auto& g : setup.groups) conservation.push_back(conservation_start(g));
-  const StressOutcome out = StressLoop<T>(o, setup, conservation).run();
+  const std::string fingerprint = stress_fingerprint(o, std::string(setup.groups.front().stepper().method().name),
+                                                     sizeof(T) == 4 ? Precision::single : Precision::dual, setup.dt);
+  StressOutcome out;
+  try {
+    StressOutcome resumed;
+    if (!o.checkpoint.resume_path.empty()) {
+      resumed = resume_stress(o.checkpoint.resume_path, fingerprint, setup.groups, conservation);
+    }
+    out = StressLoop<T>(o, setup, conservation, std::move(resumed), fingerprint).run();
+  } catch (const std::exception& e) {  // a report still says what happened
+    report.write(Json{{"scene", setup.name}, {"bodies", setup.bodies}, {"complete", false}, {"error", e.what()}});
+    throw;
+  }
   // The final drifts are those of the final state, whenever the last interval closed.
   for (std::size_t k = 0; k < setup.groups.size(); ++k) conservation_update(setup.groups[k], conservation[k]);
   const Json j = stress_report(o, setup, conservation, out, at_start);

@@ -200,6 +200,34 @@ void StressGroup<T>::advance(T h, std::uint64_t steps) {
 }
 
 template <class T>
+void StressGroup<T>::save(CheckpointWriter& out) const {
+  if (rigid_) return out.add(rigid_bodies_, stepper_);
+  out.add(particles_, stepper_);
+}
+
+template <class T>
+void StressGroup<T>::restore(const CheckpointReader& in, std::size_t k) {
+  const std::size_t before = size();
+  const auto check_size = [&](std::size_t restored) {
+    if (restored != before) {
+      throw Error("checkpoint record " + std::to_string(k) + " holds " + std::to_string(restored) + " bodies, group " +
+                  name_ + " " + std::to_string(before));
+    }
+  };
+  if (rigid_) {
+    RigidBodySet<T> b = in.rigid_bodies(k, stepper_);
+    check_size(b.size());
+    stepper_.set_clock(in.clock(k));
+    rigid_bodies_ = std::move(b);
+  } else {
+    ParticleSet<T> b = in.particles(k, stepper_);
+    check_size(b.size());
+    stepper_.set_clock(in.clock(k));
+    particles_ = std::move(b);
+  }
+}
+
+template <class T>
 double StressGroup<T>::energy() const {
   if (rigid_) return kinema::energy(rigid_bodies_, stepper_.forces()).total();
   return kinema::energy(particles_, stepper_.forces()).total();

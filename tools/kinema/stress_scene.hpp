@@ -36,6 +36,10 @@ class StressGroup {
   std::optional<NonFinite> first_non_finite() const;
   // The body arrays and the force model's spring pairs.
   std::size_t state_bytes() const;
+  // Its set and stepper as a checkpoint's record, and back from record k (kinema::Error when
+  // that record is not this group's kind, size, precision, method or model).
+  void save(CheckpointWriter& out) const;
+  void restore(const CheckpointReader& in, std::size_t k);
 
  private:
   std::string name_;
