@@ -2,6 +2,7 @@
 // Error control: what Stepper::advance_to is asked to meet, and what it reports.
 
 #include <cstdint>
+#include <functional>
 #include <limits>
 
 namespace kinema {
@@ -26,6 +27,15 @@ struct AdaptiveStats {
   std::uint64_t evaluations = 0;  // force evaluations (stages; a reused one is not counted)
   double smallest_step = 0, largest_step = 0;  // of the accepted steps
   double next_step = 0;  // the controller's proposal: a good initial_step for a next call
+  // The call returned before t_end because its stop request said so. The next advance_to call
+  // with the same t_end and tolerances goes on exactly where it stopped (the controller's state
+  // and the first-same-as-last stage are kept, in the stepper and in a checkpoint of it): the
+  // bits are those of one call that never stopped. Any other call drops what was kept.
+  bool stopped = false;
 };
+
+// Polled after each accepted step of an advance_to call: true stops the call there (between
+// steps; the set is at the last accepted step). For signals, frame budgets, checkpoints.
+using StopRequest = std::function<bool()>;
 
 }  // namespace kinema

@@ -14,14 +14,16 @@
 // applied forces and torques when the set has them and whether it keeps them, the stepper's
 // clock exactly (Stepper::clock) and the step advance_to last proposed, and what the record
 // may only be restored under: the precision, the kind of set, the method, the force model's
-// fingerprint (ForceModel::fingerprint) and the finiteness guard's settings. Stepping the
-// restored set with the same calls then gives the same bits as never stopping. advance_to
-// starts each call afresh (its controller and first stage): resume its calls where they
-// were, with Tolerances::initial_step = Stepper::clock().proposed_step.
+// fingerprint (ForceModel::fingerprint) and the finiteness guard's settings; and when an
+// advance_to call was stopped early (AdaptiveStats::stopped), what its next call goes on
+// from: the controller's state and the first-same-as-last stage. Stepping the restored set
+// with the same calls then gives the same bits as never stopping. (A call that ran to its
+// end leaves nothing: the next starts afresh from Tolerances::initial_step, for which
+// Stepper::clock().proposed_step is kept.)
 //
 // Version 1 layout, little-endian (x86-64): a 48-byte header ("kinemaCK", the version, the
 // record count, the total length, the user data's length, the header's CRC-32); each record:
-// a 128-byte header with its own CRC-32, then n values per array (no padding); the user
+// a 192-byte header with its own CRC-32, then n values per array (no padding); the user
 // data; the CRC-32 of every byte before it. Loading checks the header, every record header
 // and every length against the data's length, and the checksum, before it allocates
 // anything: a truncated, damaged or foreign checkpoint is refused with one line (a
@@ -41,7 +43,7 @@
 namespace kinema {
 
 inline constexpr std::uint32_t kCheckpointVersion = 1;
-inline constexpr std::size_t kCheckpointHeaderBytes = 48, kCheckpointRecordBytes = 128;
+inline constexpr std::size_t kCheckpointHeaderBytes = 48, kCheckpointRecordBytes = 192;
 
 // Collects sets and their steppers, then writes them at once. It keeps views of the sets'
 // arrays, not copies: write (bytes, save) before the sets change.
@@ -100,6 +102,10 @@ class CheckpointReader {
   template <class T>
   RigidBodySet<T> rigid_bodies(std::size_t k, const Stepper<T>& stepper) const;
   StepperClock clock(std::size_t k) const;
+  // Record k's clock and continuation into `stepper` (checked as restore checks them; nothing
+  // changes when it throws).
+  template <class T>
+  void restore_stepper(std::size_t k, Stepper<T>& stepper) const;
 
   struct Record {
     std::size_t header;  // offset of the record header
@@ -124,6 +130,8 @@ extern template void CheckpointReader::restore(std::size_t, ParticleSet<float>&,
 extern template void CheckpointReader::restore(std::size_t, ParticleSet<double>&, Stepper<double>&) const;
 extern template void CheckpointReader::restore(std::size_t, RigidBodySet<float>&, Stepper<float>&) const;
 extern template void CheckpointReader::restore(std::size_t, RigidBodySet<double>&, Stepper<double>&) const;
+extern template void CheckpointReader::restore_stepper(std::size_t, Stepper<float>&) const;
+extern template void CheckpointReader::restore_stepper(std::size_t, Stepper<double>&) const;
 extern template ParticleSet<float> CheckpointReader::particles(std::size_t, const Stepper<float>&) const;
 extern template ParticleSet<double> CheckpointReader::particles(std::size_t, const Stepper<double>&) const;
 extern template RigidBodySet<float> CheckpointReader::rigid_bodies(std::size_t, const Stepper<float>&) const;

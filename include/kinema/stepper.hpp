@@ -88,6 +88,9 @@ inline StepperOptions on_calling_thread(StepperOptions options = {}) {
 }
 
 template <class T>
+struct StepperAccess;  // src/step: what a checkpoint reads and writes of a stepper
+
+template <class T>
 class Stepper {
  public:
   // Throws kinema::Error for an invalid method or an unavailable ISA.
@@ -119,6 +122,10 @@ class Stepper {
   // Throws kinema::Error for a method without a pair, bad tolerances, t_end before time(),
   // or a step that would underflow.
   AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances);
+  // The same, returning early (AdaptiveStats::stopped) after the first accepted step at which
+  // `stop` returns true; the next call to the same t_end goes on exactly from there.
+  AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances,
+                           const StopRequest& stop);
   // Rigid bodies: the same, with orientation and angular momentum: the fused path for a
   // built-in method and local terms, the rigid block path for RigidCallbacks or another
   // method; coupled terms are refused (kinema::Error). Use one stepper per body set: each
@@ -169,6 +176,7 @@ class Stepper {
   unsigned chosen_workers() const;
 
  private:
+  friend struct StepperAccess<T>;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

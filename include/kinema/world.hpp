@@ -28,7 +28,8 @@ class World {
   void advance(T h, std::uint64_t steps);
   // Error-controlled steps to t_end (Stepper::advance_to); particles only (kinema::Error
   // when the world has rigid bodies).
-  AdaptiveStats advance_to(double t_end, const Tolerances& tolerances);
+  // With `stop`, as Stepper::advance_to with a stop request.
+  AdaptiveStats advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop = {});
   double time() const;
   double total_energy() const;  // kinetic (with rotation) + potential, both sets
   bool finite() const;

@@ -31,9 +31,9 @@ double World<T>::total_energy() const {
 }
 
 template <class T>
-AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances) {
+AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop) {
   if (rigid.size() > 0) throw Error("error-controlled steps are for particles; the scene has rigid bodies");
-  return particle_stepper_.advance_to(particles, t_end, tolerances);
+  return particle_stepper_.advance_to(particles, t_end, tolerances, stop);
 }
 
 template <class T>
@@ -59,12 +59,12 @@ void World<T>::restore(const CheckpointReader& in) {
                 " rigid bodies where this world has " + std::to_string(particles.size()) + " and " +
                 std::to_string(rigid.size()));
   }
-  const StepperClock before = particle_stepper_.clock();
-  particle_stepper_.set_clock(in.clock(0));  // checks before it changes anything
+  const StepperClock before = rigid_stepper_.clock();
+  in.restore_stepper(1, rigid_stepper_);  // each checks before it changes anything
   try {
-    rigid_stepper_.set_clock(in.clock(1));
+    in.restore_stepper(0, particle_stepper_);
   } catch (...) {
-    particle_stepper_.set_clock(before);
+    rigid_stepper_.set_clock(before);
     throw;
   }
   particles = std::move(p);

@@ -18,13 +18,21 @@ class AdaptiveRun {
   AdaptiveRun(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies, const Tolerances& tolerances)
       : core_(core), staged_(*core.paths.staged), workers_(workers), bodies_(bodies), tol_(tolerances) {}
 
-  AdaptiveStats to(double t_end, double max_step) {
+  AdaptiveStats to(double t_end, double max_step, AdaptiveContinuation& continuation, const StopRequest& stop) {
     staged_.reserve(bodies_.padded_size());
     double t = core_.clock.time();
+    const bool continues = continuation.continues(t_end, tol_, max_step);
+    continuation.active = false;
     if (t_end == t) return stats_;
     const Method& method = core_.method;
     StepController controller(std::min(method.order, method.embedded_order));
-    double h = tol_.initial_step > 0 ? tol_.initial_step : first_step(t_end - t);
+    double h = 0;
+    if (continues) {
+      h = continuation.h, kept_scale_ = T(continuation.kept_scale);
+      controller.set_state(continuation.controller);
+    } else {
+      h = tol_.initial_step > 0 ? tol_.initial_step : first_step(t_end - t);
+    }
     while (t < t_end) {
       h = std::min(h, max_step);
       // No sliver of a last step: one within 1% of the end takes it, if max_step allows.
@@ -43,6 +51,11 @@ class AdaptiveRun {
         reject(c);
       }
       h = controller.next(double(size), err, accepted);
+      if (accepted && t < t_end && stop && stop()) {
+        continuation = {true, t_end, tol_.rtol, tol_.atol, max_step, h, controller.state(), double(kept_scale_)};
+        stats_.stopped = true;
+        break;
+      }
     }
     stats_.next_step = h;
     return stats_;
@@ -135,13 +148,14 @@ class AdaptiveRun {
 
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
-                                 double t_end, const Tolerances& tolerances, double max_step) {
-  return AdaptiveRun<T>(core, workers, bodies, tolerances).to(t_end, max_step);
+                                 double t_end, const Tolerances& tolerances, double max_step,
+                                 AdaptiveContinuation& continuation, const StopRequest& stop) {
+  return AdaptiveRun<T>(core, workers, bodies, tolerances).to(t_end, max_step, continuation, stop);
 }
 
 template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, ParticleSet<float>&, double,
-                                          const Tolerances&, double);
+                                          const Tolerances&, double, AdaptiveContinuation&, const StopRequest&);
 template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, ParticleSet<double>&, double,
-                                          const Tolerances&, double);
+                                          const Tolerances&, double, AdaptiveContinuation&, const StopRequest&);
 
 }  // namespace kinema

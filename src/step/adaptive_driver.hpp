@@ -6,15 +6,34 @@
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
 #include "parallel/blocks.hpp"
+#include "step/step_controller.hpp"
 #include "step/stepper_core.hpp"
 
 namespace kinema {
 
+// What a call stopped early leaves for the next one to the same end: the size to try, the
+// controller's state, and whether stage 0's accelerations are kept in the staged path (with
+// the acceleration scale they carry; 0: none).
+struct AdaptiveContinuation {
+  bool active = false;
+  double t_end = 0, rtol = 0, atol = 0, max_step = 0;
+  double h = 0;
+  StepController::State controller;
+  double kept_scale = 0;
+
+  bool continues(double end, const Tolerances& t, double cap) const {
+    return active && end == t_end && t.rtol == rtol && t.atol == atol && cap == max_step;
+  }
+};
+
 // Steps the bodies from the core's clock to t_end on `workers`, no step longer than
-// `max_step`; the last step lands on t_end. The request must have passed check_adaptive.
-// Throws kinema::Error when the step size underflows.
+// `max_step`; the last step lands on t_end, unless `stop` says to stop sooner: then
+// `continuation` keeps what the next call to t_end goes on from (and a call that continues
+// it takes it). The request must have passed check_adaptive. Throws kinema::Error when the
+// step size underflows.
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
-                                 double t_end, const Tolerances& tolerances, double max_step);
+                                 double t_end, const Tolerances& tolerances, double max_step,
+                                 AdaptiveContinuation& continuation, const StopRequest& stop);
 
 }  // namespace kinema

@@ -9,6 +9,7 @@
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
 #include "kinema/files.hpp"
+#include "step/stepper_access.hpp"
 
 namespace kinema {
 namespace {
@@ -18,8 +19,9 @@ constexpr std::size_t kTrailerBytes = 4;
 constexpr std::size_t kMethodNameBytes = 32;
 
 enum class SetKind : std::uint8_t { particles = 1, rigid = 2 };
-enum Flags : std::uint8_t { kForces = 1, kTorques = 2, kKeepForces = 4 };
-constexpr std::size_t kParticleArrays = 7, kRigidArrays = 17;  // + 3 for forces, + 3 for torques
+enum Flags : std::uint8_t { kForces = 1, kTorques = 2, kKeepForces = 4, kKeptStage = 8 };
+// + 3 for forces, + 3 for torques, + 3 for a kept first stage
+constexpr std::size_t kParticleArrays = 7, kRigidArrays = 17;
 
 // Field offsets in the 48-byte header and the 128-byte record header.
 namespace head {
@@ -27,7 +29,10 @@ constexpr std::size_t version = 8, records = 12, total = 16, user = 24, crc = 44
 }
 namespace rec {
 constexpr std::size_t kind = 0, scalar = 1, flags = 2, guard = 3, bodies = 8, model = 16, method = 24, origin = 32,
-                      steps = 40, h = 48, proposed = 56, max_speed = 64, max_angular = 72, name = 80, crc = 124;
+                      steps = 40, h = 48, proposed = 56, max_speed = 64, max_angular = 72, name = 80,
+                      // the continuation of an error-controlled call stopped early
+                      continues = 112, rejected = 113, t_end = 120, rtol = 128, atol = 136, max_step = 144,
+                      next_h = 152, err_prev = 160, kept_scale = 168, crc = 188;
 }
 
 template <class V>
@@ -153,6 +158,11 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   std::uint8_t flags = bodies.keeps_forces() ? kKeepForces : 0;
   if (forces.active()) flags |= kForces, Codec::applied(forces, arrays);
   if (torques != nullptr && torques->active()) flags |= kTorques, Codec::applied(*torques, arrays);
+  const AdaptiveContinuation& cont = StepperAccess<T>::continuation(stepper);
+  if (cont.active && cont.kept_scale > 0) {
+    flags |= kKeptStage;
+    for (const T* a : StepperAccess<T>::staged(stepper)->first_stage()) arrays.push_back(a);
+  }
 
   CheckpointWriter::Record r{};
   std::byte* h = r.header.data();
@@ -173,6 +183,13 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   put(h + rec::max_angular, o.max_angular_speed);
   const std::string_view name = stepper.method().name;
   std::memcpy(h + rec::name, name.data(), std::min(name.size(), kMethodNameBytes - 1));
+  put(h + rec::continues, std::uint8_t(cont.active));
+  put(h + rec::rejected, std::uint8_t(cont.controller.rejected));
+  for (const auto& [at, value] : {std::pair{rec::t_end, cont.t_end}, {rec::rtol, cont.rtol}, {rec::atol, cont.atol},
+                                  {rec::max_step, cont.max_step}, {rec::next_h, cont.h},
+                                  {rec::err_prev, cont.controller.err_prev}, {rec::kept_scale, cont.kept_scale}}) {
+    put(h + at, value);
+  }
   put(h + rec::crc, crc_of(h, rec::crc));
   for (const T* a : arrays) r.arrays.emplace_back(reinterpret_cast<const std::byte*>(a), bodies.size() * sizeof(T));
   return r;
@@ -266,8 +283,7 @@ namespace {
 
 std::size_t arrays_of(SetKind kind, std::uint8_t flags) {
   std::size_t n = kind == SetKind::particles ? kParticleArrays : kRigidArrays;
-  if (flags & kForces) n += 3;
-  if (flags & kTorques) n += 3;
+  for (const Flags f : {kForces, kTorques, kKeptStage}) n += flags & f ? 3 : 0;
   return n;
 }
 
@@ -280,7 +296,9 @@ std::size_t check_record_header(const std::byte* h, std::size_t left, std::size_
   const auto kind = SetKind(get<std::uint8_t>(h + rec::kind));
   const auto scalar = get<std::uint8_t>(h + rec::scalar), flags = get<std::uint8_t>(h + rec::flags);
   const bool known = (kind == SetKind::particles || kind == SetKind::rigid) && (scalar == 4 || scalar == 8) &&
-                     flags < 8 && !(kind == SetKind::particles && (flags & kTorques)) && get<std::uint8_t>(h + rec::guard) < 3;
+                     flags < 16 && !(kind == SetKind::particles && (flags & kTorques)) &&
+                     !(kind == SetKind::rigid && (flags & kKeptStage)) && get<std::uint8_t>(h + rec::guard) < 3 &&
+                     get<std::uint8_t>(h + rec::continues) < 2 && get<std::uint8_t>(h + rec::rejected) < 2;
   if (!known) refuse(which + ": unknown kind, precision or flags");
   const std::uint64_t bodies = get<std::uint64_t>(h + rec::bodies);
   const std::size_t per_body = arrays_of(kind, flags) * scalar;
@@ -428,16 +446,45 @@ RigidBodySet<T> CheckpointReader::rigid_bodies(std::size_t k, const Stepper<T>& 
 }
 
 template <class T>
+void CheckpointReader::restore_stepper(std::size_t k, Stepper<T>& stepper) const {
+  if (k >= records_.size()) throw Error("checkpoint: no record " + std::to_string(k));
+  const std::byte* h = data_.data() + records_[k].header;
+  AdaptiveContinuation cont;
+  cont.active = get<std::uint8_t>(h + rec::continues) != 0;
+  cont.controller.rejected = get<std::uint8_t>(h + rec::rejected) != 0;
+  cont.t_end = get<double>(h + rec::t_end), cont.rtol = get<double>(h + rec::rtol), cont.atol = get<double>(h + rec::atol);
+  cont.max_step = get<double>(h + rec::max_step), cont.h = get<double>(h + rec::next_h);
+  cont.controller.err_prev = get<double>(h + rec::err_prev), cont.kept_scale = get<double>(h + rec::kept_scale);
+  const bool kept = (get<std::uint8_t>(h + rec::flags) & kKeptStage) != 0;
+  StagedPath<T>* staged = StepperAccess<T>::staged(stepper);
+  if (kept && staged == nullptr) throw Error("checkpoint record " + std::to_string(k) + ": this stepper keeps no stages");
+  const StepperClock before = stepper.clock();
+  stepper.set_clock(clock(k));  // checks the values: throws before anything changes
+  if (kept) {
+    try {
+      const std::size_t n = records_[k].bodies;
+      const std::array<T*, 3> stage = staged->first_stage_for(padded_count<T>(n));
+      const std::byte* at = data_.data() + records_[k].arrays + (arrays_of(SetKind::particles, get<std::uint8_t>(h + rec::flags)) - 3) * n * sizeof(T);
+      for (T* a : stage) std::memcpy(a, at, n * sizeof(T)), at += n * sizeof(T);
+    } catch (...) {
+      stepper.set_clock(before);
+      throw;
+    }
+  }
+  StepperAccess<T>::continuation(stepper) = cont;
+}
+
+template <class T>
 void CheckpointReader::restore(std::size_t k, ParticleSet<T>& bodies, Stepper<T>& stepper) const {
   ParticleSet<T> restored = particles(k, stepper);
-  stepper.set_clock(clock(k));  // checks the values: throws before the set changes
+  restore_stepper(k, stepper);  // throws before the set changes
   bodies = std::move(restored);
 }
 
 template <class T>
 void CheckpointReader::restore(std::size_t k, RigidBodySet<T>& bodies, Stepper<T>& stepper) const {
   RigidBodySet<T> restored = rigid_bodies(k, stepper);
-  stepper.set_clock(clock(k));
+  restore_stepper(k, stepper);
   bodies = std::move(restored);
 }
 
@@ -449,6 +496,8 @@ template void CheckpointReader::restore(std::size_t, ParticleSet<float>&, Steppe
 template void CheckpointReader::restore(std::size_t, ParticleSet<double>&, Stepper<double>&) const;
 template void CheckpointReader::restore(std::size_t, RigidBodySet<float>&, Stepper<float>&) const;
 template void CheckpointReader::restore(std::size_t, RigidBodySet<double>&, Stepper<double>&) const;
+template void CheckpointReader::restore_stepper(std::size_t, Stepper<float>&) const;
+template void CheckpointReader::restore_stepper(std::size_t, Stepper<double>&) const;
 template ParticleSet<float> CheckpointReader::particles(std::size_t, const Stepper<float>&) const;
 template ParticleSet<double> CheckpointReader::particles(std::size_t, const Stepper<double>&) const;
 template RigidBodySet<float> CheckpointReader::rigid_bodies(std::size_t, const Stepper<float>&) const;

@@ -67,6 +67,11 @@ class StagedPath {
   // Stage 0's accelerations (times the scale they were evaluated with), for the driver's
   // first step size.
   std::array<const T*, 3> first_stage() const { return accelerations(0); }
+  // Stage 0's accelerations to write into (a checkpoint's kept first stage), `padded` long.
+  std::array<T*, 3> first_stage_for(std::size_t padded) {
+    reserve(padded);
+    return {stage_a_[0][0].data(), stage_a_[0][1].data(), stage_a_[0][2].data()};
+  }
 
   // The block path (no coupled terms): a driver may run each block through all the steps of
   // a call while it is in cache, one step_block per step. A block's steps see nothing of

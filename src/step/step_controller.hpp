@@ -16,6 +16,14 @@ class StepController {
   explicit StepController(int lower_order)
       : beta_(0.2 / (lower_order + 1)), exponent_(1.0 / (lower_order + 1) - 0.75 * beta_) {}
 
+  // What it remembers between steps: a call stopped early goes on from it.
+  struct State {
+    double err_prev = 1e-4;
+    bool rejected = false;
+  };
+  State state() const { return {err_prev_, rejected_}; }
+  void set_state(const State& s) { err_prev_ = s.err_prev, rejected_ = s.rejected; }
+
   // The size to try after a step of size h whose error norm was `err` (accepted if <= 1).
   double next(double h, double err, bool accepted) {
     if (!std::isfinite(err)) {

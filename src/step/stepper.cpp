@@ -13,6 +13,7 @@
 #include "step/adaptive_driver.hpp"
 #include "step/fixed_steps.hpp"
 #include "step/step_checks.hpp"
+#include "step/stepper_access.hpp"
 #include "step/stepper_core.hpp"
 
 namespace kinema {
@@ -35,6 +36,7 @@ struct Stepper<T>::Impl {
 
   template <class Set>
   void advance(Set& bodies, T h, std::uint64_t steps) {
+    continuation.active = false;
     workers.run(std::uint64_t(kind_of(bodies)), bodies.size(), steps, [&](const Workers& w) {
       fixed.advance(w, bodies, h, steps);
       return double(bodies.size()) * double(steps);
@@ -48,13 +50,13 @@ struct Stepper<T>::Impl {
     if (!bodies.keeps_forces()) bodies.clear_forces();
   }
 
-  AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances) {
+  AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const StopRequest& stop) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
     check_reach(core.lowered().coupled, bodies);
     const double max_step = step_cap(bodies, t_end, tolerances);
     AdaptiveStats stats;
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
-      stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step);
+      stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stop);
       return double(bodies.size()) * double(stats.evaluations);
     });
     if (stats.accepted > 0) forces_used(bodies);
@@ -91,7 +93,23 @@ struct Stepper<T>::Impl {
   MeasuredWorkers workers;
   FixedSteps<T> fixed;
   double proposed_step = 0;  // the last advance_to's AdaptiveStats::next_step
+  AdaptiveContinuation continuation;  // of an advance_to call stopped early
 };
+
+template <class T>
+AdaptiveContinuation& StepperAccess<T>::continuation(Stepper<T>& s) {
+  return s.impl_->continuation;
+}
+
+template <class T>
+const AdaptiveContinuation& StepperAccess<T>::continuation(const Stepper<T>& s) {
+  return s.impl_->continuation;
+}
+
+template <class T>
+StagedPath<T>* StepperAccess<T>::staged(const Stepper<T>& s) {
+  return s.impl_->core.paths.staged.get();
+}
 
 template <class T>
 Stepper<T>::Stepper(ForceModel<T> forces, const Method& method, StepperOptions options)
@@ -121,7 +139,13 @@ void Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps) {
 
 template <class T>
 AdaptiveStats Stepper<T>::advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances) {
-  return impl_->advance_to(io_bodies, t_end, tolerances);
+  return impl_->advance_to(io_bodies, t_end, tolerances, {});
+}
+
+template <class T>
+AdaptiveStats Stepper<T>::advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances,
+                                     const StopRequest& stop) {
+  return impl_->advance_to(io_bodies, t_end, tolerances, stop);
 }
 
 template <class T>
@@ -172,6 +196,7 @@ std::size_t Stepper<T>::scratch_bytes() const {
 template <class T>
 void Stepper<T>::set_forces(ForceModel<T> forces) {
   impl_->core.use(std::make_shared<const ForceModel<T>>(std::move(forces)));
+  impl_->continuation.active = false;
 }
 
 template <class T>
@@ -183,6 +208,7 @@ template <class T>
 void Stepper<T>::set_time(double t) {
   if (!std::isfinite(t)) throw Error("time must be finite");
   impl_->core.clock.set(t);
+  impl_->continuation.active = false;
 }
 
 template <class T>
@@ -245,6 +271,8 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
 
 template class Stepper<float>;
 template class Stepper<double>;
+template struct StepperAccess<float>;
+template struct StepperAccess<double>;
 template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double, int,
                                               StepperOptions);
 template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double, int,

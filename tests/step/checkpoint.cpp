@@ -125,6 +125,50 @@ TEST_CASE("a checkpoint resumes error-controlled steps bit for bit", "[checkpoin
   }
 }
 
+TEST_CASE("an error-controlled call stopped early goes on, in the stepper or from a checkpoint, bit for bit",
+          "[checkpoint][adaptive]") {
+  // Each call stops after every third accepted step; the controller and the first-same-as-last
+  // stage carry over, so the bits are those of one call that never stopped.
+  const ForceModel<double> f = chain_and_cluster<double>(300);
+  const Tolerances tol{1e-7, 1e-7};
+  ParticleSet<double> straight = test::cloud<double>(300);
+  Stepper<double> a(f, dopri5, test::serial_options());
+  const AdaptiveStats whole = a.advance_to(straight, 0.3, tol);
+  REQUIRE(whole.accepted > 20);
+
+  ParticleSet<double> b = test::cloud<double>(300);
+  Stepper<double> s(f, dopri5, test::serial_options());
+  int accepted = 0;
+  const StopRequest every_third = [&] { return ++accepted % 3 == 0; };
+  AdaptiveStats total;
+  for (int call = 0;; ++call) {
+    const std::vector<std::byte> saved = bits(b, s);  // and every other call from a checkpoint
+    if (call % 2 == 1) {
+      ParticleSet<double> fresh;
+      Stepper<double> resumed(f, dopri5, resumed_options()[call / 2 % resumed_options().size()]);
+      CheckpointReader(saved).restore(0, fresh, resumed);
+      b = std::move(fresh), s = std::move(resumed);
+    }
+    const AdaptiveStats part = s.advance_to(b, 0.3, tol, every_third);
+    total.accepted += part.accepted, total.rejected += part.rejected, total.evaluations += part.evaluations;
+    if (!part.stopped) break;
+    CHECK(part.accepted == 3);
+  }
+  CHECK(total.accepted == whole.accepted);
+  CHECK(total.rejected == whole.rejected);
+  CHECK(total.evaluations == whole.evaluations);
+  CHECK(test::state_hash(b) == test::state_hash(straight));
+  CHECK(s.time() == a.time());
+  // Another end drops what the stopped call kept: the call starts afresh.
+  ParticleSet<double> c = test::cloud<double>(300);
+  Stepper<double> t(f, dopri5, test::serial_options());
+  accepted = 0;
+  REQUIRE(t.advance_to(c, 0.3, tol, every_third).stopped);
+  const AdaptiveStats other = t.advance_to(c, 0.2999, tol);
+  CHECK_FALSE(other.stopped);
+  CHECK(t.time() == 0.2999);
+}
+
 TEST_CASE("a checkpoint keeps applied forces, the keep flag and kinematic bodies", "[checkpoint]") {
   const auto make = [] {
     ParticleSet<float> b = test::cloud<float>(200);
@@ -180,7 +224,8 @@ void patch(std::vector<std::byte>& data, std::size_t at, V value) {
 // The header's and record 0's own checksums made right again after a patch.
 void reseal(std::vector<std::byte>& data) {
   patch(data, 44, crc32({data.data(), 44}));
-  patch(data, kCheckpointHeaderBytes + 124, crc32({data.data() + kCheckpointHeaderBytes, 124}));
+  constexpr std::size_t crc_at = kCheckpointRecordBytes - 4;
+  patch(data, kCheckpointHeaderBytes + crc_at, crc32({data.data() + kCheckpointHeaderBytes, crc_at}));
   patch(data, data.size() - 4, crc32({data.data(), data.size() - 4}));
 }
 

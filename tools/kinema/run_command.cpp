@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <optional>
 
 #include <nlohmann/json.hpp>
@@ -128,17 +129,30 @@ std::optional<Tolerances> tolerances_of(const Scene& scene) {
   return t;
 }
 
-// Error-controlled steps to t, each call starting from the size the last one proposed.
-template <class T>
-void advance_adaptive(World<T>& world, double t, Tolerances tolerances, AdaptiveStats& total) {
-  tolerances.initial_step = total.next_step;
-  const AdaptiveStats s = world.advance_to(t, tolerances);
+void add_stats(AdaptiveStats& total, const AdaptiveStats& s) {
   total.smallest_step = total.accepted == 0 ? s.smallest_step
                         : s.accepted == 0   ? total.smallest_step
                                             : std::min(total.smallest_step, s.smallest_step);
   total.largest_step = std::max(total.largest_step, s.largest_step);
   total.accepted += s.accepted, total.rejected += s.rejected, total.evaluations += s.evaluations;
   if (s.next_step > 0) total.next_step = s.next_step;
+}
+
+// Error-controlled steps to t, starting from the size the last call proposed. A signal or a
+// checkpoint due stops the call between steps; for a checkpoint it goes on after (the bits of
+// one call). Returns false when a signal stopped it short of t (the stepper keeps the rest).
+template <class T>
+bool advance_adaptive(World<T>& world, double t, Tolerances tolerances, AdaptiveStats& total,
+                      CheckpointTimer& checkpoints, const std::function<void()>& save) {
+  tolerances.initial_step = total.next_step;
+  const StopRequest stop = [&] { return interrupting_signal() != 0 || checkpoints.due(); };
+  for (;;) {
+    const AdaptiveStats s = world.advance_to(t, tolerances, stop);
+    add_stats(total, s);
+    if (!s.stopped) return true;
+    if (interrupting_signal() != 0) return false;
+    save();
+  }
 }
 
 // The stiffness of the scene at its start, in double whatever the run's precision (finite
@@ -310,17 +324,20 @@ Resumed resume(World<T>& world, const Scene& scene, const RunOptions& o) {
 }
 
 // Steps from `done` to done + n (error control: over that span), timed.
+// Returns false when a signal stopped error control short of the span's end.
 template <class T>
-void advance_timed(World<T>& world, const Scene& scene, const std::optional<Tolerances>& tolerances,
-                   std::uint64_t n, Stepped& s) {
+bool advance_timed(World<T>& world, const Scene& scene, const std::optional<Tolerances>& tolerances,
+                   std::uint64_t n, Stepped& s, CheckpointTimer& checkpoints, const std::function<void()>& save) {
   const auto start = Clock::now();
+  bool whole = true;
   if (tolerances) {
-    advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive);
+    whole = advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive, checkpoints, save);
   } else {
     world.advance(T(scene.dt), n);
   }
   s.wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
   ++s.calls;
+  return whole;
 }
 
 // Every K-th step, the last, and the one that stopped being finite.
@@ -353,7 +370,9 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
   while (s.done < scene.steps && interrupting_signal() == 0) {
     std::uint64_t n = std::min(chunk, scene.steps - s.done);
     if (trajectory) n = std::min(n, o.every - s.done % o.every);  // stop at each K-th step
-    advance_timed(world, scene, tolerances, n, s);
+    const auto save = [&] { save_checkpoint(world, scene, o, s, initial_energy, trajectory), checkpoints.saved(); };
+    // Short of the span's end only on a signal: the checkpoint below keeps the rest to do.
+    if (!advance_timed(world, scene, tolerances, n, s, checkpoints, save)) break;
     const bool finite = world.finite();
     if (!finite) s.blow_up = find_blow_up<T>(scene, options, world, s.done, n);
     s.done += n;
@@ -362,7 +381,7 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
       trajectory->write(s.done, world.time(), world.particles, world.rigid);
     }
     if (!finite) break;  // the last checkpoint stays the last finite state
-    if (checkpoints.due()) save_checkpoint(world, scene, o, s, initial_energy, trajectory), checkpoints.saved();
+    if (checkpoints.due()) save();
   }
   // The end, or where a signal stopped it: what a resume goes on from.
   if (checkpoints.enabled() && !s.blow_up) save_checkpoint(world, scene, o, s, initial_energy, trajectory);
@@ -538,8 +557,11 @@ int finish(const nlohmann::ordered_json& summary, const Scene& scene, const RunO
   if (summary.contains("interrupted")) {
     const int signal = interrupting_signal();
     const std::string outputs = complete_outputs(o);
-    std::fprintf(stderr, "kinema: stopped by %s after step %llu of %llu%s\n", signal_name(signal).c_str(),
-                 static_cast<unsigned long long>(s.done), static_cast<unsigned long long>(scene.steps),
+    // Error control stops between its own steps: where it got is a time, not a step of dt.
+    const std::string where = summary.contains("t_requested")
+        ? "at t = " + summary["t_final"].dump() + " of " + summary["t_requested"].dump()
+        : "after step " + std::to_string(s.done) + " of " + std::to_string(scene.steps);
+    std::fprintf(stderr, "kinema: stopped by %s %s%s\n", signal_name(signal).c_str(), where.c_str(),
                  outputs.empty() ? "" : ("; " + outputs + " complete to there").c_str());
     return 128 + signal;
   }

@@ -1,0 +1,21 @@
+#pragma once
+// What a checkpoint reads and writes of a stepper beyond its public face: the continuation of
+// an error-controlled call stopped early, and the staged path that keeps its first stage.
+
+#include "kinema/stepper.hpp"
+#include "step/adaptive_driver.hpp"
+#include "step/staged_path.hpp"
+
+namespace kinema {
+
+template <class T>
+struct StepperAccess {
+  static AdaptiveContinuation& continuation(Stepper<T>& s);
+  static const AdaptiveContinuation& continuation(const Stepper<T>& s);
+  static StagedPath<T>* staged(const Stepper<T>& s);  // nullptr when the stepper has none
+};
+
+extern template struct StepperAccess<float>;
+extern template struct StepperAccess<double>;
+
+}  // namespace kinema
