@@ -5,18 +5,23 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdlib>
+#include <cstring>
 #include <new>
+#include <vector>
 
 #include "support.hpp"
 
 namespace {
 std::atomic<long> g_allocations{0};
+std::atomic<std::size_t> g_largest{0};  // the largest single allocation since last reset
 }
 
 // Every replaceable form, so that each allocation is counted and each pair matches.
 namespace {
 void* counted(std::size_t size, std::size_t alignment = alignof(std::max_align_t)) noexcept {
   ++g_allocations;
+  for (std::size_t seen = g_largest.load(); size > seen && !g_largest.compare_exchange_weak(seen, size);) {
+  }
   size = size == 0 ? 1 : size;
   if (alignment <= alignof(std::max_align_t)) return std::malloc(size);
   return std::aligned_alloc(alignment, (size + alignment - 1) / alignment * alignment);
@@ -146,4 +151,25 @@ TEST_CASE("applied forces and rigid callbacks allocate nothing in steps", "[allo
       CHECK(g_allocations.load() - before == 0);
     }
   }
+}
+
+TEST_CASE("a hostile checkpoint is refused before anything past its own size is allocated", "[allocation][checkpoint]") {
+  // A small checkpoint whose body count says 2^40 (its checksums made right again): the reader
+  // compares every count with the data's length before it allocates for bodies.
+  ParticleSet<float> b = test::cloud<float>(3);
+  Stepper<float> s(test::all_local_terms<float>(), rk4, test::serial_options());
+  CheckpointWriter out;
+  out.add(b, s);
+  std::vector<std::byte> data = out.bytes();
+  const std::uint64_t huge = std::uint64_t(1) << 40;
+  std::memcpy(data.data() + kCheckpointHeaderBytes + 8, &huge, sizeof huge);
+  const std::size_t record_crc = kCheckpointRecordBytes - 4;
+  const std::uint32_t crc = crc32({data.data() + kCheckpointHeaderBytes, record_crc});
+  std::memcpy(data.data() + kCheckpointHeaderBytes + record_crc, &crc, sizeof crc);
+  const std::uint32_t whole = crc32({data.data(), data.size() - 4});
+  std::memcpy(data.data() + data.size() - 4, &whole, sizeof whole);
+  const std::size_t size = data.size();
+  g_largest = 0;
+  CHECK_THROWS_WITH(CheckpointReader(std::move(data)), Catch::Contains("more than its"));
+  CHECK(g_largest.load() <= size);
 }
