@@ -20,6 +20,7 @@ void print_coupled_table(const Results& results, Noise& noise);
 void print_frame_table(const Results& results, Noise& noise);
 void print_guard_table(const Results& results, Noise& noise);
 void print_adaptive_table(const Results& results, Noise& noise);
+void print_checkpoint_table(const Results& results, Noise& noise);
 void print_limits(const Results& results);
 
 }  // namespace kinema::bench::report

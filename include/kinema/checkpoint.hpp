@@ -22,9 +22,9 @@
 // Stepper::clock().proposed_step is kept.)
 //
 // Version 1 layout, little-endian (x86-64): a 48-byte header ("kinemaCK", the version, the
-// record count, the total length, the user data's length, the header's CRC-32); each record:
-// a 192-byte header with its own CRC-32, then n values per array (no padding); the user
-// data; the CRC-32 of every byte before it. Loading checks the header, every record header
+// record count, the total length, the user data's length, the header's CRC-32C); each record:
+// a 192-byte header with its own CRC-32C, then n values per array (no padding); the user
+// data; the CRC-32C of every byte before it. Loading checks the header, every record header
 // and every length against the data's length, and the checksum, before it allocates
 // anything: a truncated, damaged or foreign checkpoint is refused with one line (a
 // kinema::Error) and nothing changes.
@@ -57,7 +57,7 @@ class CheckpointWriter {
   void set_user_data(std::vector<std::byte> data) { user_ = std::move(data); }
 
   std::size_t size() const;  // bytes, trailer included
-  // The CRC-32 the checkpoint ends with, computed without writing it: equal values for equal
+  // The CRC-32C the checkpoint ends with, computed without writing it: equal values for equal
   // bits of every record (and user data).
   std::uint32_t crc() const;
   std::vector<std::byte> bytes() const;

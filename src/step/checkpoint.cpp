@@ -46,7 +46,7 @@ V get(const std::byte* at) {
   return value;
 }
 
-std::uint32_t crc_of(const std::byte* data, std::size_t bytes) { return crc32({data, bytes}); }
+std::uint32_t crc_of(const std::byte* data, std::size_t bytes) { return crc32c({data, bytes}); }
 
 class Fnv {
  public:
@@ -227,7 +227,7 @@ std::size_t CheckpointWriter::size() const {
   return bytes;
 }
 
-// Every byte through `sink` in order, the running CRC-32 last.
+// Every byte through `sink` in order, the running CRC-32C last.
 template <class Sink>
 void CheckpointWriter::emit(Sink& sink) const {
   std::array<std::byte, kCheckpointHeaderBytes> h{};
@@ -239,7 +239,7 @@ void CheckpointWriter::emit(Sink& sink) const {
   put(h.data() + head::crc, crc_of(h.data(), head::crc));
   std::uint32_t crc = 0;
   const auto out = [&](std::span<const std::byte> bytes) {
-    crc = crc32(bytes, crc);
+    crc = crc32c(bytes, crc);
     sink(bytes);
   };
   out(h);

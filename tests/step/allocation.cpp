@@ -164,9 +164,9 @@ TEST_CASE("a hostile checkpoint is refused before anything past its own size is 
   const std::uint64_t huge = std::uint64_t(1) << 40;
   std::memcpy(data.data() + kCheckpointHeaderBytes + 8, &huge, sizeof huge);
   const std::size_t record_crc = kCheckpointRecordBytes - 4;
-  const std::uint32_t crc = crc32({data.data() + kCheckpointHeaderBytes, record_crc});
+  const std::uint32_t crc = crc32c({data.data() + kCheckpointHeaderBytes, record_crc});
   std::memcpy(data.data() + kCheckpointHeaderBytes + record_crc, &crc, sizeof crc);
-  const std::uint32_t whole = crc32({data.data(), data.size() - 4});
+  const std::uint32_t whole = crc32c({data.data(), data.size() - 4});
   std::memcpy(data.data() + data.size() - 4, &whole, sizeof whole);
   const std::size_t size = data.size();
   g_largest = 0;

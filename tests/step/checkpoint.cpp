@@ -223,10 +223,10 @@ void patch(std::vector<std::byte>& data, std::size_t at, V value) {
 
 // The header's and record 0's own checksums made right again after a patch.
 void reseal(std::vector<std::byte>& data) {
-  patch(data, 44, crc32({data.data(), 44}));
+  patch(data, 44, crc32c({data.data(), 44}));
   constexpr std::size_t crc_at = kCheckpointRecordBytes - 4;
-  patch(data, kCheckpointHeaderBytes + crc_at, crc32({data.data() + kCheckpointHeaderBytes, crc_at}));
-  patch(data, data.size() - 4, crc32({data.data(), data.size() - 4}));
+  patch(data, kCheckpointHeaderBytes + crc_at, crc32c({data.data() + kCheckpointHeaderBytes, crc_at}));
+  patch(data, data.size() - 4, crc32c({data.data(), data.size() - 4}));
 }
 
 std::string refusal(std::vector<std::byte> data) {

@@ -491,7 +491,7 @@ void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const Ste
   }
 }
 
-// Whether the run did all it was asked, and from where it resumed. state_crc32 is the CRC-32 a
+// Whether the run did all it was asked, and from where it resumed. state_crc32 is the CRC-32C a
 // checkpoint of the final state would end with: equal values, equal bits (bodies and clocks).
 template <class T>
 void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene, const RunOptions& o,

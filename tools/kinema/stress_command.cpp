@@ -432,7 +432,7 @@ Json intervals_report(const std::vector<Interval>& intervals) {
   return j;
 }
 
-// The CRC-32 a checkpoint of every group would end with: equal values, equal bits.
+// The CRC-32C a checkpoint of every group would end with: equal values, equal bits.
 template <class T>
 std::string state_crc(const std::vector<StressGroup<T>>& groups) {
   CheckpointWriter state;
