@@ -65,7 +65,7 @@ bool only_outputs_in(const fs::path& dir) {
 }
 
 // `args` straight, and the same stopped by SIGINT at its first checkpoint then resumed with one
-// thread: the same final state (state_crc32) and the same trajectory, if any.
+// thread: the same final state (state_crc32c) and the same trajectory, if any.
 void check_resumes(const std::vector<std::string>& args, const std::string& csv_name = "") {
   const fs::path dir = work_dir(), ckpt = dir / "run.ckpt";
   fs::remove(ckpt);
@@ -95,7 +95,7 @@ void check_resumes(const std::vector<std::string>& args, const std::string& csv_
   const Json c = summary_of(dir / "resumed.json");
   CHECK(c["complete"] == true);
   CHECK(c["resumed_from"]["checkpoint"] == ckpt.string());
-  CHECK(c["state_crc32"] == a["state_crc32"]);
+  CHECK(c["state_crc32c"] == a["state_crc32c"]);
   CHECK(c["steps"] == a["steps"]);
   CHECK(c["force_evaluations"] == a["force_evaluations"]);
   if (!csv_name.empty()) CHECK(read(dir / ("a_" + csv_name)) == read(dir / ("b_" + csv_name)));
@@ -147,7 +147,7 @@ TEST_CASE("run --checkpoint survives SIGKILL at 30 random moments", "[cli][check
   const Result last = run_kinema(with(args, {"--out", csv.string(), "--resume", ckpt.string(), "--summary",
                                              (dir / "last.json").string()}));
   REQUIRE(last.code == 0);
-  CHECK(summary_of(dir / "last.json")["state_crc32"] == summary_of(dir / "whole.json")["state_crc32"]);
+  CHECK(summary_of(dir / "last.json")["state_crc32c"] == summary_of(dir / "whole.json")["state_crc32c"]);
   CHECK(summary_of(dir / "last.json")["resumed_from"]["step"].get<long>() > 0);
   CHECK(read(csv) == read(dir / "whole.csv"));
 }
@@ -163,7 +163,7 @@ TEST_CASE("stress --resume: the built-in scene's groups, drifts and report go on
   const Result resumed = run_kinema(with(args, {"--report", (dir / "resumed.json").string(), "--resume", ckpt.string()}));
   REQUIRE(resumed.code == 0);
   const Json whole = summary_of(dir / "whole.json"), again = summary_of(dir / "resumed.json");
-  CHECK(again["state_crc32"] == whole["state_crc32"]);
+  CHECK(again["state_crc32c"] == whole["state_crc32c"]);
   CHECK(again["steps"] == whole["steps"]);
   CHECK(again["complete"] == true);
   CHECK(again["resumed_from"]["step"].get<long>() > 0);

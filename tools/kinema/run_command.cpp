@@ -491,7 +491,7 @@ void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const Ste
   }
 }
 
-// Whether the run did all it was asked, and from where it resumed. state_crc32 is the CRC-32C a
+// Whether the run did all it was asked, and from where it resumed. state_crc32c is the CRC-32C a
 // checkpoint of the final state would end with: equal values, equal bits (bodies and clocks).
 template <class T>
 void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene, const RunOptions& o,
@@ -504,7 +504,7 @@ void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, co
   world.save(state);
   char crc[12];
   std::snprintf(crc, sizeof crc, "%08x", unsigned(state.crc()));
-  summary["state_crc32"] = crc;
+  summary["state_crc32c"] = crc;
 }
 
 // The unit of every field that has one and does not name it.

@@ -469,7 +469,7 @@ Json stress_report(const StressOptions& o, const StressSetup<T>& setup, const st
   j["complete"] = !out.failure && interrupting_signal() == 0;
   if (out.resumed_at) j["resumed_from"] = {{"checkpoint", o.checkpoint.resume_path}, {"step", *out.resumed_at}};
   if (!o.checkpoint.path.empty()) j["checkpoints_written"] = out.checkpoints;
-  j["state_crc32"] = state_crc(setup.groups);
+  j["state_crc32c"] = state_crc(setup.groups);
   j["intervals"] = intervals_report(out.intervals);
   return j;
 }
