@@ -193,15 +193,55 @@ std::uint32_t crc32c_tables(const unsigned char* p, std::size_t n, std::uint32_t
   return c;
 }
 
-// SSE4.2's crc32 instruction computes the same polynomial, 8 bytes at a time.
-[[gnu::target("sse4.2")]] std::uint32_t crc32c_sse42(const unsigned char* p, std::size_t n, std::uint32_t c) {
-  std::uint64_t wide = c;
-  for (; n >= 8; p += 8, n -= 8) {
+// a b mod P in the reflected order (bit 31 holds x^0): what advances a CRC register over zeros.
+std::uint32_t multiply_mod(std::uint32_t a, std::uint32_t b) {
+  std::uint32_t product = 0;
+  for (int i = 0; i < 32; ++i, a <<= 1) {
+    if (a & 0x80000000u) product ^= b;
+    b = b & 1 ? (b >> 1) ^ kCastagnoli : b >> 1;  // b x, reduced
+  }
+  return product;
+}
+
+// x^(8 n) mod P: a register times it is the register run over n zero bytes.
+std::uint32_t zeros_operator(std::size_t n) {
+  std::uint32_t result = 0x80000000u, square = 0x00800000u;  // x^0 and x^8
+  for (; n > 0; n >>= 1, square = multiply_mod(square, square)) {
+    if (n & 1) result = multiply_mod(result, square);
+  }
+  return result;
+}
+
+[[gnu::target("sse4.2")]] std::uint64_t crc32c_words(std::uint64_t c, const unsigned char* p, std::size_t words) {
+  for (std::size_t i = 0; i < words; ++i, p += 8) {
     std::uint64_t v;
     std::memcpy(&v, p, 8);
-    wide = _mm_crc32_u64(wide, v);
+    c = _mm_crc32_u64(c, v);
   }
-  c = std::uint32_t(wide);
+  return c;
+}
+
+// SSE4.2's crc32 instruction computes the same polynomial, 8 bytes at a time. One register
+// waits 3 cycles for each word: three run side by side over thirds of the data, and the
+// register being linear, each is advanced over the bytes after its third and they are added.
+[[gnu::target("sse4.2")]] std::uint32_t crc32c_sse42(const unsigned char* p, std::size_t n, std::uint32_t c) {
+  constexpr std::size_t kInterleaveFrom = 3 * 256;
+  if (n >= kInterleaveFrom) {
+    const std::size_t third = n / 24 * 8;  // bytes per stream, whole words
+    const unsigned char* q = p + third;
+    const unsigned char* r = q + third;
+    std::uint64_t a = c, b = 0, d = 0;
+    for (std::size_t i = 0; i < third; i += 8) {
+      std::uint64_t u, v, w;
+      std::memcpy(&u, p + i, 8), std::memcpy(&v, q + i, 8), std::memcpy(&w, r + i, 8);
+      a = _mm_crc32_u64(a, u), b = _mm_crc32_u64(b, v), d = _mm_crc32_u64(d, w);
+    }
+    const std::uint32_t shift = zeros_operator(third);
+    c = multiply_mod(multiply_mod(std::uint32_t(a), shift) ^ std::uint32_t(b), shift) ^ std::uint32_t(d);
+    p += 3 * third, n -= 3 * third;
+  }
+  c = std::uint32_t(crc32c_words(c, p, n / 8));
+  p += n / 8 * 8, n %= 8;
   for (; n > 0; ++p, --n) c = _mm_crc32_u8(c, *p);
   return c;
 }

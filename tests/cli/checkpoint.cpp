@@ -86,6 +86,7 @@ void check_resumes(const std::vector<std::string>& args, const std::string& csv_
   const Json b = summary_of(dir / "stopped.json");
   CHECK(b["complete"] == false);
   CHECK(b["interrupted"] == "SIGINT");
+  CHECK(b["error"] == "stopped by SIGINT");
   CHECK(b["checkpoints_written"].get<int>() >= 2);  // the first, and the one at the signal
 
   const Result resumed = run_kinema(

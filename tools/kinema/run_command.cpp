@@ -498,6 +498,9 @@ void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, co
                       const Stepped& s) {
   summary["complete"] = !s.error && !s.blow_up && s.done == scene.steps;
   if (s.error) summary["error"] = *s.error;
+  if (!s.error && interrupting_signal() != 0 && s.done < scene.steps) {
+    summary["error"] = "stopped by " + signal_name(interrupting_signal());
+  }
   if (s.resumed_at) summary["resumed_from"] = {{"checkpoint", o.checkpoint.resume_path}, {"step", *s.resumed_at}};
   if (!o.checkpoint.path.empty()) summary["checkpoints_written"] = s.checkpoints;
   CheckpointWriter state;

@@ -467,6 +467,7 @@ Json stress_report(const StressOptions& o, const StressSetup<T>& setup, const st
   if (out.failure) j["first_non_finite"] = failure_report(*out.failure, o.guard);
   if (interrupting_signal() != 0 && !out.failure) j["interrupted"] = signal_name(interrupting_signal());
   j["complete"] = !out.failure && interrupting_signal() == 0;
+  if (interrupting_signal() != 0) j["error"] = "stopped by " + signal_name(interrupting_signal());
   if (out.resumed_at) j["resumed_from"] = {{"checkpoint", o.checkpoint.resume_path}, {"step", *out.resumed_at}};
   if (!o.checkpoint.path.empty()) j["checkpoints_written"] = out.checkpoints;
   j["state_crc32c"] = state_crc(setup.groups);
@@ -539,8 +540,15 @@ int stress_exit_code(const StressOptions& o, const StressOutcome& out) {
 template <class T>
 int run_stress(const StressOptions& o, const Scene* scene) {
   const Memory at_start = memory_now();  // before any body is built
-  StressSetup<T> setup = set_up<T>(o, scene);
-  ReportFile report(o.report_path, "report");
+  ReportFile report(o.report_path, "report");  // a path that cannot be written: refused now
+  const std::string name = scene ? scene->name : "random (seed " + std::to_string(o.seed) + ")";
+  StressSetup<T> setup;
+  try {
+    setup = set_up<T>(o, scene);
+  } catch (const std::exception& e) {
+    report.write(Json{{"scene", name}, {"steps", 0}, {"complete", false}, {"error", e.what()}});
+    throw;
+  }
   std::vector<Conservation<T>> conservation;
   for (const auto& g : setup.groups) conservation.push_back(conservation_start(g));
   const std::string fingerprint = stress_fingerprint(o, std::string(setup.groups.front().stepper().method().name),
