@@ -242,3 +242,27 @@ TEST_CASE("run --resume refuses what is not this run's checkpoint, in one line",
     CHECK_THAT(r.err, Catch::Contains("taken under another scene or other options"));
   }
 }
+
+TEST_CASE("outputs never overwrite the scene or each other", "[cli][checkpoint][hostile]") {
+  const fs::path dir = work_dir();
+  const fs::path scene_copy = write("mine.json", read(scene("projectiles.json")));
+  const std::string before = read(scene_copy);
+  const std::string same = (dir / "same.out").string(), other_name = (dir / "." / "same.out").string();
+  const std::vector<std::vector<std::string>> cases{
+      {"run", scene_copy.string(), "-q", "--summary", scene_copy.string()},
+      {"run", scene_copy.string(), "-q", "--out", same, "--summary", other_name},
+      {"run", scene_copy.string(), "-q", "--checkpoint", same, "--out", same},
+      {"stress", "-q", "--scene", scene_copy.string(), "--report", scene_copy.string()},
+      {"stress", "-q", "--bodies", "100", "--report", same, "--checkpoint", other_name},
+  };
+  for (const auto& args : cases) {
+    INFO(args.back());
+    const Result r = run_kinema(args);
+    CHECK(r.code == 1);
+    CHECK_THAT(r.err, Catch::Contains("one would overwrite the other"));
+  }
+  CHECK(read(scene_copy) == before);
+  CHECK_FALSE(fs::exists(same));
+  // Devices are no files to clobber.
+  CHECK(run_kinema({"run", scene_copy.string(), "-q", "--out", "/dev/null", "--summary", "/dev/null"}).code == 0);
+}

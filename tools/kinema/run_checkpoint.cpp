@@ -2,6 +2,7 @@
 
 #include <bit>
 #include <cstdio>
+#include <filesystem>
 
 #include "kinema/error.hpp"
 #include "kinema/files.hpp"
@@ -37,6 +38,34 @@ RunRecord decode(std::span<const std::byte> data, const std::string& command, co
                 "guard, --every, --out): resume with the command line that made it");
   }
   return {command, fingerprint, j["fields"]};
+}
+
+namespace {
+
+// The same file: one existing file under two names, or two names of one path yet to be made.
+// Devices are not files to clobber (--out /dev/null --summary /dev/null is fine).
+bool same_file(const std::string& a, const std::string& b) {
+  std::error_code error;
+  if (std::filesystem::exists(a, error) && !std::filesystem::is_regular_file(a, error)) return false;
+  if (std::filesystem::equivalent(a, b, error)) return true;
+  const auto canonical_a = std::filesystem::weakly_canonical(a, error);
+  const auto canonical_b = std::filesystem::weakly_canonical(b, error);
+  return !error && canonical_a == canonical_b;
+}
+
+}  // namespace
+
+void check_distinct(const std::vector<NamedPath>& inputs, const std::vector<NamedPath>& outputs) {
+  for (std::size_t i = 0; i < outputs.size(); ++i) {
+    if (outputs[i].path.empty()) continue;
+    const auto clash = [&](const NamedPath& other, const char* what) {
+      if (other.path.empty() || !same_file(outputs[i].path, other.path)) return;
+      throw Error(outputs[i].option + " " + printable(outputs[i].path) + " is the " + what + " " + other.option +
+                  " names: one would overwrite the other");
+    };
+    for (const NamedPath& input : inputs) clash(input, "input");
+    for (std::size_t j = i + 1; j < outputs.size(); ++j) clash(outputs[j], "file");
+  }
 }
 
 std::uint64_t exact(double value) { return std::bit_cast<std::uint64_t>(value); }

@@ -39,6 +39,16 @@ double exact(std::uint64_t bits);
 // FNV-1a of the scene file's bytes and of `options` (the results-changing options as text).
 std::string fingerprint_of(const std::string& scene_path, const std::string& options);
 
+// A file a command reads or writes, as its option names it ("--summary").
+struct NamedPath {
+  std::string option, path;
+};
+
+// kinema::Error before any work when two outputs are one file, or an output is an input (the
+// scene): one would clobber the other. Empty paths are not given. (A --resume file may also be
+// the --checkpoint: the run reads it before it writes the next.)
+void check_distinct(const std::vector<NamedPath>& inputs, const std::vector<NamedPath>& outputs);
+
 // Whether a checkpoint is due: every `every` seconds from construction or the last save().
 class CheckpointTimer {
  public:

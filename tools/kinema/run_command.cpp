@@ -619,6 +619,8 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
 }  // namespace
 
 int run_scene(const RunOptions& o) {
+  check_distinct({{"the scene", o.scene_path}},
+                 {{"--out", o.trajectory_path}, {"--summary", o.summary_path}, {"--checkpoint", o.checkpoint.path}});
   Scene scene = scene_with_overrides(o);
   // Before any work: a path that cannot be written is refused now.
   ReportFile summary_file(o.summary_path, "summary");

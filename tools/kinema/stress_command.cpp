@@ -609,6 +609,7 @@ FiniteGuard guard_by_name(const std::string& name) {
 }
 
 int stress(const StressOptions& o) {
+  check_distinct({{"--scene", o.scene_path}}, {{"--report", o.report_path}, {"--checkpoint", o.checkpoint.path}});
   if (o.method == "auto") throw Error("stress runs a fixed method; auto is for kinema run");
   if (o.method) method_by_name(*o.method);  // a bad name fails before any work
   const std::optional<Scene> scene = stress_scene(o);
