@@ -14,9 +14,9 @@
 // applied forces and torques when the set has them and whether it keeps them, the stepper's
 // clock exactly (Stepper::clock) and the step advance_to last proposed, and what the record
 // may only be restored under: the precision, the kind of set, the method, the force model's
-// fingerprint (ForceModel::fingerprint) and the finiteness guard's settings; and when an
-// advance_to call was stopped early (AdaptiveStats::stopped), what its next call goes on
-// from: the controller's state and the first-same-as-last stage. Stepping the restored set
+// fingerprint (ForceModel::fingerprint), the finiteness guard's settings and relaxed_fma;
+// and when an advance_to call was stopped early (AdaptiveStats::stopped), what its next call
+// goes on from: the controller's state and the first-same-as-last stage. Stepping the restored set
 // with the same calls then gives the same bits as never stopping. (A call that ran to its
 // end leaves nothing: the next starts afresh from Tolerances::initial_step, for which
 // Stepper::clock().proposed_step is kept.)
@@ -70,7 +70,7 @@ class CheckpointWriter {
 
  private:
   template <class Sink>
-  void emit(Sink& sink) const;
+  std::uint32_t emit(Sink& sink) const;  // returns the CRC-32C it ends with
 
   std::vector<Record> records_;
   std::vector<std::byte> user_;
@@ -92,9 +92,9 @@ class CheckpointReader {
   // when k is not a record of that kind and precision, or was taken under another method,
   // force model or guard than the stepper's.
   template <class T>
-  void restore(std::size_t k, ParticleSet<T>& bodies, Stepper<T>& stepper) const;
+  void restore(std::size_t k, ParticleSet<T>& io_bodies, Stepper<T>& io_stepper) const;
   template <class T>
-  void restore(std::size_t k, RigidBodySet<T>& bodies, Stepper<T>& stepper) const;
+  void restore(std::size_t k, RigidBodySet<T>& io_bodies, Stepper<T>& io_stepper) const;
   // The parts, for restoring several records all or nothing (World::restore): the set
   // decoded and checked against the stepper, and the clock to give the stepper.
   template <class T>
@@ -105,7 +105,7 @@ class CheckpointReader {
   // Record k's clock and continuation into `stepper` (checked as restore checks them; nothing
   // changes when it throws).
   template <class T>
-  void restore_stepper(std::size_t k, Stepper<T>& stepper) const;
+  void restore_stepper(std::size_t k, Stepper<T>& io_stepper) const;
 
   struct Record {
     std::size_t header;  // offset of the record header
@@ -116,6 +116,8 @@ class CheckpointReader {
  private:
   template <class T>
   void check_record(std::size_t k, bool rigid, const Stepper<T>& stepper) const;
+  template <class T>
+  const std::byte* kept_stage(std::size_t k) const;  // nullptr when record k keeps none
 
   std::vector<std::byte> data_;
   std::vector<Record> records_;

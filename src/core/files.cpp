@@ -31,6 +31,16 @@ std::filesystem::path temporary_beside(const std::filesystem::path& path) {
   return path.parent_path() / name;
 }
 
+// A new file beside `path`, under a name no other file has: one a process killed while
+// writing left (its pid since reused) is passed over. fd < 0 on failure, errno saying why.
+std::filesystem::path create_beside(const std::filesystem::path& path, mode_t mode, int& fd) {
+  for (int attempt = 0;; ++attempt) {
+    std::filesystem::path name = temporary_beside(path);
+    fd = ::open(name.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, mode);
+    if (fd >= 0 || errno != EEXIST || attempt == 1000) return name;
+  }
+}
+
 // The directory's entry reaches the disk too: without it a crash may lose the rename.
 void sync_directory(const std::filesystem::path& file) {
   const std::filesystem::path dir = file.parent_path().empty() ? "." : file.parent_path();
@@ -59,8 +69,7 @@ WholeFile::WholeFile(std::filesystem::path path, std::string what) : what_(std::
   // A probe now, so that a directory that cannot be written is refused before any work; the
   // temporary itself is made at the first write, so that a process killed before it leaves
   // nothing behind.
-  const std::filesystem::path probe = temporary_beside(path_);
-  fd_ = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  const std::filesystem::path probe = create_beside(path_, 0600, fd_);
   if (fd_ < 0) fail("cannot write", errno);
   ::close(fd_), ::unlink(probe.c_str());
   fd_ = -1;
@@ -68,8 +77,7 @@ WholeFile::WholeFile(std::filesystem::path path, std::string what) : what_(std::
 }
 
 void WholeFile::open_temporary() {
-  temporary_ = temporary_beside(path_);
-  fd_ = ::open(temporary_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  temporary_ = create_beside(path_, 0666, fd_);
   if (fd_ < 0) {
     temporary_.clear();
     fail("cannot write", errno);
@@ -92,7 +100,7 @@ void WholeFile::fail(const char* doing, int error) {
 }
 
 void WholeFile::write(std::span<const std::byte> bytes) {
-  if (finished_) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
+  if (finished_) throw Error(printable(path_.string()) + ": the " + what_ + " is already written, or failed");
   if (fd_ < 0) open_temporary();
   while (!bytes.empty()) {
     const ssize_t n = ::write(fd_, bytes.data(), bytes.size());
@@ -103,7 +111,7 @@ void WholeFile::write(std::span<const std::byte> bytes) {
 }
 
 void WholeFile::commit() {
-  if (finished_) throw Error(printable(path_.string()) + ": the " + what_ + " is already written");
+  if (finished_) throw Error(printable(path_.string()) + ": the " + what_ + " is already written, or failed");
   if (fd_ < 0) open_temporary();  // nothing written: an empty file
   finished_ = true;
   if (device_) {  // nothing to rename
@@ -152,7 +160,12 @@ std::vector<std::byte> read_regular_file(const std::filesystem::path& path, std:
   while (done < data.size()) {
     const ssize_t n = ::read(fd, data.data() + done, data.size() - done);
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;  // shorter than fstat said: it changed under us; the caller checks lengths
+    if (n < 0) {
+      const int error = errno;
+      ::close(fd);
+      throw fail(std::strerror(error));
+    }
+    if (n == 0) break;  // shorter than fstat said: it changed under us; the caller checks lengths
     done += std::size_t(n);
   }
   ::close(fd);

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "forces/force_terms.hpp"
+#include "core/fnv.hpp"
 #include "kinema/error.hpp"
 
 namespace kinema {
@@ -169,21 +170,6 @@ ForceModel<T>& ForceModel<T>::add(Springs&& term) {
 }
 
 namespace {
-
-// FNV-1a, 64 bits, over values' bit patterns: equal models give equal hashes on every machine
-// of one byte order.
-class Fnv {
- public:
-  template <class V>
-  void add(const V& value) {
-    const auto* bytes = reinterpret_cast<const unsigned char*>(&value);
-    for (std::size_t i = 0; i < sizeof(V); ++i) hash_ = (hash_ ^ bytes[i]) * 1099511628211ull;
-  }
-  std::uint64_t value() const { return hash_; }
-
- private:
-  std::uint64_t hash_ = 14695981039346656037ull;
-};
 
 void add_term(Fnv& fnv, const LocalTerm& term) {
   fnv.add(std::uint64_t(term.index()));

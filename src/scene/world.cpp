@@ -59,8 +59,10 @@ void World<T>::restore(const CheckpointReader& in) {
                 " rigid bodies where this world has " + std::to_string(particles.size()) + " and " +
                 std::to_string(rigid.size()));
   }
+  // Each checks before it changes anything; a rigid stepper has no error control to go on
+  // from, so its clock is all there is to put back.
   const StepperClock before = rigid_stepper_.clock();
-  in.restore_stepper(1, rigid_stepper_);  // each checks before it changes anything
+  in.restore_stepper(1, rigid_stepper_);
   try {
     in.restore_stepper(0, particle_stepper_);
   } catch (...) {

@@ -21,7 +21,7 @@ class AdaptiveRun {
   AdaptiveStats to(double t_end, double max_step, AdaptiveContinuation& continuation, const StopRequest& stop) {
     staged_.reserve(bodies_.padded_size());
     double t = core_.clock.time();
-    const bool continues = continuation.continues(t_end, tol_, max_step);
+    const bool continues = continuation.continues(t_end, tol_, bodies_.size()) && continuation.max_step == max_step;
     continuation.active = false;
     if (t_end == t) return stats_;
     const Method& method = core_.method;
@@ -52,7 +52,8 @@ class AdaptiveRun {
       }
       h = controller.next(double(size), err, accepted);
       if (accepted && t < t_end && stop && stop()) {
-        continuation = {true, t_end, tol_.rtol, tol_.atol, max_step, h, controller.state(), double(kept_scale_)};
+        continuation = {true, t_end, tol_.rtol, tol_.atol, max_step, h, controller.state(), double(kept_scale_),
+                        bodies_.size()};
         stats_.stopped = true;
         break;
       }
@@ -86,7 +87,7 @@ class AdaptiveRun {
   // of bodies, the one to look at.
   [[noreturn]] void underflow(double t) {
     std::string culprit;
-    if (last_size_ > 0) {
+    if (last_size_ > 0) try {
       // One more attempt of the last size tried, from here, taken back: its errors say who.
       const StepContext<T> c{bodies_, last_size_, core_.accel_scale(last_size_), t, workers_};
       staged_.attempt(c, {tol_.rtol, tol_.atol, T(0)});
@@ -96,6 +97,7 @@ class AdaptiveRun {
       culprit = ": body " + std::to_string(worst.body) + "'s " + kComponents[worst.component] + " has the largest error (" +
                 shortest_text(worst.weighted) + " times its tolerance at the last step tried, " +
                 shortest_text(double(last_size_)) + ")";
+    } catch (const std::exception&) {  // user code threw: the underflow is still the error
     }
     throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
                 "; the tolerances cannot be met in " + type_name<T>() + culprit);

@@ -20,9 +20,11 @@ struct AdaptiveContinuation {
   double h = 0;
   StepController::State controller;
   double kept_scale = 0;
+  std::size_t bodies = 0;
 
-  bool continues(double end, const Tolerances& t, double cap) const {
-    return active && end == t_end && t.rtol == rtol && t.atol == atol && cap == max_step;
+  // Whether a call to `end` with `t` on `count` bodies goes on from here.
+  bool continues(double end, const Tolerances& t, std::size_t count) const {
+    return active && end == t_end && t.rtol == rtol && t.atol == atol && count == bodies;
   }
 };
 

@@ -1,12 +1,14 @@
 #include "kinema/checkpoint.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <string>
 #include <string_view>
 
 #include "kinema/diagnostics.hpp"
+#include "core/fnv.hpp"
 #include "kinema/error.hpp"
 #include "kinema/files.hpp"
 #include "step/stepper_access.hpp"
@@ -31,7 +33,7 @@ namespace rec {
 constexpr std::size_t kind = 0, scalar = 1, flags = 2, guard = 3, bodies = 8, model = 16, method = 24, origin = 32,
                       steps = 40, h = 48, proposed = 56, max_speed = 64, max_angular = 72, name = 80,
                       // the continuation of an error-controlled call stopped early
-                      continues = 112, rejected = 113, t_end = 120, rtol = 128, atol = 136, max_step = 144,
+                      continues = 112, rejected = 113, relaxed = 114, t_end = 120, rtol = 128, atol = 136, max_step = 144,
                       next_h = 152, err_prev = 160, kept_scale = 168, crc = 188;
 }
 
@@ -47,19 +49,6 @@ V get(const std::byte* at) {
 }
 
 std::uint32_t crc_of(const std::byte* data, std::size_t bytes) { return crc32c({data, bytes}); }
-
-class Fnv {
- public:
-  template <class V>
-  void add(V value) {
-    const auto* bytes = reinterpret_cast<const unsigned char*>(&value);
-    for (std::size_t i = 0; i < sizeof(V); ++i) hash_ = (hash_ ^ bytes[i]) * 1099511628211ull;
-  }
-  std::uint64_t value() const { return hash_; }
-
- private:
-  std::uint64_t hash_ = 14695981039346656037ull;
-};
 
 // The method as data (tableau or kick-drift scheme), field by field: equal methods, equal hashes.
 std::uint64_t method_fingerprint(const Method& m) {
@@ -107,7 +96,7 @@ struct detail::CheckpointCodec {
   // Copies `n` values into each array from `at` on, advancing it.
   template <class T>
   static void fill(AlignedArray<T>& a, std::size_t n, const std::byte*& at) {
-    std::memcpy(a.data(), at, n * sizeof(T));
+    if (n > 0) std::memcpy(a.data(), at, n * sizeof(T));  // an empty set has no arrays at all
     at += n * sizeof(T);
   }
   template <class T>
@@ -185,6 +174,7 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   std::memcpy(h + rec::name, name.data(), std::min(name.size(), kMethodNameBytes - 1));
   put(h + rec::continues, std::uint8_t(cont.active));
   put(h + rec::rejected, std::uint8_t(cont.controller.rejected));
+  put(h + rec::relaxed, std::uint8_t(o.relaxed_fma));
   for (const auto& [at, value] : {std::pair{rec::t_end, cont.t_end}, {rec::rtol, cont.rtol}, {rec::atol, cont.atol},
                                   {rec::max_step, cont.max_step}, {rec::next_h, cont.h},
                                   {rec::err_prev, cont.controller.err_prev}, {rec::kept_scale, cont.kept_scale}}) {
@@ -229,7 +219,7 @@ std::size_t CheckpointWriter::size() const {
 
 // Every byte through `sink` in order, the running CRC-32C last.
 template <class Sink>
-void CheckpointWriter::emit(Sink& sink) const {
+std::uint32_t CheckpointWriter::emit(Sink& sink) const {
   std::array<std::byte, kCheckpointHeaderBytes> h{};
   std::memcpy(h.data(), kMagic, sizeof kMagic);
   put(h.data() + head::version, kCheckpointVersion);
@@ -251,15 +241,12 @@ void CheckpointWriter::emit(Sink& sink) const {
   std::array<std::byte, kTrailerBytes> trailer;
   put(trailer.data(), crc);
   sink(trailer);
+  return crc;
 }
 
 std::uint32_t CheckpointWriter::crc() const {
-  std::uint32_t last = 0;
-  const auto keep_trailer = [&](std::span<const std::byte> bytes) {
-    if (bytes.size() == kTrailerBytes) last = get<std::uint32_t>(bytes.data());
-  };
-  emit(keep_trailer);
-  return last;
+  auto nowhere = [](std::span<const std::byte>) {};
+  return emit(nowhere);
 }
 
 std::vector<std::byte> CheckpointWriter::bytes() const {
@@ -298,7 +285,8 @@ std::size_t check_record_header(const std::byte* h, std::size_t left, std::size_
   const bool known = (kind == SetKind::particles || kind == SetKind::rigid) && (scalar == 4 || scalar == 8) &&
                      flags < 16 && !(kind == SetKind::particles && (flags & kTorques)) &&
                      !(kind == SetKind::rigid && (flags & kKeptStage)) && get<std::uint8_t>(h + rec::guard) < 3 &&
-                     get<std::uint8_t>(h + rec::continues) < 2 && get<std::uint8_t>(h + rec::rejected) < 2;
+                     get<std::uint8_t>(h + rec::continues) < 2 && get<std::uint8_t>(h + rec::rejected) < 2 &&
+                     get<std::uint8_t>(h + rec::relaxed) < 2;
   if (!known) refuse(which + ": unknown kind, precision or flags");
   const std::uint64_t bodies = get<std::uint64_t>(h + rec::bodies);
   const std::size_t per_body = arrays_of(kind, flags) * scalar;
@@ -386,6 +374,10 @@ void CheckpointReader::check_record(std::size_t k, bool rigid, const Stepper<T>&
     throw Error(which + " was taken under the finiteness guard " + std::string(guard_name(guard)) +
                 " with other settings than this stepper's (" + std::string(guard_name(std::uint8_t(o.guard))) + ")");
   }
+  if ((get<std::uint8_t>(h + rec::relaxed) != 0) != o.relaxed_fma) {
+    throw Error(which + " was taken " + (o.relaxed_fma ? "without" : "with") +
+                " relaxed_fma, which changes the last bits on the scalar and SSE2 paths");
+  }
 }
 
 StepperClock CheckpointReader::clock(std::size_t k) const {
@@ -445,47 +437,72 @@ RigidBodySet<T> CheckpointReader::rigid_bodies(std::size_t k, const Stepper<T>& 
   return b;
 }
 
+namespace {
+
+AdaptiveContinuation continuation_in(const std::byte* h) {
+  AdaptiveContinuation c;
+  c.active = get<std::uint8_t>(h + rec::continues) != 0;
+  c.controller.rejected = get<std::uint8_t>(h + rec::rejected) != 0;
+  c.t_end = get<double>(h + rec::t_end), c.rtol = get<double>(h + rec::rtol), c.atol = get<double>(h + rec::atol);
+  c.max_step = get<double>(h + rec::max_step), c.h = get<double>(h + rec::next_h);
+  c.controller.err_prev = get<double>(h + rec::err_prev), c.kept_scale = get<double>(h + rec::kept_scale);
+  return c;
+}
+
+// What a controller can have left: finite tolerances and sizes (the cap may be infinite), and
+// a kept stage exactly when it says it kept one.
+void check_continuation(const AdaptiveContinuation& c, bool kept, std::size_t k) {
+  const auto finite = [](double x) { return std::isfinite(x) && x >= 0; };
+  const bool valid = !c.active ? !kept
+                               : finite(c.t_end) && finite(c.rtol) && finite(c.atol) && c.max_step > 0 && c.h > 0 &&
+                                     finite(c.h) && c.controller.err_prev > 0 && finite(c.controller.err_prev) &&
+                                     finite(c.kept_scale) && kept == (c.kept_scale > 0);
+  if (!valid) throw Error("checkpoint record " + std::to_string(k) + ": its error control's state is not one it can have");
+}
+
+}  // namespace
+
 template <class T>
-void CheckpointReader::restore_stepper(std::size_t k, Stepper<T>& stepper) const {
+const std::byte* CheckpointReader::kept_stage(std::size_t k) const {
+  const std::uint8_t flags = get<std::uint8_t>(data_.data() + records_[k].header + rec::flags);
+  if (!(flags & kKeptStage)) return nullptr;
+  const std::size_t before = arrays_of(SetKind::particles, flags) - 3;  // the kept stage's arrays come last
+  return data_.data() + records_[k].arrays + before * records_[k].bodies * sizeof(T);
+}
+
+template <class T>
+void CheckpointReader::restore_stepper(std::size_t k, Stepper<T>& io_stepper) const {
   if (k >= records_.size()) throw Error("checkpoint: no record " + std::to_string(k));
   const std::byte* h = data_.data() + records_[k].header;
-  AdaptiveContinuation cont;
-  cont.active = get<std::uint8_t>(h + rec::continues) != 0;
-  cont.controller.rejected = get<std::uint8_t>(h + rec::rejected) != 0;
-  cont.t_end = get<double>(h + rec::t_end), cont.rtol = get<double>(h + rec::rtol), cont.atol = get<double>(h + rec::atol);
-  cont.max_step = get<double>(h + rec::max_step), cont.h = get<double>(h + rec::next_h);
-  cont.controller.err_prev = get<double>(h + rec::err_prev), cont.kept_scale = get<double>(h + rec::kept_scale);
-  const bool kept = (get<std::uint8_t>(h + rec::flags) & kKeptStage) != 0;
-  StagedPath<T>* staged = StepperAccess<T>::staged(stepper);
-  if (kept && staged == nullptr) throw Error("checkpoint record " + std::to_string(k) + ": this stepper keeps no stages");
-  const StepperClock before = stepper.clock();
-  stepper.set_clock(clock(k));  // checks the values: throws before anything changes
-  if (kept) {
-    try {
-      const std::size_t n = records_[k].bodies;
-      const std::array<T*, 3> stage = staged->first_stage_for(padded_count<T>(n));
-      const std::byte* at = data_.data() + records_[k].arrays + (arrays_of(SetKind::particles, get<std::uint8_t>(h + rec::flags)) - 3) * n * sizeof(T);
-      for (T* a : stage) std::memcpy(a, at, n * sizeof(T)), at += n * sizeof(T);
-    } catch (...) {
-      stepper.set_clock(before);
-      throw;
-    }
+  check_record(k, SetKind(get<std::uint8_t>(h + rec::kind)) == SetKind::rigid, io_stepper);
+  AdaptiveContinuation cont = continuation_in(h);
+  cont.bodies = records_[k].bodies;  // the set the record holds is the set it goes on with
+  const std::byte* stage = kept_stage<T>(k);
+  check_continuation(cont, stage != nullptr, k);
+  StagedPath<T>* staged = StepperAccess<T>::staged(io_stepper);
+  if (stage != nullptr && staged == nullptr) {
+    throw Error("checkpoint record " + std::to_string(k) + ": this stepper keeps no stages");
   }
-  StepperAccess<T>::continuation(stepper) = cont;
+  const std::size_t n = records_[k].bodies;
+  // Everything that can throw (the clock's values, the stage's memory) before anything changes.
+  const std::array<T*, 3> into = stage != nullptr ? staged->first_stage_for(padded_count<T>(n)) : std::array<T*, 3>{};
+  io_stepper.set_clock(clock(k));
+  for (int d = 0; d < 3 && stage != nullptr && n > 0; ++d) std::memcpy(into[d], stage + d * n * sizeof(T), n * sizeof(T));
+  StepperAccess<T>::continuation(io_stepper) = cont;
 }
 
 template <class T>
-void CheckpointReader::restore(std::size_t k, ParticleSet<T>& bodies, Stepper<T>& stepper) const {
-  ParticleSet<T> restored = particles(k, stepper);
-  restore_stepper(k, stepper);  // throws before the set changes
-  bodies = std::move(restored);
+void CheckpointReader::restore(std::size_t k, ParticleSet<T>& io_bodies, Stepper<T>& io_stepper) const {
+  ParticleSet<T> restored = particles(k, io_stepper);
+  restore_stepper(k, io_stepper);  // throws before the set changes
+  io_bodies = std::move(restored);
 }
 
 template <class T>
-void CheckpointReader::restore(std::size_t k, RigidBodySet<T>& bodies, Stepper<T>& stepper) const {
-  RigidBodySet<T> restored = rigid_bodies(k, stepper);
-  restore_stepper(k, stepper);
-  bodies = std::move(restored);
+void CheckpointReader::restore(std::size_t k, RigidBodySet<T>& io_bodies, Stepper<T>& io_stepper) const {
+  RigidBodySet<T> restored = rigid_bodies(k, io_stepper);
+  restore_stepper(k, io_stepper);
+  io_bodies = std::move(restored);
 }
 
 template void CheckpointWriter::add(const ParticleSet<float>&, const Stepper<float>&);

@@ -428,7 +428,8 @@ typename StagedPath<T>::WorstError StagedPath<T>::worst_error(const StepContext<
         double e = 0;
         for (int s = 0; s < method_.tableau.stages; ++s) e += w[s] * double(k[s][i]);
         const double q = std::abs(e) / (atol + rtol * std::abs(double(y0[i])));
-        if (q > worst.weighted) worst = {i, 3 * field + d, q};
+        // The first NaN error is the worst, and stays so.
+        if (!std::isnan(worst.weighted) && !(q <= worst.weighted)) worst = {i, 3 * field + d, q};
       }
     }
   }

@@ -53,13 +53,15 @@ struct Stepper<T>::Impl {
   AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const StopRequest& stop) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
     check_reach(core.lowered().coupled, bodies);
-    const double max_step = step_cap(bodies, t_end, tolerances);
+    // A call that goes on from one stopped early keeps its cap (the bodies have moved since).
+    const double max_step = continuation.continues(t_end, tolerances, bodies.size()) ? continuation.max_step
+                                                                                     : step_cap(bodies, t_end, tolerances);
     AdaptiveStats stats;
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
       stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stop);
       return double(bodies.size()) * double(stats.evaluations);
     });
-    if (stats.accepted > 0) forces_used(bodies);
+    if (stats.accepted > 0 && !stats.stopped) forces_used(bodies);  // they act to the call's end
     if (stats.next_step > 0) proposed_step = stats.next_step;
     return stats;
   }
@@ -225,6 +227,7 @@ void Stepper<T>::set_clock(const StepperClock& c) {
                           "and h a value of " + std::string(sizeof(T) == 4 ? "float" : "double"));
   impl_->core.clock = Clock<T>{c.origin, c.steps, T(c.h)};
   impl_->proposed_step = c.proposed_step;
+  impl_->continuation.active = false;  // it belonged to the old clock
 }
 
 template <class T>

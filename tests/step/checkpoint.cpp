@@ -169,6 +169,36 @@ TEST_CASE("an error-controlled call stopped early goes on, in the stepper or fro
   CHECK(t.time() == 0.2999);
 }
 
+TEST_CASE("a call stopped early keeps its stable-step cap and the forces applied for it", "[checkpoint][adaptive]") {
+  // The cap comes from the bodies at the call's start and the forces last to the call's end:
+  // a call that goes on must not take either from the bodies as they are when it resumes.
+  const ForceModel<double> f = chain_and_cluster<double>(200);
+  Tolerances tol{1e-6, 1e-6};
+  tol.limit_to_stable_step = true;
+  const auto make = [] {
+    ParticleSet<double> b = test::cloud<double>(200);
+    b.keep_forces(false);
+    for (std::size_t i = 0; i < b.size(); i += 5) b.apply_force(i, {0.5, double(i % 3), -1});
+    return b;
+  };
+  ParticleSet<double> straight = make();
+  Stepper<double> a(f, dopri5, test::serial_options());
+  const AdaptiveStats whole = a.advance_to(straight, 0.2, tol);
+  ParticleSet<double> b = make();
+  Stepper<double> s(f, dopri5, test::serial_options());
+  int accepted = 0;
+  std::uint64_t total = 0;
+  for (;;) {
+    const AdaptiveStats part = s.advance_to(b, 0.2, tol, [&] { return ++accepted % 4 == 0; });
+    total += part.accepted;
+    if (!part.stopped) break;
+    CHECK(b.has_applied_forces());
+  }
+  CHECK(total == whole.accepted);
+  CHECK(test::state_hash(b) == test::state_hash(straight));
+  CHECK_FALSE(b.has_applied_forces());  // gone once the call reached its end
+}
+
 TEST_CASE("a checkpoint keeps applied forces, the keep flag and kinematic bodies", "[checkpoint]") {
   const auto make = [] {
     ParticleSet<float> b = test::cloud<float>(200);
@@ -287,6 +317,11 @@ TEST_CASE("a checkpoint of another version, size, scene, method or precision is 
   ParticleSet<double> d;
   Stepper<double> in_double(test::all_local_terms<double>(), rk4, test::serial_options());
   CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, d, in_double), Catch::Contains("in float, not double"));
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore_stepper(0, in_double), Catch::Contains("in float, not double"));
+  StepperOptions relaxed = test::serial_options();
+  relaxed.relaxed_fma = true;
+  Stepper<float> relaxed_stepper(test::all_local_terms<float>(), rk4, relaxed);
+  CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, b, relaxed_stepper), Catch::Contains("relaxed_fma"));
   RigidBodySet<float> rigid;
   Stepper<float> same(test::all_local_terms<float>(), rk4, test::serial_options());
   CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, rigid, same), Catch::Contains("holds particles"));

@@ -72,14 +72,11 @@ std::uint64_t exact(double value) { return std::bit_cast<std::uint64_t>(value); 
 double exact(std::uint64_t bits) { return std::bit_cast<double>(bits); }
 
 std::string fingerprint_of(const std::string& scene_path, const std::string& options) {
-  std::uint64_t hash = 14695981039346656037ull;
-  const auto add = [&](std::span<const std::byte> bytes) {
-    for (const std::byte b : bytes) hash = (hash ^ std::uint64_t(b)) * 1099511628211ull;
-  };
-  if (!scene_path.empty()) add(read_regular_file(scene_path, kMaxSceneBytes, "scene"));
-  add(std::as_bytes(std::span(options.data(), options.size())));
-  char text[20];
-  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(hash));
+  std::uint32_t crc = 0;
+  if (!scene_path.empty()) crc = crc32c(read_regular_file(scene_path, kMaxSceneBytes, "scene"));
+  crc = crc32c(std::as_bytes(std::span(options.data(), options.size())), crc);
+  char text[12];
+  std::snprintf(text, sizeof text, "%08x", unsigned(crc));
   return text;
 }
 

@@ -36,7 +36,7 @@ RunRecord decode(std::span<const std::byte> data, const std::string& command, co
 std::uint64_t exact(double value);
 double exact(std::uint64_t bits);
 
-// FNV-1a of the scene file's bytes and of `options` (the results-changing options as text).
+// CRC-32C of the scene file's bytes and of `options` (the results-changing options as text).
 std::string fingerprint_of(const std::string& scene_path, const std::string& options);
 
 // A file a command reads or writes, as its option names it ("--summary").

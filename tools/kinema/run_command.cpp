@@ -324,19 +324,27 @@ Resumed resume(World<T>& world, const Scene& scene, const RunOptions& o) {
 }
 
 // Steps from `done` to done + n (error control: over that span), timed.
-// Returns false when a signal stopped error control short of the span's end.
+// Returns false when a signal stopped error control short of the span's end. Only stepping is
+// timed: the clock pauses while a checkpoint is written, and what ran before it is counted in
+// it. A span a signal cut short is no call done (a resume makes it again).
 template <class T>
 bool advance_timed(World<T>& world, const Scene& scene, const std::optional<Tolerances>& tolerances,
                    std::uint64_t n, Stepped& s, CheckpointTimer& checkpoints, const std::function<void()>& save) {
-  const auto start = Clock::now();
+  auto segment = Clock::now();
+  const auto seconds_since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
+  const auto timed_save = [&] {
+    s.wall_seconds += seconds_since(segment);
+    save();
+    segment = Clock::now();
+  };
   bool whole = true;
   if (tolerances) {
-    whole = advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive, checkpoints, save);
+    whole = advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive, checkpoints, timed_save);
   } else {
     world.advance(T(scene.dt), n);
   }
-  s.wall_seconds += std::chrono::duration<double>(Clock::now() - start).count();
-  ++s.calls;
+  s.wall_seconds += seconds_since(segment);
+  if (whole) ++s.calls;
   return whole;
 }
 
@@ -599,7 +607,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     plan = plan_steps(scene, o, options);
     std::optional<TrajectoryWriter> trajectory;
     if (!o.trajectory_path.empty() && stepped.resumed_at) {
-      if (!trajectory_bytes) throw Error(o.checkpoint.resume_path + ": the checkpoint was taken without --out");
+      if (!trajectory_bytes) throw Error(printable(o.checkpoint.resume_path) + ": the checkpoint was taken without --out");
       trajectory.emplace(o.trajectory_path, world.rigid.size() > 0, *trajectory_bytes);
     } else if (!o.trajectory_path.empty()) {
       trajectory.emplace(o.trajectory_path, world.rigid.size() > 0);
@@ -607,7 +615,10 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     step_scene(world, scene, o, options, plan.tolerances, trajectory, initial_energy, stepped);
   } catch (const std::exception& e) {
     stepped.error = e.what();
-    summary_file.write(summarize(world, scene, o, plan, stepped, initial_energy, context));
+    try {
+      summary_file.write(summarize(world, scene, o, plan, stepped, initial_energy, context));
+    } catch (const std::exception&) {  // the summary's own failure: the first error is the one to report
+    }
     throw;
   }
   const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);

@@ -537,6 +537,14 @@ int stress_exit_code(const StressOptions& o, const StressOutcome& out) {
   return 0;
 }
 
+// The report of a run an error ended; its own failure is not the error to report.
+void write_failure(ReportFile& report, const Json& j) {
+  try {
+    report.write(j);
+  } catch (const std::exception&) {
+  }
+}
+
 template <class T>
 int run_stress(const StressOptions& o, const Scene* scene) {
   const Memory at_start = memory_now();  // before any body is built
@@ -546,7 +554,7 @@ int run_stress(const StressOptions& o, const Scene* scene) {
   try {
     setup = set_up<T>(o, scene);
   } catch (const std::exception& e) {
-    report.write(Json{{"scene", name}, {"steps", 0}, {"complete", false}, {"error", e.what()}});
+    write_failure(report, Json{{"scene", name}, {"steps", 0}, {"complete", false}, {"error", e.what()}});
     throw;
   }
   std::vector<Conservation<T>> conservation;
@@ -561,7 +569,7 @@ int run_stress(const StressOptions& o, const Scene* scene) {
     }
     out = StressLoop<T>(o, setup, conservation, std::move(resumed), fingerprint).run();
   } catch (const std::exception& e) {  // a report still says what happened
-    report.write(Json{{"scene", setup.name}, {"bodies", setup.bodies}, {"complete", false}, {"error", e.what()}});
+    write_failure(report, Json{{"scene", setup.name}, {"bodies", setup.bodies}, {"complete", false}, {"error", e.what()}});
     throw;
   }
   // The final drifts are those of the final state, whenever the last interval closed.
