@@ -389,7 +389,7 @@ TEST_CASE("run under error control: the summary's steps and throughput are the s
 }
 
 TEST_CASE("run: fixed steps are shown as the precision holds them, numbers without binary noise", "[cli]") {
-  const fs::path summary = work_dir() / "float_steps.json";
+  const fs::path summary = work_dir() / "float_steps_summary.json";
   // dt 1/60 in float is 0.016666668: 600 of them end at 10.0000005, not at 10.
   const fs::path path = write("float_steps.json", R"({"precision": "float", "dt": 0.016666666666666666, "steps": 600,
       "particles": [{"position": [1,0,0]}], "forces": [{"type": "spring", "anchor": [0,0,0], "k": 2}]})");
