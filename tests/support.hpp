@@ -104,6 +104,14 @@ ForceModel<T> all_local_terms(bool quadratic = true, bool central = true) {
   return f;
 }
 
+// Every local term and every rotational one (rigid bodies).
+template <class T>
+ForceModel<T> rotational_terms() {
+  ForceModel<T> f = all_local_terms<T>();
+  f.add(Torque{{0.1, 0.2, -0.3}}).add(AngularDrag{0.05}).add(PointForce{{0.5, 0, 0}, {0, 1, 0}});
+  return f;
+}
+
 // hash(options, bodies) of one run is the same on every instruction set (serially, on
 // `isa_bodies` bodies: the scalar path is slow) and on 2 and 3 threads of the TBB job system
 // and of a host's pool (on `thread_bodies`: several blocks) as serially on the best one.

@@ -33,9 +33,13 @@ std::string scene(const std::string& name) { return std::string(KINEMA_SCENES) +
 #ifdef KINEMA_SANITIZED
 constexpr long kSlower = 80;
 constexpr int kKills = 4;
+constexpr int kKillAfterMs[2] = {1500, 3000};  // its start (the stiffness estimate) takes a second
+const char* const kStressBodies = "4000";       // N-body among N/16 of them
 #else
 constexpr long kSlower = 1;
 constexpr int kKills = 30;
+constexpr int kKillAfterMs[2] = {100, 600};
+const char* const kStressBodies = "20000";
 #endif
 std::string steps(long n) { return std::to_string(n / kSlower); }
 
@@ -131,7 +135,7 @@ TEST_CASE("run --checkpoint survives SIGKILL at 30 random moments", "[cli][check
   REQUIRE(run_kinema(with(args, {"--summary", (dir / "whole.json").string(), "--out", (dir / "whole.csv").string()}))
               .code == 0);
   std::mt19937 random(20261202);
-  std::uniform_int_distribution<int> delay_ms(100, 600);
+  std::uniform_int_distribution<int> delay_ms(kKillAfterMs[0], kKillAfterMs[1]);
   int kills = 0;
   for (int attempt = 0; attempt < kKills; ++attempt) {
     std::vector<std::string> run = with(args, {"--out", csv.string(), "--checkpoint", ckpt.string(),
@@ -156,7 +160,7 @@ TEST_CASE("run --checkpoint survives SIGKILL at 30 random moments", "[cli][check
 
 TEST_CASE("stress --resume: the built-in scene's groups, drifts and report go on", "[cli][checkpoint][stress]") {
   const fs::path dir = work_dir(), ckpt = dir / "stress.ckpt";
-  const std::vector<std::string> args{"stress", "-q", "--bodies", "20000", "--steps", "150"};
+  const std::vector<std::string> args{"stress", "-q", "--bodies", kStressBodies, "--steps", "150"};
   REQUIRE(run_kinema(with(args, {"--report", (dir / "whole.json").string()})).code == 0);
   const Result stopped = run_kinema(with(args, {"--report", (dir / "stopped.json").string(), "--checkpoint",
                                                 ckpt.string(), "--checkpoint-every", "0.05"}),

@@ -31,13 +31,6 @@ ForceModel<T> chain_and_cluster(std::size_t n) {
   return f;
 }
 
-template <class T>
-ForceModel<T> rotational_terms() {
-  ForceModel<T> f = test::all_local_terms<T>();
-  f.add(Torque{{0.1, 0.2, -0.3}}).add(AngularDrag{0.05}).add(PointForce{{0.5, 0, 0}, {0, 1, 0}});
-  return f;
-}
-
 // The bytes of a checkpoint of one set: every state bit and the clock.
 template <class Set, class T>
 std::vector<std::byte> bits(const Set& b, const Stepper<T>& s) {
@@ -102,9 +95,9 @@ TEST_CASE("a checkpoint resumes fixed steps bit for bit on every ISA and thread 
     check_resume<ParticleSet<float>>([] { return test::cloud<float>(400); }, chain_and_cluster<float>(400),
                                      velocity_verlet, fixed_steps, 5, 2, o);
     // Rigid bodies under rotational terms.
-    check_resume<RigidBodySet<float>>([] { return tumbling<float>(500); }, rotational_terms<float>(), rk4,
+    check_resume<RigidBodySet<float>>([] { return tumbling<float>(500); }, test::rotational_terms<float>(), rk4,
                                       fixed_steps, 5, 1, o);
-    check_resume<RigidBodySet<double>>([] { return tumbling<double>(200); }, rotational_terms<double>(), midpoint,
+    check_resume<RigidBodySet<double>>([] { return tumbling<double>(200); }, test::rotational_terms<double>(), midpoint,
                                        fixed_steps, 4, 3, o);
   }
 }
@@ -216,7 +209,7 @@ TEST_CASE("a checkpoint keeps applied forces, the keep flag and kinematic bodies
     b.set_kinematic(5);
     return b;
   };
-  check_resume<RigidBodySet<double>>(make_rigid, rotational_terms<double>(), rk4, fixed_steps, 4, 2,
+  check_resume<RigidBodySet<double>>(make_rigid, test::rotational_terms<double>(), rk4, fixed_steps, 4, 2,
                                      test::serial_options());
   // Forces for the next call only come back as such.
   ParticleSet<float> b = test::cloud<float>(50);

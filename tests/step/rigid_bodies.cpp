@@ -302,18 +302,11 @@ std::uint64_t rigid_hash(const RigidBodySet<T>& b) {
 }
 
 template <class T>
-ForceModel<T> rigid_terms() {
-  ForceModel<T> f = test::all_local_terms<T>();
-  f.add(Torque{{0.1, 0.2, -0.3}}).add(AngularDrag{0.05}).add(PointForce{{0.5, 0, 0}, {0, 1, 0}});
-  return f;
-}
-
-template <class T>
 void check_rigid_determinism() {
   for (const Method* m : builtin_methods) {
     auto run = [&](StepperOptions o) {
       RigidBodySet<T> b = tumbling_cloud<T>(3000);
-      Stepper<T>(rigid_terms<T>(), *m, o).advance(b, T(0.01), 10);
+      Stepper<T>(test::rotational_terms<T>(), *m, o).advance(b, T(0.01), 10);
       REQUIRE(all_finite(b.centers()));
       return rigid_hash(b);
     };
@@ -345,7 +338,7 @@ TEST_CASE("rigid bodies: the same bits on every ISA and thread count (double)", 
 }
 
 TEST_CASE("particles ignore the rotational terms", "[rigid]") {
-  const ForceModel<float> plain = test::all_local_terms<float>(), rotational = rigid_terms<float>();
+  const ForceModel<float> plain = test::all_local_terms<float>(), rotational = test::rotational_terms<float>();
   ParticleSet<float> a = test::cloud<float>(1000), b = a;
   Stepper<float>(plain, rk4, test::serial_options()).advance(a, 0.01f, 10);
   Stepper<float>(rotational, rk4, test::serial_options()).advance(b, 0.01f, 10);
