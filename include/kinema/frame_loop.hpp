@@ -32,7 +32,7 @@ class FixedTimestep {
   // between the previous and the current state.
   double alpha() const { return accumulated_ / h_; }
   double step_size() const { return h_; }
-  // Steps dropped by the cap so far.
+  // Steps dropped by the cap so far (saturating at 2^64 - 1).
   std::uint64_t dropped_steps() const { return dropped_; }
 
  private:
@@ -48,7 +48,7 @@ class FixedTimestep {
 // otherwise); `out` is made a copy of `current` first, which reuses its memory when it is
 // large enough, so a frame loop allocates only at its first frame. SIMD over bodies on the
 // best instruction set (or `isa`).
-// `out` may not be `previous` or `current` (kinema::Error).
+// `out` may not be `previous` or `current`, and alpha must be finite (kinema::Error).
 template <class T>
 void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current,
                  std::type_identity_t<T> alpha, ParticleSet<T>& out, Isa isa = Isa::automatic);

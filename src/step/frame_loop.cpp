@@ -1,6 +1,7 @@
 #include "kinema/frame_loop.hpp"
 
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "kernels/kernels.hpp"
@@ -24,8 +25,11 @@ unsigned FixedTimestep::steps_for(double frame_seconds) {
   const double due = std::floor(accumulated_ / h_);
   const unsigned steps = due >= double(cap_) ? cap_ : unsigned(due);
   if (due > double(cap_)) {
-    const double dropped = due - double(cap_);  // saturated: 2^64 steps is forever anyway
-    dropped_ += dropped < 0x1p63 ? std::uint64_t(dropped) : std::uint64_t(1) << 63;
+    // Saturated, the frame's and the total: 2^64 steps is forever anyway, and must not wrap.
+    constexpr std::uint64_t most = std::numeric_limits<std::uint64_t>::max();
+    const double dropped = due - double(cap_);
+    const std::uint64_t now = dropped < 0x1p63 ? std::uint64_t(dropped) : std::uint64_t(1) << 63;
+    dropped_ = dropped_ > most - now ? most : dropped_ + now;
     accumulated_ = std::isfinite(accumulated_) ? std::fmod(accumulated_, h_) : 0.0;  // keep the fraction
   } else {
     accumulated_ -= double(steps) * h_;
@@ -36,9 +40,10 @@ unsigned FixedTimestep::steps_for(double frame_seconds) {
 
 namespace {
 
-template <class Set>
-void check_pair(const Set& previous, const Set& current, const Set& out) {
+template <class Set, class T>
+void check_pair(const Set& previous, const Set& current, const Set& out, T alpha) {
   if (&out == &previous || &out == &current) throw Error("interpolate: out must be a set of its own");
+  if (!std::isfinite(alpha)) throw Error("interpolate: alpha must be finite");  // else every position is NaN
   if (previous.size() != current.size()) {
     throw Error("interpolate: the previous set has " + std::to_string(previous.size()) +
                 " bodies, the current one " + std::to_string(current.size()));
@@ -61,7 +66,7 @@ kernels::InterpolateJob<T> position_job(const ParticleSet<T>& previous, const Pa
 template <class T>
 void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current,
                  std::type_identity_t<T> alpha, ParticleSet<T>& out, Isa isa) {
-  check_pair(previous, current, out);
+  check_pair(previous, current, out, alpha);
   const auto& table = kernels::kernel_table<T>(isa);  // may throw: before out changes
   out = current;
   T* const positions[3] = {out.px(), out.py(), out.pz()};
@@ -71,7 +76,7 @@ void interpolate(const ParticleSet<T>& previous, const ParticleSet<T>& current,
 template <class T>
 void interpolate(const RigidBodySet<T>& previous, const RigidBodySet<T>& current,
                  std::type_identity_t<T> alpha, RigidBodySet<T>& out, Isa isa) {
-  check_pair(previous, current, out);
+  check_pair(previous, current, out, alpha);
   const auto& table = kernels::kernel_table<T>(isa);
   out = current;
   T* const positions[3] = {out.position_data(0), out.position_data(1), out.position_data(2)};

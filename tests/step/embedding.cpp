@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 #include <thread>
@@ -345,6 +346,10 @@ TEST_CASE("a fixed timestep runs whole steps, caps a slow frame, and leaves the 
   CHECK(clock.steps_for(1e300) == 4);
   CHECK(clock.alpha() >= 0);
   CHECK(clock.alpha() < 1);
+  // Frames of the largest double: the count saturates, it never wraps back to a small one.
+  FixedTimestep hitched(0.01);
+  for (int f = 0; f < 3; ++f) hitched.steps_for(std::numeric_limits<double>::max());
+  CHECK(hitched.dropped_steps() == std::numeric_limits<std::uint64_t>::max());
   // Over many frames of uneven length the steps add up to the time given, less what was
   // dropped, to within the fraction.
   FixedTimestep steady(1.0 / 60);
@@ -390,6 +395,9 @@ TEST_CASE("interpolate: positions by lerp, orientations by the short-arc normali
   ParticleSet<float> one = test::cloud<float>(3), two = test::cloud<float>(4), out;
   CHECK_THROWS_WITH(interpolate(one, two, 0.5f, out), "interpolate: the previous set has 3 bodies, the current one 4");
   CHECK_THROWS_WITH(interpolate(one, one, 0.5f, one), "interpolate: out must be a set of its own");
+  for (const float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    CHECK_THROWS_WITH(interpolate(one, one, bad, out), "interpolate: alpha must be finite");
+  }
   // A frame clock's alpha (a double) goes straight in for float sets.
   FixedTimestep clock(0.01);
   clock.steps_for(0.005);
