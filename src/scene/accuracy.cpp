@@ -409,6 +409,9 @@ void consider_float(const Scene& pilot_scene, double duration, double tolerance,
 
 // The search of choose_method: every candidate tried in turn against the cheapest so far,
 // each one's cost (in force evaluations) written into the reason.
+// A pilot's error as a note: up to its first ';' ("advance_to: the step size underflows at t = 46.1").
+std::string first_clause(const std::string& message) { return message.substr(0, message.find(';')); }
+
 class MethodSearch {
  public:
   MethodSearch(const Scene& scene, double tolerance)
@@ -475,6 +478,9 @@ class MethodSearch {
       // The best so far meets the tolerance; it may not be the cheapest.
       note(std::string(m.name) + " not tried (search budget spent)");
       return false;
+    } catch (const Error& e) {
+      note(std::string(m.name) + " failed (" + first_clause(e.what()) + ")");
+      return true;
     }
     if (!steps) {
       note(std::string(m.name) + (std::isfinite(best_cost_) ? " costlier" : " cannot"));
@@ -502,6 +508,9 @@ class MethodSearch {
       pick = adaptive_pick(pilot_scene_, m, duration_, tolerance_, stable, best_cost_, spent_);
     } catch (const SearchSpent&) {
       return false;
+    } catch (const Error& e) {  // a pilot that cannot go on (its step underflows): not a candidate
+      note(std::string(m.name) + " with error control failed (" + first_clause(e.what()) + ")");
+      return true;
     }
     if (!pick) return true;
     char text[120];

@@ -91,6 +91,15 @@ TEST_CASE("auto meets the tolerance on every shipped scene, for no more work tha
   }
 }
 
+TEST_CASE("auto passes over a candidate whose pilot fails and says so", "[accuracy][auto]") {
+  // On the binary orbit at 1e-2 dopri5's error-controlled pilot cannot follow the close
+  // approach (its step underflows); fixed steps still meet the tolerance.
+  const MethodChoice choice = choose_method(load_scene(scene_path("binary_orbit")), 1e-2);
+  CHECK(choice.method != nullptr);
+  CHECK_THAT(choice.reason, Catch::Contains("with error control failed (advance_to: the step size underflows"));
+  CHECK_FALSE(choice.step_tolerance);
+}
+
 TEST_CASE("tighter tolerances take more steps", "[accuracy][auto]") {
   const Scene scene = load_scene(scene_path("damped_spring"));
   const MethodChoice loose = choose_method(scene, 1e-2), tight = choose_method(scene, 1e-9);
