@@ -271,3 +271,14 @@ TEST_CASE("outputs never overwrite the scene or each other", "[cli][checkpoint][
   // Devices are no files to clobber.
   CHECK(run_kinema({"run", scene_copy.string(), "-q", "--out", "/dev/null", "--summary", "/dev/null"}).code == 0);
 }
+
+TEST_CASE("an energy that overflows is said, not left as a silent null", "[cli][hostile]") {
+  // G = 1e308 between two bodies half a unit apart: the state stays finite, the potential not.
+  const fs::path scene_file = write("overflow.json", R"({"precision": "double", "dt": 0.001, "steps": 10,
+      "forces": [{"type": "nbody", "G": 1e308}], "particles": [{"position": [0, 0, 0]}, {"position": [0.5, 0, 0]}]})");
+  const fs::path summary = work_dir() / "overflow_summary.json";
+  const Result r = run_kinema({"run", scene_file.string(), "-q", "--summary", summary.string()});
+  CHECK(r.code == 0);
+  CHECK_THAT(r.err, Catch::Contains("warning: the total energy at the start overflows double"));
+  CHECK(summary_of(summary)["energy_initial"].is_null());
+}

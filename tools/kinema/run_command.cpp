@@ -242,10 +242,18 @@ StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOption
 // Steps per advance call: for the progress bar, the trajectory and signals (the same bits as
 // one call). Error-controlled steps land on each call's end, so their calls are longer: a
 // sixteenth of the run or more.
+// Fixed steps are bounded by what a step costs: a body-step, and under N-body gravity each force
+// evaluation's N^2 interactions too, an interaction about half a body-step (so a chunk stays
+// near 50 ms of stepping, and a signal is answered that soon, at 4096 bodies as at 4). Error
+// control keeps its bound in body-steps: its calls' ends change its steps, and it answers
+// signals between its own steps anyway.
 std::uint64_t steps_per_call(const Scene& scene, std::size_t bodies, bool adaptive) {
-  const auto bounded = std::uint64_t(std::max(1.0, kBodyStepsPerChunk / double(std::max<std::size_t>(bodies, 1))));
-  return adaptive ? std::max<std::uint64_t>({1, scene.steps / 16, bounded})
-                  : std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), bounded);
+  const double n = double(std::max<std::size_t>(bodies, 1));
+  const auto bounded = [](double cost) { return std::uint64_t(std::max(1.0, kBodyStepsPerChunk / cost)); };
+  if (adaptive) return std::max<std::uint64_t>({1, scene.steps / 16, bounded(n)});
+  const double evaluations = method_by_name(scene.method).evaluations();  // auto has chosen by now
+  const double cost = n + (scene.nbody ? evaluations * n * n / 2 : 0);
+  return std::min<std::uint64_t>(std::max<std::uint64_t>(1, scene.steps / 100), bounded(cost));
 }
 
 // What stepping did.
@@ -579,6 +587,15 @@ int finish(const nlohmann::ordered_json& summary, const Scene& scene, const RunO
   return 0;
 }
 
+// The state can be finite while its energy is not (N-body with G = 1e308: the potential
+// overflows); the summary's energies are then null, and this says why. Not silenced by -q.
+void warn_if_energy_overflows(double initial, double final) {
+  if (std::isfinite(initial) && std::isfinite(final)) return;
+  std::fprintf(stderr, "kinema: warning: the total energy %s overflows double (a force parameter or a mass too "
+               "large, or bodies too close without softening): energy_initial and energy_final are null in the "
+               "summary\n", std::isfinite(initial) ? "at the end" : "at the start");
+}
+
 // What a summary says of a run that could not start (the world or auto's choice failed).
 nlohmann::ordered_json failed_summary(const Scene& scene, const std::string& error) {
   nlohmann::ordered_json summary;
@@ -624,6 +641,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);
   summary_file.write(summary);
   if (!o.quiet) print_summary(summary);
+  warn_if_energy_overflows(initial_energy, world.total_energy());
   return finish(summary, scene, o, stepped);
 }
 
