@@ -32,6 +32,8 @@ class WholeFile {
   void write(std::string_view text) { write(std::as_bytes(std::span(text.data(), text.size()))); }
   void commit();
   const std::filesystem::path& path() const { return path_; }
+  // Whether `path` is a device or FIFO, written directly (nothing to rename).
+  bool is_device() const { return device_; }
 
  private:
   [[noreturn]] void fail(const char* doing, int error);

@@ -282,3 +282,17 @@ TEST_CASE("an energy that overflows is said, not left as a silent null", "[cli][
   CHECK_THAT(r.err, Catch::Contains("warning: the total energy at the start overflows double"));
   CHECK(summary_of(summary)["energy_initial"].is_null());
 }
+
+TEST_CASE("a full device for the summary or report is refused before any step", "[cli][hostile]") {
+  // A run of 10^9 steps: refused at once, or this test would not end.
+  const Result run = run_kinema({"run", scene("projectiles.json"), "-q", "--steps", "1000000000", "--summary", "/dev/full"});
+  CHECK(run.code == 1);
+  CHECK_THAT(run.err, Catch::Contains("/dev/full: cannot write the summary: No space left on device"));
+  const Result stress = run_kinema({"stress", "-q", "--bodies", "100", "--seconds", "3600", "--report", "/dev/full"});
+  CHECK(stress.code == 1);
+  CHECK_THAT(stress.err, Catch::Contains("cannot write the report"));
+  // A device that takes it gets valid JSON after the newline.
+  const fs::path out = work_dir() / "stdout_summary.txt";
+  REQUIRE(run_kinema({"run", scene("projectiles.json"), "-q", "--steps", "10", "--summary", "/dev/stdout"}, out).code == 0);
+  CHECK(Json::parse(read(out))["steps"] == 10);
+}

@@ -3,6 +3,7 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include <nlohmann/json.hpp>
 
@@ -14,8 +15,12 @@ namespace kinema::cli {
 // Until write() the earlier file, if any, stays as it was; write() replaces it whole, once.
 class ReportFile {
  public:
+  // A device (/dev/stdout, /dev/full) gets a newline at once, whitespace JSON allows before a
+  // value: a full device or a closed pipe is found now, not after the run.
   ReportFile(const std::string& path, const std::string& what) {
-    if (!path.empty()) file_.emplace(path, what);
+    if (path.empty()) return;
+    file_.emplace(path, what);
+    if (file_->is_device()) file_->write(std::string_view("\n"));
   }
   void write(const nlohmann::ordered_json& summary) {
     written_ = true;
