@@ -2,11 +2,13 @@
 #include "kinema/scene.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
-#include <fstream>
+#include <fcntl.h>
 #include <initializer_list>
 #include <optional>
 #include <string>
+#include <unistd.h>
 #include <vector>
 
 #include "forces/force_terms.hpp"
@@ -291,15 +293,20 @@ Scene load_scene(const std::filesystem::path& path) {
   const std::string name = printable(path.string());
   std::error_code error;
   if (std::filesystem::is_directory(path, error)) throw Error(name + ": is a directory, not a scene file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(name + ": cannot open the file");
+  // O_NONBLOCK for the open alone: a FIFO nobody writes to must not hold it forever (with no
+  // writer its read ends at once, empty), and signals must still be answered.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) throw Error(name + ": cannot open the file");
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   // In chunks, up to one byte past the cap: a device or a pipe may never end.
   std::string text;
   char chunk[1 << 16];
-  while (text.size() <= kMaxSceneBytes && in.read(chunk, sizeof chunk).gcount() > 0) {
-    text.append(chunk, std::size_t(in.gcount()));
+  ssize_t n = 0;
+  while (text.size() <= kMaxSceneBytes && ((n = ::read(fd, chunk, sizeof chunk)) > 0 || (n < 0 && errno == EINTR))) {
+    if (n > 0) text.append(chunk, std::size_t(n));
   }
-  if (in.bad()) throw Error(name + ": cannot read the file");
+  ::close(fd);
+  if (n < 0) throw Error(name + ": cannot read the file");
   if (text.size() > kMaxSceneBytes) {
     throw Error(name + ": larger than " + std::to_string(kMaxSceneBytes >> 20) +
                 " MiB, the limit for a scene file (use \"generate\" for large scenes)");

@@ -3,9 +3,11 @@
 // summaries say what went wrong; hostile checkpoints are refused with one line.
 #include <catch2/catch.hpp>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <random>
+#include <sys/stat.h>
 #include <string>
 #include <thread>
 #include <vector>
@@ -295,4 +297,33 @@ TEST_CASE("a full device for the summary or report is refused before any step", 
   const fs::path out = work_dir() / "stdout_summary.txt";
   REQUIRE(run_kinema({"run", scene("projectiles.json"), "-q", "--steps", "10", "--summary", "/dev/stdout"}, out).code == 0);
   CHECK(Json::parse(read(out))["steps"] == 10);
+}
+
+TEST_CASE("a FIFO with no other end, as scene or summary, is answered at once", "[cli][hostile]") {
+  const fs::path fifo = work_dir() / "nobody.fifo";
+  fs::remove(fifo);
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  // A watchdog: a run still blocked after 20 s is killed (the checks below then fail); it
+  // stands down as soon as the run has ended, before its pid can be another's.
+  const auto watched = [](const std::vector<std::string>& args) {
+    std::atomic<bool> ended{false};
+    std::thread watchdog;
+    const Result r = run_kinema(args, {}, [&](pid_t pid) {
+      watchdog = std::thread([&ended, pid] {
+        for (int i = 0; i < 200 && !ended; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        if (!ended) ::kill(pid, SIGKILL);
+      });
+    });
+    ended = true;
+    watchdog.join();
+    return r;
+  };
+  const Result as_scene = watched({"run", fifo.string(), "-q"});
+  CHECK_FALSE(as_scene.killed);
+  CHECK(as_scene.code == 1);
+  const Result as_summary = watched({"run", scene("projectiles.json"), "-q", "--summary", fifo.string()});
+  CHECK_FALSE(as_summary.killed);
+  CHECK(as_summary.code == 1);
+  CHECK_THAT(as_summary.err, Catch::Contains("cannot write the summary"));
+  fs::remove(fifo);
 }

@@ -266,6 +266,7 @@ struct Stepped {
   std::optional<std::uint64_t> resumed_at;  // the step a checkpoint resumed the run from
   std::uint64_t checkpoints = 0;            // written by this process
   std::optional<std::string> error;         // what ended the run early
+  std::string fingerprint;                  // of the scene and options, with checkpoints
 };
 
 // What the run's results depend on beyond the bodies: the scene file and the options that
@@ -280,7 +281,7 @@ std::string run_fingerprint(const RunOptions& o, const Scene& scene) {
 }
 
 // The run's record in a checkpoint: its progress and what it measured so far.
-RunRecord run_record(const RunOptions& o, const Scene& scene, const Stepped& s, double initial_energy,
+RunRecord run_record(const Stepped& s, double initial_energy,
                      std::optional<std::uint64_t> trajectory_bytes) {
   const AdaptiveStats& a = s.adaptive;
   nlohmann::json f = {{"done", s.done}, {"calls", s.calls}, {"wall_seconds", exact(s.wall_seconds)},
@@ -288,7 +289,7 @@ RunRecord run_record(const RunOptions& o, const Scene& scene, const Stepped& s, 
                       {"smallest_step", exact(a.smallest_step)}, {"largest_step", exact(a.largest_step)},
                       {"next_step", exact(a.next_step)}, {"initial_energy", exact(initial_energy)}};
   if (trajectory_bytes) f["trajectory_bytes"] = *trajectory_bytes;
-  return {"run", run_fingerprint(o, scene), f};
+  return {"run", s.fingerprint, f};
 }
 
 // How far a checkpoint's run got, as the run goes on from it.
@@ -315,10 +316,10 @@ Resumed resumed_from(const nlohmann::json& f) {
 
 // The world as the checkpoint left it, and the run's progress then.
 template <class T>
-Resumed resume(World<T>& world, const Scene& scene, const RunOptions& o) {
+Resumed resume(World<T>& world, const Scene& scene, const RunOptions& o, const std::string& fingerprint) {
   const std::string& path = o.checkpoint.resume_path;
   const CheckpointReader in = CheckpointReader::load(path);
-  const RunRecord record = decode(in.user_data(), "run", run_fingerprint(o, scene), path);
+  const RunRecord record = decode(in.user_data(), "run", fingerprint, path);
   try {
     world.restore(in);
     Resumed r = resumed_from(record.fields);
@@ -370,7 +371,7 @@ void save_checkpoint(const World<T>& world, const Scene& scene, const RunOptions
   if (trajectory) length = trajectory->sync();
   CheckpointWriter out;
   world.save(out);
-  out.set_user_data(encode(run_record(o, scene, s, initial_energy, length)));
+  out.set_user_data(encode(run_record(s, initial_energy, length)));
   out.save(o.checkpoint.path);
   ++s.checkpoints;
 }
@@ -617,10 +618,14 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   Stepped stepped;
   try {
     std::optional<std::uint64_t> trajectory_bytes;
+    // Read once, before any step: a scene that is no regular file cannot be checkpointed.
+    const bool checkpoints = !o.checkpoint.path.empty() || !o.checkpoint.resume_path.empty();
+    const std::string fingerprint = checkpoints ? run_fingerprint(o, scene) : "";
     if (!o.checkpoint.resume_path.empty()) {
-      Resumed r = resume(world, scene, o);
+      Resumed r = resume(world, scene, o, fingerprint);
       stepped = r.stepped, initial_energy = r.initial_energy, trajectory_bytes = r.trajectory_bytes;
     }
+    stepped.fingerprint = fingerprint;
     plan = plan_steps(scene, o, options);
     std::optional<TrajectoryWriter> trajectory;
     if (!o.trajectory_path.empty() && stepped.resumed_at) {

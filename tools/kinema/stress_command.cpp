@@ -559,10 +559,13 @@ int run_stress(const StressOptions& o, const Scene* scene) {
   }
   std::vector<Conservation<T>> conservation;
   for (const auto& g : setup.groups) conservation.push_back(conservation_start(g));
-  const std::string fingerprint = stress_fingerprint(o, std::string(setup.groups.front().stepper().method().name),
-                                                     sizeof(T) == 4 ? Precision::single : Precision::dual, setup.dt);
   StressOutcome out;
   try {
+    // Read once, before any step, and only for checkpoints (it reads the scene file again).
+    const bool checkpoints = !o.checkpoint.path.empty() || !o.checkpoint.resume_path.empty();
+    const Precision precision = sizeof(T) == 4 ? Precision::single : Precision::dual;
+    const std::string method(setup.groups.front().stepper().method().name);
+    const std::string fingerprint = checkpoints ? stress_fingerprint(o, method, precision, setup.dt) : "";
     StressOutcome resumed;
     if (!o.checkpoint.resume_path.empty()) {
       resumed = resume_stress(o.checkpoint.resume_path, fingerprint, setup.groups, conservation);
