@@ -26,4 +26,9 @@ void check_clamp_limits(const StepperOptions& options);
 // advance_to's request: a method with a pair, sane tolerances, t_end not before `now`.
 void check_adaptive(const Method& method, double t_end, const Tolerances& tolerances, double now);
 
+// Throws kinema::Error when no step could meet the tolerances in T: atol + rtol Y under a
+// sixteenth of an ulp of Y, the bodies' largest |position| + |velocity| component.
+template <class T>
+void check_tolerance_floor(const ParticleSet<T>& bodies, const Tolerances& tolerances);
+
 }  // namespace kinema

@@ -53,9 +53,11 @@ struct Stepper<T>::Impl {
   AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const StopRequest& stop) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
     check_reach(core.lowered().coupled, bodies);
-    // A call that goes on from one stopped early keeps its cap (the bodies have moved since).
-    const double max_step = continuation.continues(t_end, tolerances, bodies.size()) ? continuation.max_step
-                                                                                     : step_cap(bodies, t_end, tolerances);
+    // A call that goes on from one stopped early keeps its cap (the bodies have moved since)
+    // and was checked when it began.
+    const bool continues = continuation.continues(t_end, tolerances, bodies.size());
+    if (!continues) check_tolerance_floor(bodies, tolerances);
+    const double max_step = continues ? continuation.max_step : step_cap(bodies, t_end, tolerances);
     AdaptiveStats stats;
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
       stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stop);

@@ -191,6 +191,19 @@ TEST_CASE("advance_to refuses methods without a pair, bad tolerances and times i
   Stepper<double> s(attractor(), dopri5, test::serial_options());
   CHECK_THROWS_WITH(s.advance_to(b, 1, {0, 0}), Catch::Contains("not both 0"));
   CHECK_THROWS_WITH(s.advance_to(b, 1, {-1, 1e-6}), Catch::Contains("rtol and atol"));
+  // Below the round-off of one step (rtol 1e-24 used to take hundreds of millions of steps,
+  // 1e-30 never ended): refused before any.
+  for (const double tiny : {1e-24, 1e-30}) {
+    CHECK_THROWS_WITH(s.advance_to(b, 1, {tiny, tiny}), Catch::Contains("far below the round-off of one step in double"));
+  }
+  CHECK(s.time() == 0);
+  ParticleSet<float> f;
+  f.add({3, 0, 0}, {0, 1, 0}, 1);
+  ForceModel<float> pull;
+  pull.add(Central{{0, 0, 0}, 1});
+  Stepper<float> in_float(pull, dopri5, test::serial_options());
+  CHECK_THROWS_WITH(in_float.advance_to(f, 1, {1e-12, 1e-12}), Catch::Contains("in float"));
+  CHECK(in_float.advance_to(f, 1, {1e-7, 1e-7}).accepted > 0);  // under float's ulp, yet estimates can meet it
   CHECK_THROWS_WITH(s.advance_to(b, std::nan(""), {}), Catch::Contains("t_end"));
   s.advance_to(b, 1, {});
   CHECK_THROWS_WITH(s.advance_to(b, 0.5, {}), Catch::Contains("not before time()"));
