@@ -74,7 +74,10 @@ double exact(std::uint64_t bits) { return std::bit_cast<double>(bits); }
 std::string fingerprint_of(const std::string& scene_path, const std::string& options) {
   std::uint32_t crc = 0;
   if (!scene_path.empty()) crc = crc32c(read_regular_file(scene_path, kMaxSceneBytes, "scene"));
-  crc = crc32c(std::as_bytes(std::span(options.data(), options.size())), crc);
+  return crc_text(crc32c(std::as_bytes(std::span(options.data(), options.size())), crc));
+}
+
+std::string crc_text(std::uint32_t crc) {
   char text[12];
   std::snprintf(text, sizeof text, "%08x", unsigned(crc));
   return text;

@@ -17,6 +17,8 @@ struct CheckpointOptions {
   std::string path;         // empty: none
   double every = 60;        // seconds of wall clock between checkpoints
   std::string resume_path;  // empty: a fresh run
+
+  bool wanted() const { return !path.empty() || !resume_path.empty(); }
 };
 
 // A command's own record in a checkpoint's user data: which command and run it belongs to
@@ -35,6 +37,9 @@ RunRecord decode(std::span<const std::byte> data, const std::string& command, co
 // A double as its bits, and back: JSON numbers would do, but this says so.
 std::uint64_t exact(double value);
 double exact(std::uint64_t bits);
+
+// A CRC as the summaries and run records show it: eight hex digits.
+std::string crc_text(std::uint32_t crc);
 
 // CRC-32C of the scene file's bytes and of `options` (the results-changing options as text).
 std::string fingerprint_of(const std::string& scene_path, const std::string& options);

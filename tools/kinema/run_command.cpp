@@ -522,9 +522,7 @@ void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, co
   if (!o.checkpoint.path.empty()) summary["checkpoints_written"] = s.checkpoints;
   CheckpointWriter state;
   world.save(state);
-  char crc[12];
-  std::snprintf(crc, sizeof crc, "%08x", unsigned(state.crc()));
-  summary["state_crc32c"] = crc;
+  summary["state_crc32c"] = crc_text(state.crc());
 }
 
 // The unit of every field that has one and does not name it.
@@ -619,8 +617,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   try {
     std::optional<std::uint64_t> trajectory_bytes;
     // Read once, before any step: a scene that is no regular file cannot be checkpointed.
-    const bool checkpoints = !o.checkpoint.path.empty() || !o.checkpoint.resume_path.empty();
-    const std::string fingerprint = checkpoints ? run_fingerprint(o, scene) : "";
+    const std::string fingerprint = o.checkpoint.wanted() ? run_fingerprint(o, scene) : "";
     if (!o.checkpoint.resume_path.empty()) {
       Resumed r = resume(world, scene, o, fingerprint);
       stepped = r.stepped, initial_energy = r.initial_energy, trajectory_bytes = r.trajectory_bytes;

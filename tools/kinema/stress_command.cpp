@@ -437,9 +437,7 @@ template <class T>
 std::string state_crc(const std::vector<StressGroup<T>>& groups) {
   CheckpointWriter state;
   for (const auto& g : groups) g.save(state);
-  char crc[12];
-  std::snprintf(crc, sizeof crc, "%08x", unsigned(state.crc()));
-  return crc;
+  return crc_text(state.crc());
 }
 
 template <class T>
@@ -562,10 +560,9 @@ int run_stress(const StressOptions& o, const Scene* scene) {
   StressOutcome out;
   try {
     // Read once, before any step, and only for checkpoints (it reads the scene file again).
-    const bool checkpoints = !o.checkpoint.path.empty() || !o.checkpoint.resume_path.empty();
     const Precision precision = sizeof(T) == 4 ? Precision::single : Precision::dual;
     const std::string method(setup.groups.front().stepper().method().name);
-    const std::string fingerprint = checkpoints ? stress_fingerprint(o, method, precision, setup.dt) : "";
+    const std::string fingerprint = o.checkpoint.wanted() ? stress_fingerprint(o, method, precision, setup.dt) : "";
     StressOutcome resumed;
     if (!o.checkpoint.resume_path.empty()) {
       resumed = resume_stress(o.checkpoint.resume_path, fingerprint, setup.groups, conservation);
