@@ -82,6 +82,17 @@ std::uint64_t state_hash(const ParticleSet<T>& b) {
   return hash;
 }
 
+// The same over a rigid set: its centres, orientations and angular momenta.
+template <class T>
+std::uint64_t state_hash(const RigidBodySet<T>& b) {
+  std::uint64_t hash = state_hash(b.centers());
+  for (const T* a : {b.q(0), b.q(1), b.q(2), b.q(3), b.l(0), b.l(1), b.l(2)}) {
+    const auto* bytes = reinterpret_cast<const unsigned char*>(a);
+    for (std::size_t i = 0; i < b.padded_size() * sizeof(T); ++i) hash = (hash ^ bytes[i]) * 1099511628211ull;
+  }
+  return hash;
+}
+
 // A reproducible cloud of bodies with a spread of masses, for determinism tests.
 template <class T>
 ParticleSet<T> cloud(std::size_t count, std::uint64_t seed = 3) {

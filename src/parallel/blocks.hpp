@@ -54,6 +54,12 @@ struct Workers {
   unsigned count = 0;
 };
 
+// Whether `jobs` is one of kinema's own (serial, oneTBB), whose enqueue does not throw; a
+// host's may, before it takes any range (see kinema/job_system.hpp).
+inline bool enqueue_never_throws(const JobSystem* jobs) {
+  return jobs == nullptr || dynamic_cast<const SerialJobSystem*>(jobs) || dynamic_cast<const TbbJobSystem*>(jobs);
+}
+
 // Every worker of the job system.
 inline Workers all_workers(JobSystem& jobs) { return {&jobs, std::max(1u, jobs.worker_count())}; }
 

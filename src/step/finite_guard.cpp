@@ -129,11 +129,16 @@ void Checkpoint<T>::save(const StateArrays<T>& s, Block b) {
 
 template <class T>
 void Checkpoint<T>::restore(const Workers& workers, const StateArrays<T>& s) const {
-  for_each_block(workers, s.padded, [&](Block b) {
+  const auto put_back = [&](Block b) {
     for (int a = 0; a < s.count; ++a) {
       std::memcpy(s.data[a] + b.begin, copy_[a].data() + b.begin, (b.end - b.begin) * sizeof(T));
     }
-  });
+  };
+  try {
+    for_each_block(workers, s.padded, put_back);
+  } catch (...) {
+    for_each_block(Workers{}, s.padded, put_back);  // a host's enqueue threw: nothing ran
+  }
 }
 
 template <class T>

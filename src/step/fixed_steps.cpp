@@ -175,14 +175,26 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
 template <class T>
 void FixedSteps<T>::run_steps(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard) {
   const std::size_t n = c.bodies.padded_size();
+  const std::uint64_t start = core_.clock.steps;
+  // A host's enqueue that throws in one of the guard's own passes leaves steps unchecked
+  // (or unclamped): the set and the clock go back to where the call started.
+  const auto guard_pass = [&](auto&& pass) {
+    try {
+      for_each_block(c.workers, n, pass);
+    } catch (...) {
+      guard->checkpoint.restore(c.workers, guard->state);
+      core_.clock.steps = start;
+      throw;
+    }
+  };
   if (guard) for_each_block(c.workers, n, [&](Block b) { guard->checkpoint.save(guard->state, b); });
   for (std::uint64_t k = 0; k < steps; ++k) {
     c.t0 = core_.clock.time();
     staged.step(c);
     ++core_.clock.steps;
-    if (guard && guard->clamp) for_each_block(c.workers, n, [&](Block b) { clamp(c.bodies, b); });
+    if (guard && guard->clamp) guard_pass([&](Block b) { clamp(c.bodies, b); });
   }
-  if (guard) for_each_block(c.workers, n, [&](Block b) { guard->scan.scan(b); });
+  if (guard) guard_pass([&](Block b) { guard->scan.scan(b); });
 }
 
 template class FixedSteps<float>;

@@ -76,8 +76,10 @@ void StagedPath<T>::reserve(std::size_t padded) {
 
 template <class T>
 void StagedPath<T>::step(const StepContext<T>& c) {
-  if (!may_throw()) return run_phases(c);
-  // User code runs in this step: keep the bodies' state, so a throw leaves them as they were.
+  const bool host_may_tear = phases_change_bodies() && !enqueue_never_throws(c.workers.jobs);
+  if (!may_throw() && !host_may_tear) return run_phases(c);
+  // User code runs in this step, or a host's enqueue may throw between two passes that
+  // each change the bodies: keep their state, so a throw leaves them as they were.
   for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { copy_state(c, b, true); });
   try {
     run_phases(c);

@@ -151,7 +151,10 @@ class StagedPath {
   const Attempt* attempt_ = nullptr;
   bool first_stage_only_ = false;
   std::vector<double> block_error_;
-  bool keeps_state() const { return may_throw() || method_.embedded_order > 0; }
+  bool keeps_state() const { return may_throw() || method_.embedded_order > 0 || phases_change_bodies(); }
+  // More than one pass of a step changes the bodies (kick-drift methods with coupled terms:
+  // each kick and drift is a pass of its own); else only the last pass does.
+  bool phases_change_bodies() const { return method_.kind == MethodKind::kick_drift && coupled(); }
   // An attempt saves each block as it starts on it, unless a block may throw (then every
   // block must be saved before any runs, to put them all back) or phases run as jobs of
   // their own.

@@ -60,16 +60,6 @@ RigidBodySet<T> tumbling(std::size_t n) {
   return set;
 }
 
-template <class T>
-std::uint64_t rigid_hash(const RigidBodySet<T>& b) {
-  std::uint64_t h = test::state_hash(b.centers());
-  for (const T* a : {b.q(0), b.q(1), b.q(2), b.q(3), b.l(0), b.l(1), b.l(2)}) {
-    const auto* bytes = reinterpret_cast<const unsigned char*>(a);
-    for (std::size_t i = 0; i < b.padded_size() * sizeof(T); ++i) h = (h ^ bytes[i]) * 1099511628211ull;
-  }
-  return h;
-}
-
 // A callback with a force and a torque that depend on the whole view.
 template <class T>
 ForceModel<T> callback_model(double throw_at = -1, std::size_t throw_block = 0) {
@@ -133,7 +123,7 @@ TEST_CASE("rigid callbacks: the same bits on every ISA, thread count and job sys
           Stepper<float> s(callback_model<float>(), *m, o);
           s.advance(b, 0.01f, 8);
           REQUIRE(all_finite(b));
-          return rigid_hash(b);
+          return test::state_hash(b);
         },
         1500, 5000);
   }
@@ -145,7 +135,7 @@ TEST_CASE("advance(n) on the rigid block path gives the bits of n steps", "[rigi
   Stepper<double> sb(callback_model<double>(), rk4, test::serial_options());
   sa.advance(a, 0.01, 12);
   for (int k = 0; k < 12; ++k) sb.step(b, 0.01);
-  CHECK(rigid_hash(a) == rigid_hash(b));
+  CHECK(test::state_hash(a) == test::state_hash(b));
 }
 
 TEST_CASE("a rigid callback that throws leaves the set as before the step that threw", "[rigid][callbacks][embedding]") {
@@ -160,7 +150,7 @@ TEST_CASE("a rigid callback that throws leaves the set as before the step that t
     RigidBodySet<double> b = tumbling<double>(3000);
     Stepper<double> s(callback_model<double>(when, 1024), rk4, o);
     CHECK_THROWS_WITH(s.advance(b, h, 9), "rigid callback failed");
-    CHECK(rigid_hash(b) == rigid_hash(expected));
+    CHECK(test::state_hash(b) == test::state_hash(expected));
     CHECK(s.time() == Approx(4 * h).epsilon(1e-15));
   }
 }
@@ -177,6 +167,6 @@ TEST_CASE("particles ignore rigid callbacks, rigid bodies particle callbacks", "
   RigidBodySet<float> r = tumbling<float>(100), fused = r;
   Stepper<float>(g, rk4, test::serial_options()).step(r, 0.01f);
   Stepper<float>(test::all_local_terms<float>(), rk4, test::serial_options()).step(fused, 0.01f);
-  CHECK(rigid_hash(r) == rigid_hash(fused));
+  CHECK(test::state_hash(r) == test::state_hash(fused));
   CHECK_THROWS_WITH(f.add(RigidCallback<float>{}), Catch::Contains("empty"));
 }

@@ -1,0 +1,170 @@
+// A host job system whose enqueue throws, as its contract allows before it takes a range
+// (an engine's queue out of memory, say), at each enqueue of a call in turn and on every
+// path: the set and the clock are left as before the step that threw, and the call can go
+// on to the bits of a call that never threw.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+namespace {
+
+// Runs every job inline on the calling thread, and throws at its `throw_at`-th enqueue.
+class ThrowingJobs final : public JobSystem {
+ public:
+  unsigned worker_count() const override { return 2; }
+  JobHandle enqueue(RangeTask task, std::size_t count, std::size_t, void* context) override {
+    if (++calls == throw_at) throw std::runtime_error("enqueue failed");
+    task(0, count, 0, context);
+    return nullptr;
+  }
+  void wait(JobHandle) override {}
+  int calls = 0;
+  int throw_at = 0;  // 0: never
+};
+
+StepperOptions every_call_on(ThrowingJobs& jobs, FiniteGuard guard = FiniteGuard::off) {
+  StepperOptions o;
+  o.jobs = &jobs;
+  o.workers = WorkerChoice::all;
+  o.inline_below = 0;
+  o.guard = guard;
+  return o;
+}
+
+// Springs between neighbours in index order: a coupled term for the staged path.
+Springs neighbour_springs(std::size_t n) {
+  Springs s;
+  for (std::uint32_t i = 0; i + 1 < n; ++i) s.pairs.push_back({i, i + 1, 0.5, 40, 0.2});
+  return s;
+}
+
+ForceModel<double> with_callback(ForceModel<double> f) {
+  f.add([](const ParticleBlock<double>& b) {
+    for (std::size_t i = 0; i < b.count; ++i) b.fy[i] += 0.1 * b.px[i] - 0.2 * b.vz[i];
+  });
+  return f;
+}
+
+ForceModel<double> with_rigid_callback(ForceModel<double> f) {
+  f.add([](const RigidBlock<double>& b) {
+    for (std::size_t i = 0; i < b.count; ++i) b.tz[i] -= 0.3 * b.qx[i], b.fy[i] += 0.1 * b.wz[i];
+  });
+  return f;
+}
+
+RigidBodySet<double> tumbling(std::size_t n) {
+  RigidBodySet<double> set;
+  const ParticleSet<double> centers = test::cloud<double>(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double a = double(i % 17) / 17, c = double(i % 5) / 5;
+    set.add({centers.position(i), centers.velocity(i), {1, a, c, 0.3}, {a, 1, c}, 1 + a, {1 + a, 2, 2.5 - c}});
+  }
+  return set;
+}
+
+// advance(set, h, steps) with the enqueue that throws at each position in turn: every
+// throw leaves the set as `completed` clean steps would, and time() counts them; the rest
+// of the steps then give the clean call's bits.
+template <class Set>
+void check_each_enqueue(const char* path, const Set& initial, const ForceModel<double>& forces,
+                        const Method& method, FiniteGuard guard = FiniteGuard::off) {
+  INFO(path << (guard == FiniteGuard::check ? ", guard check" : guard == FiniteGuard::clamp ? ", guard clamp" : ""));
+  constexpr double h = 0.004;
+  constexpr std::uint64_t steps = 3;
+  ThrowingJobs jobs;
+  Set clean = initial;
+  Stepper<double>(forces, method, every_call_on(jobs, guard)).advance(clean, h, steps);
+  const int enqueues = jobs.calls;
+  REQUIRE(enqueues > 0);
+  for (int k = 1; k <= enqueues; ++k) {
+    INFO("enqueue " << k << " of " << enqueues);
+    jobs.calls = 0, jobs.throw_at = k;
+    Set b = initial;
+    Stepper<double> s(forces, method, every_call_on(jobs, guard));
+    CHECK_THROWS_WITH(s.advance(b, h, steps), "enqueue failed");
+    const std::uint64_t completed = s.clock().steps;
+    CHECK(completed < steps);
+    Set expected = initial;
+    if (completed > 0) Stepper<double>(forces, method, test::serial_options()).advance(expected, h, completed);
+    CHECK(test::state_hash(b) == test::state_hash(expected));
+    CHECK(s.time() == double(completed) * h);
+    jobs.throw_at = 0;
+    s.advance(b, h, steps - completed);
+    CHECK(test::state_hash(b) == test::state_hash(clean));
+  }
+}
+
+}  // namespace
+
+TEST_CASE("a throwing enqueue leaves particles as before the step, on every path", "[job_system][throws]") {
+  const ParticleSet<double> cloud = test::cloud<double>(2500);
+  const ForceModel<double> local = test::all_local_terms<double>();
+  ForceModel<double> springs = local;
+  springs.add(neighbour_springs(cloud.size()));
+  ForceModel<double> gravity = local;
+  gravity.add(NBody{1e-3, 0.1});
+  for (const Method* m : {&rk4, &velocity_verlet, &symplectic_euler, &midpoint}) {
+    INFO(m->name);
+    check_each_enqueue("fused", cloud, local, *m);
+    check_each_enqueue("block path", cloud, with_callback(local), *m);
+    check_each_enqueue("staged, springs", cloud, springs, *m);
+    check_each_enqueue("staged, springs and a callback", cloud, with_callback(springs), *m);
+    check_each_enqueue("staged, N-body", cloud, gravity, *m);
+    check_each_enqueue("staged, springs", cloud, springs, *m, FiniteGuard::check);
+    check_each_enqueue("fused", cloud, local, *m, FiniteGuard::check);
+    check_each_enqueue("staged, springs", cloud, springs, *m, FiniteGuard::clamp);
+  }
+}
+
+TEST_CASE("a throwing enqueue leaves rigid bodies as before the step, on every path", "[job_system][throws]") {
+  const RigidBodySet<double> bodies = tumbling(2500);
+  ForceModel<double> local = test::rotational_terms<double>();
+  for (const Method* m : {&rk4, &velocity_verlet, &bs3}) {
+    INFO(m->name);
+    check_each_enqueue("rigid", bodies, local, *m);
+    check_each_enqueue("rigid block path", bodies, with_rigid_callback(local), *m);
+    check_each_enqueue("rigid", bodies, local, *m, FiniteGuard::check);
+    check_each_enqueue("rigid block path", bodies, with_rigid_callback(local), *m, FiniteGuard::clamp);
+  }
+}
+
+TEST_CASE("a throwing enqueue inside advance_to leaves the bodies at an accepted step", "[job_system][throws]") {
+  const ParticleSet<double> cloud = test::cloud<double>(2500);
+  ForceModel<double> springs = test::all_local_terms<double>();
+  springs.add(neighbour_springs(cloud.size()));
+  const Tolerances tol{1e-8, 1e-8};
+  constexpr double t_end = 0.02;
+  for (const Method* m : {&dopri5, &bs3}) {
+    INFO(m->name);
+    // The clean run, stopped after every accepted step: the states a throw may leave.
+    ThrowingJobs jobs;
+    ParticleSet<double> clean = cloud;
+    Stepper<double> reference(springs, *m, every_call_on(jobs));
+    std::vector<std::pair<double, std::uint64_t>> accepted{{0.0, test::state_hash(clean)}};
+    while (reference.time() < t_end) {
+      reference.advance_to(clean, t_end, tol, [] { return true; });
+      accepted.emplace_back(reference.time(), test::state_hash(clean));
+    }
+    const int enqueues = jobs.calls;
+    for (int k = 1; k <= enqueues; k += std::max(1, enqueues / 40)) {
+      INFO("enqueue " << k << " of " << enqueues);
+      jobs.calls = 0, jobs.throw_at = k;
+      ParticleSet<double> b = cloud;
+      Stepper<double> s(springs, *m, every_call_on(jobs));
+      try {
+        s.advance_to(b, t_end, tol);
+      } catch (const std::runtime_error& e) {
+        CHECK(std::string(e.what()) == "enqueue failed");
+      }
+      const std::pair<double, std::uint64_t> left{s.time(), test::state_hash(b)};
+      CHECK(std::find(accepted.begin(), accepted.end(), left) != accepted.end());
+    }
+  }
+}
