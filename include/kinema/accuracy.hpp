@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "kinema/adaptive.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/scene.hpp"
 
@@ -29,7 +30,10 @@ struct BodyStates {
 Scene sample_bodies(const Scene& scene, std::size_t max_bodies);
 
 // Runs `steps` steps of duration / steps with `method` on one thread, in the scene's precision.
-BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t steps, double duration);
+// The analyses here poll `stop` between calls of a few milliseconds of stepping (and between
+// force evaluations of a stiffness estimate); once it returns true they throw kinema::Stopped.
+BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t steps, double duration,
+                    const StopRequest& stop = {});
 
 // An error-controlled run (rtol = atol = tolerance, steps at most max_step) of a method
 // with an embedded pair over the duration: the final states and the force evaluations.
@@ -38,7 +42,8 @@ struct AdaptiveRun {
   std::uint64_t evaluations = 0;
 };
 AdaptiveRun simulate_adaptive(const Scene& scene, const Method& method, double tolerance, double duration,
-                              double max_step = std::numeric_limits<double>::infinity());
+                              double max_step = std::numeric_limits<double>::infinity(),
+                              const StopRequest& stop = {});
 
 // max over bodies of |x - x_ref| + |v - v_ref| (+ the rotation angle between q and q_ref).
 double state_error(const BodyStates& states, const BodyStates& reference);
@@ -57,7 +62,7 @@ struct Reference {
 
 // The analytic solution, else rk4 in double with `steps` steps, its own error estimated
 // from a run at half as many steps (Richardson: difference / 15).
-Reference reference_states(const Scene& scene, double duration, std::uint64_t steps);
+Reference reference_states(const Scene& scene, double duration, std::uint64_t steps, const StopRequest& stop = {});
 
 struct MethodChoice {
   const Method* method = nullptr;
@@ -89,6 +94,6 @@ struct MethodChoice {
 // by the chosen configuration in both precisions, stays ten times under the tolerance: float
 // steps cost half. Throws kinema::Error when the tolerance is not positive or cannot be
 // reached.
-MethodChoice choose_method(const Scene& scene, double tolerance);
+MethodChoice choose_method(const Scene& scene, double tolerance, const StopRequest& stop = {});
 
 }  // namespace kinema

@@ -32,6 +32,14 @@ class NonFiniteError : public Error {
   std::string field;   // its first such field: "px" .. "vz", rigid bodies also "qw" .. "lz"
 };
 
+// Thrown by a long analysis (simulate, reference_states, choose_method, estimate_stiffness)
+// when the stop request it was given returned true: it has no result to give. Not an Error:
+// nothing was wrong with the input.
+class Stopped : public std::exception {
+ public:
+  const char* what() const noexcept override { return "stopped on request"; }
+};
+
 // `text` made safe for one line of a terminal or of a script's string literal: control
 // characters (C0, DEL, C1) and bytes that are not valid UTF-8 become \xNN (C1 code points
 // \u00NN); every other character, Unicode included, stays as it is. Past `limit` bytes of

@@ -182,16 +182,18 @@ class Stepper {
 };
 
 // The dominant eigenvalue of a force model's Jacobian at the bodies' state and time t
-// (kinema/stability.hpp), from the accelerations of a stepper made with `options`.
+// (kinema/stability.hpp), from the accelerations of a stepper made with `options`. `stop`
+// is polled before each force evaluation; once it returns true, kinema::Stopped is thrown.
 template <class T>
 StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t = 0,
-                                     int iterations = 120, StepperOptions options = on_calling_thread());
+                                     int iterations = 120, StepperOptions options = on_calling_thread(),
+                                     const StopRequest& stop = {});
 
 extern template class Stepper<float>;
 extern template class Stepper<double>;
 extern template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double,
-                                                     int, StepperOptions);
+                                                     int, StepperOptions, const StopRequest&);
 extern template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double,
-                                                     int, StepperOptions);
+                                                     int, StepperOptions, const StopRequest&);
 
 }  // namespace kinema

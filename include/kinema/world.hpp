@@ -26,6 +26,13 @@ class World {
   World(World&&) noexcept = default;
 
   void advance(T h, std::uint64_t steps);
+  // The same steps, in calls of about a few milliseconds each (steps_per_call), polling
+  // `stop` between them; returns the steps taken, fewer than asked once `stop` returned true.
+  // The bits are those of one call.
+  std::uint64_t advance(T h, std::uint64_t steps, const StopRequest& stop);
+  // Steps of about the same work: 2^22 body-evaluations, where a body costs its springs too
+  // and, under N-body gravity, half of every body again (its share of the pairs).
+  std::uint64_t steps_per_call() const;
   // Error-controlled steps to t_end (Stepper::advance_to); particles only (kinema::Error
   // when the world has rigid bodies).
   // With `stop`, as Stepper::advance_to with a stop request.

@@ -17,6 +17,28 @@
 namespace kinema {
 namespace {
 
+// The stop request of the analysis running on this thread: set by the outermost public
+// call given one, read by every run inside it (pilots, references, the stiffness estimate).
+thread_local const StopRequest* active_stop = nullptr;
+
+class StopScope {
+ public:
+  explicit StopScope(const StopRequest& stop) : outer_(active_stop) {
+    if (stop) active_stop = &stop;
+  }
+  ~StopScope() { active_stop = outer_; }
+  StopScope(const StopScope&) = delete;
+  StopScope& operator=(const StopScope&) = delete;
+
+ private:
+  const StopRequest* outer_;
+};
+
+const StopRequest& current_stop() {
+  static const StopRequest none;
+  return active_stop ? *active_stop : none;
+}
+
 template <class T>
 BodyStates states_of(const World<T>& world) {
   const ParticleSet<T>& particles = world.particles;
@@ -39,7 +61,7 @@ BodyStates states_of(const World<T>& world) {
 template <class T>
 BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
   World<T> world(scene, method, on_calling_thread());
-  world.advance(T(duration / double(steps)), steps);
+  if (world.advance(T(duration / double(steps)), steps, current_stop()) < steps) throw Stopped();
   return states_of(world);
 }
 
@@ -49,7 +71,8 @@ AdaptiveRun run_adaptive(const Scene& scene, const Method& method, double tolera
   World<T> world(scene, method, on_calling_thread());
   Tolerances t{tolerance, tolerance};
   t.max_step = max_step;
-  const AdaptiveStats stats = world.advance_to(duration, t);
+  const AdaptiveStats stats = world.advance_to(duration, t, current_stop());
+  if (stats.stopped) throw Stopped();
   return {states_of(world), stats.evaluations};
 }
 
@@ -150,14 +173,16 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
 }
 
 BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t steps,
-                    double duration) {
+                    double duration, const StopRequest& stop) {
   if (steps == 0) throw Error("simulate: steps must be at least 1");
+  const StopScope scope(stop);
   return with_precision(scene.precision,
                         [&]<class T>() { return run<T>(scene, method, steps, duration); });
 }
 
 AdaptiveRun simulate_adaptive(const Scene& scene, const Method& method, double tolerance, double duration,
-                              double max_step) {
+                              double max_step, const StopRequest& stop) {
+  const StopScope scope(stop);
   return with_precision(scene.precision, [&]<class T>() {
     return run_adaptive<T>(scene, method, tolerance, duration, max_step);
   });
@@ -231,7 +256,8 @@ std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
   return out;
 }
 
-Reference reference_states(const Scene& scene, double duration, std::uint64_t steps) {
+Reference reference_states(const Scene& scene, double duration, std::uint64_t steps, const StopRequest& stop) {
+  const StopScope scope(stop);
   if (auto exact = analytic_states(scene, duration)) return {*exact, 0, true, 0};
   Scene precise = scene;
   precise.precision = Precision::dual;
@@ -355,7 +381,7 @@ std::optional<AdaptivePick> adaptive_pick(const Scene& scene, const Method& m, d
 StiffnessEstimate stiffness_of(const Scene& scene) {
   ParticleSet<double> bodies = make_particles<double>(scene);
   if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
-  return estimate_stiffness(bodies, make_forces<double>(scene));
+  return estimate_stiffness(bodies, make_forces<double>(scene), 0, 120, on_calling_thread(), current_stop());
 }
 
 // Refuses at once a tolerance below the round-off of a single step: a few units in the
@@ -546,7 +572,8 @@ class MethodSearch {
 
 }  // namespace
 
-MethodChoice choose_method(const Scene& scene, double tolerance) {
+MethodChoice choose_method(const Scene& scene, double tolerance, const StopRequest& stop) {
+  const StopScope scope(stop);
   if (!(std::isfinite(tolerance) && tolerance > 0)) {
     throw Error("tolerance must be positive and finite");
   }

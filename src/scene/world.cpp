@@ -1,5 +1,7 @@
 #include "kinema/world.hpp"
 
+#include <algorithm>
+
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
 
@@ -17,6 +19,27 @@ template <class T>
 void World<T>::advance(T h, std::uint64_t steps) {
   if (particles.size() > 0) particle_stepper_.advance(particles, h, steps);
   if (rigid.size() > 0) rigid_stepper_.advance(rigid, h, steps);
+}
+
+template <class T>
+std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& stop) {
+  const std::uint64_t chunk = steps_per_call();
+  std::uint64_t done = 0;
+  while (done < steps && !(stop && stop())) {
+    const std::uint64_t n = std::min(chunk, steps - done);
+    advance(h, n);
+    done += n;
+  }
+  return done;
+}
+
+template <class T>
+std::uint64_t World<T>::steps_per_call() const {
+  constexpr double kWorkPerCall = double(1 << 22);
+  const double n = double(particles.size() + rigid.size());
+  const double body = 1 + double(forces_->springs().size()) / std::max(n, 1.0) + (forces_->nbody() ? n / 2 : 0);
+  const double evaluations = main_stepper().method().evaluations();
+  return std::uint64_t(std::max(1.0, kWorkPerCall / (std::max(n, 64.0) * body * evaluations)));
 }
 
 template <class T>

@@ -265,12 +265,15 @@ unsigned Stepper<T>::chosen_workers() const {
 
 template <class T>
 StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceModel<T>& forces, double t,
-                                     int iterations, StepperOptions options) {
+                                     int iterations, StepperOptions options, const StopRequest& stop) {
   // Checked before the stepper is made, as the estimate itself checks it, so that a bad count
   // is the error reported whatever else is wrong.
   if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
   Stepper<T> stepper(forces, euler, options);
-  const auto accelerations = [&](const ParticleSet<T>& set, T* const out[3]) { stepper.accelerations(set, t, out); };
+  const auto accelerations = [&](const ParticleSet<T>& set, T* const out[3]) {
+    if (stop && stop()) throw Stopped();
+    stepper.accelerations(set, t, out);
+  };
   return estimate_stiffness<T>(bodies, accelerations, iterations);
 }
 
@@ -279,8 +282,8 @@ template class Stepper<double>;
 template struct StepperAccess<float>;
 template struct StepperAccess<double>;
 template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double, int,
-                                              StepperOptions);
+                                              StepperOptions, const StopRequest&);
 template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double, int,
-                                              StepperOptions);
+                                              StepperOptions, const StopRequest&);
 
 }  // namespace kinema

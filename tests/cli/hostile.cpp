@@ -9,6 +9,8 @@
 #include <map>
 #include <sstream>
 
+#include <sys/wait.h>
+
 #include <nlohmann/json.hpp>
 
 #include "cli_support.hpp"
@@ -383,6 +385,40 @@ TEST_CASE("a signal with no output asked for: the message claims none", "[cli][h
   CHECK(r.code == 128 + SIGINT);
   CHECK(r.err.find("kinema: stopped by SIGINT after step") == 0);
   CHECK(r.err.find("complete") == std::string::npos);
+}
+
+TEST_CASE("the long analyses answer a signal: chart and stability runs, auto's pilots, the stiffness estimate",
+          "[cli][hostile][signals]") {
+  const std::string cluster = std::string(KINEMA_SCENES) + "/plummer_cluster.json";
+  const std::string cloth = std::string(KINEMA_SCENES) + "/cloth.json";
+  // Each takes minutes to hours: chart's reference on the cluster (rk4 at 64 x the most steps
+  // swept), stability's bisections, auto's pilots on the stiff cloth, and the estimate before
+  // the first step of 16384 bodies' pairs.
+  const fs::path big = write("big_cluster.json", R"({"dt": 0.002, "steps": 500, "precision": "double",
+      "generate": {"count": 16384, "seed": 7, "distribution": "plummer", "radius": 1, "mass": 6.103515625e-05},
+      "forces": [{"type": "nbody", "G": 1, "softening": 0.05}]})");
+  const std::vector<std::vector<std::string>> commands = {
+      {"chart", cluster, "-q", "--out", (work_dir() / "signal_chart").string()},
+      {"stability", cluster, "-q", "--out", (work_dir() / "signal_stability").string()},
+      {"run", cloth, "-q", "--method", "auto", "--tolerance", "1e-5"},
+      {"run", big.string(), "-q"}};
+  for (const auto& args : commands) {
+    INFO(args[0] << " " << args[1]);
+    const Result r = run_kinema(args, {}, [](pid_t pid) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(700));
+      ::kill(pid, SIGINT);
+      // A minute to answer, then it is killed (and the test fails: it did not exit by itself).
+      for (int k = 0; k < 600; ++k) {
+        siginfo_t info{};
+        if (::waitid(P_PID, id_t(pid), &info, WEXITED | WNOHANG | WNOWAIT) == 0 && info.si_pid == pid) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      }
+      ::kill(pid, SIGKILL);
+    });
+    CHECK_FALSE(r.killed);
+    CHECK(r.code == 128 + SIGINT);
+    CHECK(r.err.find("kinema: stopped by SIGINT") == 0);
+  }
 }
 
 TEST_CASE("more threads than cores: silent with -q, and the summary says what ran", "[cli][hostile]") {

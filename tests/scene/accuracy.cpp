@@ -109,3 +109,47 @@ TEST_CASE("tighter tolerances take more steps", "[accuracy][auto]") {
   CHECK(tight.estimated_error <= 1e-9);
   CHECK_THROWS_WITH(choose_method(scene, -1), "tolerance must be positive and finite");
 }
+
+namespace {
+
+// A stop request that says stop at its `at`-th poll, and counts them.
+struct StopAt {
+  int at;
+  std::shared_ptr<int> polls = std::make_shared<int>(0);
+  bool operator()() const { return ++*polls >= at; }
+};
+
+}  // namespace
+
+TEST_CASE("World::advance stops between calls on request, with the bits of one call", "[accuracy][stop]") {
+  const Scene scene = load_scene(scene_path("plummer_cluster"));
+  World<float> stopped(scene, rk4, test::serial_options()), whole(scene, rk4, test::serial_options());
+  const std::uint64_t per_call = stopped.steps_per_call();
+  REQUIRE(per_call >= 1);
+  REQUIRE(per_call < 8);  // a step of 4096 bodies' pairs costs millions of interactions
+  const std::uint64_t done = stopped.advance(1e-3f, 40, StopAt{4});
+  CHECK(done == 3 * per_call);
+  whole.advance(1e-3f, done);
+  CHECK(test::state_hash(stopped.particles) == test::state_hash(whole.particles));
+  CHECK(stopped.time() == whole.time());
+  CHECK(stopped.advance(1e-3f, 5, {}) == 5);
+}
+
+TEST_CASE("the long analyses throw Stopped once their stop request says so", "[accuracy][stop]") {
+  const Scene orbit = load_scene(scene_path("binary_orbit"));
+  const Scene cluster = sample_bodies(load_scene(scene_path("plummer_cluster")), 512);
+  const StopAt third{3};
+  CHECK_THROWS_AS(simulate(cluster, rk4, 4000, 1.0, third), Stopped);
+  CHECK(*third.polls == 3);
+  CHECK_THROWS_AS(reference_states(cluster, 1.0, 4000, StopAt{2}), Stopped);
+  CHECK_THROWS_AS(simulate_adaptive(orbit, dopri5, 1e-10, 10.0, 1.0, StopAt{50}), Stopped);
+  // A stopped pilot ends the search, not the one method: no choice is made.
+  CHECK_THROWS_AS(choose_method(orbit, 1e-6, StopAt{20}), Stopped);
+  const ParticleSet<double> bodies = make_particles<double>(cluster);
+  const StopAt tenth{10};
+  CHECK_THROWS_AS(estimate_stiffness(bodies, make_forces<double>(cluster), 0, 40, on_calling_thread(), tenth), Stopped);
+  CHECK(*tenth.polls == 10);  // polled before each force evaluation
+  // Never asked to stop: the results of the calls without a request.
+  const BodyStates a = simulate(cluster, rk4, 20, 0.1, [] { return false; }), b = simulate(cluster, rk4, 20, 0.1);
+  CHECK(state_error(a, b) == 0);
+}

@@ -6,6 +6,7 @@
 
 #include "kinema/accuracy.hpp"
 #include "kinema/error.hpp"
+#include "interrupt.hpp"
 #include "numbers.hpp"
 
 namespace kinema::cli {
@@ -73,7 +74,7 @@ nlohmann::ordered_json choice_record(const MethodChoice& c, double tolerance, do
 
 MethodChoice choose(const Scene& scene, const std::string& path) {
   try {
-    return choose_method(scene, *scene.tolerance);
+    return choose_method(scene, *scene.tolerance, interrupt_request());
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }

@@ -150,7 +150,7 @@ Sweep plan_sweep(const ChartOptions& o, const Scene& full) {
 void measure_against_reference(Sweep& s) {
   std::uint64_t most_steps = 1;
   for (double dt : s.dts) most_steps = std::max(most_steps, step_count(s.duration, dt));
-  s.ref = reference_states(s.scene, s.duration, 64 * most_steps);
+  s.ref = reference_states(s.scene, s.duration, 64 * most_steps, interrupt_request());
   s.epsilon = s.scene.precision == Precision::single ? 1.2e-7 : 2.2e-16;
   s.scale = motion_scale(s.ref.states);
 }
@@ -159,7 +159,7 @@ void measure_against_reference(Sweep& s) {
 Point measure(const Sweep& s, const Method& m, double dt) {
   const std::uint64_t steps = step_count(s.duration, dt);
   const double h = s.duration / double(steps);
-  const double error = state_error(simulate(s.scene, m, steps, s.duration), s.ref.states);
+  const double error = state_error(simulate(s.scene, m, steps, s.duration, interrupt_request()), s.ref.states);
   const double seconds = with_precision(
       s.scene.precision, [&]<class T>() { return timed<T>(s.scene, m, steps, s.duration, s.repeat); });
   const std::size_t bodies = s.scene.particles.size() + s.scene.rigid_bodies.size();

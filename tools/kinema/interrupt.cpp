@@ -32,4 +32,12 @@ void stop_if_interrupted() {
   if (received != 0) throw Interrupted(received);
 }
 
+const StopRequest& interrupt_request() {
+  static const StopRequest request = [] {
+    stop_if_interrupted();
+    return false;
+  };
+  return request;
+}
+
 }  // namespace kinema::cli

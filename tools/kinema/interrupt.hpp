@@ -5,6 +5,8 @@
 #include <exception>
 #include <string>
 
+#include "kinema/adaptive.hpp"
+
 namespace kinema::cli {
 
 // Installs the handlers; call once at start.
@@ -25,5 +27,9 @@ struct Interrupted : std::exception {
 
 // Throws Interrupted when a signal came.
 void stop_if_interrupted();
+
+// A stop request for the library's long loops (World::advance, the analyses): it throws
+// Interrupted, between two of their calls, once a signal came.
+const StopRequest& interrupt_request();
 
 }  // namespace kinema::cli

@@ -167,7 +167,7 @@ StiffnessEstimate stiffness_at_start(const Scene& scene, const StepperOptions& o
   const Scene source = sampled ? sample_bodies(scene, 1024) : scene;
   ParticleSet<double> bodies = make_particles<double>(source);
   if (bodies.size() == 0) bodies = make_rigid_bodies<double>(source).centers();
-  return estimate_stiffness(bodies, forces, 0, 40, options);
+  return estimate_stiffness(bodies, forces, 0, 40, options, interrupt_request());
 }
 
 std::string mode_name(const StiffnessEstimate& e) {

@@ -126,7 +126,7 @@ std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t
     max_z = std::max(max_z, double(std::abs(x[2])));
     const std::uint64_t n = std::min(every, steps - std::min(steps, k));
     if (n == 0) break;
-    world.advance(T(dt), n);
+    world.advance(T(dt), n, interrupt_request());
   }
   return plotted;
 }
@@ -158,7 +158,7 @@ template <class T>
 bool holds(const Scene& scene, const Method& m, double h, double duration) {
   World<T> world(scene, m, on_calling_thread());
   const double e0 = world.total_energy();
-  world.advance(T(h), step_count(duration, h));
+  world.advance(T(h), step_count(duration, h), interrupt_request());
   return world.finite() && std::abs(world.total_energy() - e0) <= std::max(std::abs(e0), 1e-300);
 }
 
@@ -274,7 +274,7 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
   const ForceModel<double> forces = make_forces<double>(scene);
   ParticleSet<double> bodies = make_particles<double>(scene);
   if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
-  const StiffnessEstimate e = estimate_stiffness(bodies, forces);
+  const StiffnessEstimate e = estimate_stiffness(bodies, forces, 0, 120, on_calling_thread(), interrupt_request());
   const std::vector<MethodLimit> limits = measure_limits(scene, methods, e, dt, duration);
   write_limits(limits, e, dt, dir);
   return limits_table(scene, limits, e, duration);
