@@ -81,6 +81,13 @@ struct Scene {
   // order, then generated particles.
   std::optional<NBody> nbody;
   std::vector<Springs> springs;
+  // The particles a spring network generator (chain, grid) added to `particles`, by the
+  // generator's JSON path ("forces[0].chain"): errors about them name what the file says.
+  struct Generated {
+    std::size_t first = 0, count = 0;
+    std::string path;
+  };
+  std::vector<Generated> generated_particles;
 };
 
 // Parses a scene; throws kinema::Error naming the JSON path of the first problem,

@@ -1,5 +1,7 @@
 #include "scene/networks.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <vector>
 
@@ -87,9 +89,10 @@ Springs make_chain(const Node& n, Scene& scene) {
     scene.particles.push_back(b);
     if (i > 0) add_spring(springs, net, i - 1, i, net.spacing, net.k);
   }
+  scene.generated_particles.push_back({net.first, std::size_t(count), n.path});
   if (n.has("pinned")) {
     pin(n.child("pinned"), scene.particles, net.first, count);
-  } else {
+  } else if (count > 0) {
     scene.particles[net.first].kinematic = true;
   }
   return springs;
@@ -120,6 +123,7 @@ Springs make_grid(const Node& n, Scene& scene) {
       }
     }
   }
+  scene.generated_particles.push_back({net.first, std::size_t(rows * columns), n.path});
   if (!n.has("pinned")) return springs;
   const Node pinned = n.child("pinned");
   if (pinned.value.is_string()) {
@@ -168,6 +172,40 @@ void parse_coupled_force(const Node& n, const std::string& type, Scene& scene) {
   scene.nbody = term;
 }
 
+namespace {
+
+// Term t's k-th pair as the file has it: a listed pair's path, or its generator's.
+std::string pair_path(const Node& term, std::size_t k) {
+  if (term.has("pairs")) return term.child("pairs").element(k).path;
+  return term.child(term.has("chain") ? "chain" : "grid").path + " (its spring " + std::to_string(k) + ")";
+}
+
+// A pair that repeats one of an earlier springs term (within one term, parse_springs
+// refuses it), named as written.
+void check_repeats_across(const Scene& scene, std::span<const Node> terms) {
+  if (terms.size() < 2) return;
+  std::vector<std::array<std::uint64_t, 3>> keys;  // {both bodies, term, pair}: file order within a key
+  for (std::size_t t = 0; t < terms.size(); ++t) {
+    const auto& pairs = scene.springs[t].pairs;
+    for (std::size_t k = 0; k < pairs.size(); ++k) {
+      const std::uint64_t lo = std::min(pairs[k].i, pairs[k].j), hi = std::max(pairs[k].i, pairs[k].j);
+      keys.push_back({lo << 32 | hi, t, k});
+    }
+  }
+  std::sort(keys.begin(), keys.end());
+  for (std::size_t n = 1; n < keys.size(); ++n) {
+    if (keys[n][0] != keys[n - 1][0]) continue;
+    const Node& term = terms[keys[n][1]];
+    const std::string bodies = "bodies " + std::to_string(keys[n][0] >> 32) + " and " +
+                               std::to_string(keys[n][0] & 0xffffffffu);
+    const std::string earlier = pair_path(terms[keys[n - 1][1]], keys[n - 1][2]);
+    if (term.has("pairs")) term.child("pairs").element(keys[n][2]).fail("repeats " + earlier + " (" + bodies + ")");
+    term.child(term.has("chain") ? "chain" : "grid").fail("its spring between " + bodies + " repeats " + earlier);
+  }
+}
+
+}  // namespace
+
 void check_coupled(const Scene& scene, std::span<const Node> terms) {
   const bool generated_particles = scene.generate && !scene.generate->rigid;
   const std::size_t particles = scene.particles.size() + (generated_particles ? scene.generate->count : 0);
@@ -183,6 +221,7 @@ void check_coupled(const Scene& scene, std::span<const Node> terms) {
                                               std::to_string(particles) + " particles");
     }
   }
+  check_repeats_across(scene, terms);
 }
 
 }  // namespace kinema

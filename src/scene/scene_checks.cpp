@@ -42,22 +42,53 @@ double largest(const Vec3<double>& v) {
   return std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])});
 }
 
-// Listed masses that T cannot invert (1e-50 is 0 in float), named by their JSON path.
+// The generator (a spring network's chain or grid) that added particle i, if one did.
+const Scene::Generated* generator_of(const Scene& scene, std::size_t i) {
+  for (const Scene::Generated& g : scene.generated_particles) {
+    if (i >= g.first && i - g.first < g.count) return &g;
+  }
+  return nullptr;
+}
+
+std::string shown(const Vec3<double>& v) {
+  char text[96];
+  std::snprintf(text, sizeof text, "(%g, %g, %g)", v[0], v[1], v[2]);
+  return text;
+}
+
+// Listed masses that T cannot invert (1e-50 is 0 in float), and positions, velocities and
+// applied forces it cannot hold, named by their JSON path: a listed body's own, or that of
+// the network generator that made it.
 template <class T>
-void check_listed_masses(const Scene& scene) {
-  auto check = [](const char* list, std::size_t i, double mass) {
+void check_listed_bodies(const Scene& scene) {
+  const std::string type = type_name<T>();
+  auto mass_fails = [](double mass) {
     const T inverse = T(1) / T(mass);
-    if (!(std::isfinite(inverse) && inverse > 0)) {
-      char text[160];
-      std::snprintf(text, sizeof text, "%s[%zu].mass: %g has no finite nonzero inverse in %s", list,
-                    i, mass, type_name<T>().c_str());
-      throw Error(text);
-    }
+    return !(std::isfinite(inverse) && inverse > 0);
+  };
+  auto fail_mass = [&](const std::string& path, double mass) {
+    char text[64];
+    std::snprintf(text, sizeof text, "%g", mass);
+    throw Error(printable(path + ".mass: " + text + " has no finite nonzero inverse in " + type));
   };
   for (std::size_t i = 0; i < scene.particles.size(); ++i) {
-    if (!scene.particles[i].kinematic) check("particles", i, scene.particles[i].mass);
+    const BodySpec& b = scene.particles[i];
+    const Scene::Generated* g = generator_of(scene, i);
+    const std::string path = g ? g->path : "particles[" + std::to_string(i) + "]";
+    if (!b.kinematic && mass_fails(b.mass)) fail_mass(path, b.mass);
+    if (!holds<T>(b.position)) {
+      if (g) {
+        throw Error(printable(g->path + ".spacing: its body " + std::to_string(i - g->first) + " lies at " +
+                              shown(b.position) + ", beyond " + type));
+      }
+      throw Error(printable(path + ".position: " + shown(b.position) + " overflows " + type));
+    }
+    if (!holds<T>(b.velocity)) throw Error(printable(path + ".velocity: " + shown(b.velocity) + " overflows " + type));
+    if (!holds<T>(b.force)) throw Error(printable(path + ".force: " + shown(b.force) + " overflows " + type));
   }
-  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) check("rigid_bodies", i, scene.rigid_bodies[i].mass);
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
+    if (mass_fails(scene.rigid_bodies[i].mass)) fail_mass("rigid_bodies[" + std::to_string(i) + "]", scene.rigid_bodies[i].mass);
+  }
 }
 
 }  // namespace
@@ -90,9 +121,15 @@ void check_generated(const Scene& scene) {
   }
   if (g.plummer_radius > 0) {
     if (!holds<T>(40 * g.plummer_radius)) fail("radius", "overflows " + type);
+    // The speed at the centre, as the generator computes it (a radius whose square
+    // underflows double makes it infinite).
     const double GM = (scene.nbody ? scene.nbody->G : 1) * g.mass * double(g.count);
-    if (!holds<T>(std::sqrt(2 * GM / g.plummer_radius))) {
-      fail("mass", "the cluster's escape speed overflows " + type);
+    const double a = g.plummer_radius;
+    if (!holds<T>(std::sqrt(2 * GM) / std::sqrt(std::sqrt(a * a)))) {
+      char text[160];
+      std::snprintf(text, sizeof text, "%g with G M = %g: the escape speed at the centre, sqrt(2 G M / radius), "
+                    "overflows %s", a, GM, type.c_str());
+      fail("radius", text);
     }
   }
   if (!g.rigid) return;
@@ -132,7 +169,7 @@ double state_bytes(const Scene& scene) {
 
 template <class T>
 void check_scene(const Scene& scene) {
-  check_listed_masses<T>(scene);
+  check_listed_bodies<T>(scene);
   check_generated<T>(scene);
   const ForceModel<T> forces = make_forces<T>(scene);
   // Lowering the forces to T checks their sums; auto picks its own dt later.
