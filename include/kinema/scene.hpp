@@ -114,6 +114,18 @@ double usable_memory_bytes();
 template <class T>
 double state_bytes(const Scene& scene);
 
+// What a run of the scene in T takes at its peak, a bound measured on this tool's own runs:
+// its bodies (the state and its copies, the bodies as parsed), its springs (the model's
+// copies and the network's layout, in T and in the double of the stiffness estimate), and
+// the scratch of coupled scenes (the estimate's vectors, the stages). check_scene refuses a
+// scene whose total passes usable_memory_bytes().
+struct RunBytes {
+  double state = 0, springs = 0, scratch = 0;
+  double total() const { return state + springs + scratch; }
+};
+template <class T>
+RunBytes run_bytes(const Scene& scene);
+
 // Listed bodies first, then generated ones (of the matching kind). Generated bodies are
 // checked as check_scene does before the first is made.
 template <class T>

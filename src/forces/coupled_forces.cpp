@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cassert>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -119,15 +120,25 @@ void check_in(double value, const char* what) {
   }
 }
 
+// The reach and the parameters' range now; the layout once a set shows it has the bodies.
 template <class T>
 SpringNetwork<T> lower_springs(std::span<const SpringPair> pairs) {
   SpringNetwork<T> net;
-  if (pairs.empty()) return net;
+  net.pairs = pairs;
   for (const SpringPair& p : pairs) {
     net.covered = std::max<std::size_t>(net.covered, std::max(p.i, p.j) + 1);
     check_in<T>(p.rest, "springs.rest"), check_in<T>(p.k, "springs.k");
     check_in<T>(p.damping, "springs.damping");
   }
+  return net;
+}
+
+}  // namespace
+
+template <class T>
+void SpringNetwork<T>::lay_out() {
+  if (laid_out || pairs.empty()) return;
+  SpringNetwork<T>& net = *this;
   const Adjacency adjacency(pairs, net.covered);
   const std::size_t slices = (net.covered + kSpringSlice - 1) / kSpringSlice;
   std::vector<SliceLayout> layouts(slices);
@@ -142,8 +153,10 @@ SpringNetwork<T> lower_springs(std::span<const SpringPair> pairs) {
   for (auto* a : {&net.rest, &net.k, &net.damping}) a->resize(entries * kSpringSlice);
   for (std::size_t s = 0; s < slices; ++s) fill_slice(adjacency, pairs, s, layouts[s], net);
   mark_contiguous(layouts, net);
-  return net;
+  laid_out = true;
 }
+
+namespace {
 
 double mass_of(double inv_mass) { return 1.0 / inv_mass; }
 
@@ -152,6 +165,7 @@ double mass_of(double inv_mass) { return 1.0 / inv_mass; }
 template <class T>
 kernels::SpringJob<T> SpringNetwork<T>::job(const T* const x[3], const T* const v[3],
                                             T* const force[3]) const {
+  assert(laid_out || pairs.empty());
   return {{x[0], x[1], x[2]}, {v[0], v[1], v[2]}, covered,  slice_offset.data(),
           neighbor.data(),    contiguous.data(),  rest.data(), k.data(),
           damping.data(),     {force[0], force[1], force[2]}};

@@ -21,8 +21,14 @@ struct SpringNetwork {
   std::vector<std::uint32_t> slice_offset;  // see kernels::SpringJob
   std::vector<std::int32_t> neighbor, contiguous;
   AlignedArray<T> rest, k, damping;
+  // The model's pairs (it outlives the network). Their layout, which takes time and memory
+  // in proportion to `covered`, is made by lay_out once a set has shown it has those bodies:
+  // one spring to body 2^30 - 1 of a 3-body set is refused before anything is built.
+  std::span<const SpringPair> pairs;
+  bool laid_out = false;
 
   bool empty() const { return covered == 0; }
+  void lay_out();
   std::size_t bytes() const {
     return slice_offset.capacity() * sizeof(std::uint32_t) +
            (neighbor.capacity() + contiguous.capacity()) * sizeof(std::int32_t) +

@@ -22,9 +22,13 @@ namespace {
 // inverse principal moments (3).
 constexpr double kParticleArrays = 7, kRigidArrays = 17;
 
-std::string gib(double bytes) {
+std::string size_text(double bytes) {
   char text[32];
-  std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1 << 30));
+  if (bytes < double(1 << 30)) {
+    std::snprintf(text, sizeof text, "%.0f MiB", bytes / double(1 << 20));
+  } else {
+    std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1 << 30));
+  }
   return text;
 }
 
@@ -104,7 +108,7 @@ void check_generated(const Scene& scene) {
   const double need = state_bytes<T>(scene), have = usable_memory_bytes();
   if (need > have) {
     fail("count", std::to_string(g.count) + (g.rigid ? " rigid bodies" : " particles") + " in " +
-                      type + " need " + gib(need) + " of state, more than the " + gib(have) +
+                      type + " need " + size_text(need) + " of state, more than the " + size_text(have) +
                       " this process may use");
   }
   const T inv_mass = T(1) / T(g.mass);
@@ -168,9 +172,42 @@ double state_bytes(const Scene& scene) {
 }
 
 template <class T>
+RunBytes run_bytes(const Scene& scene) {
+  // Calibrated on peak resident sizes of `kinema run` (grids of 256^2 to 4 x 1024^2 bodies,
+  // 4M generated particles), rounded up: copies of the state for the run, listed bodies as
+  // parsed, and for coupled scenes the stiffness estimate's Krylov vectors (at most
+  // 512 MiB), the stages' scratch in T and in double, and per spring the model's copies and
+  // the network's layout in both.
+  constexpr double kListedBody = 100, kEstimateVectors = 21 * 6 * 8, kEstimateCap = double(512 << 20);
+  constexpr double kDoubleProbe = (9 + 7) * 8, kSpringCopies = 4 * sizeof(SpringPair);
+  constexpr double kMargin = 1.2;
+  RunBytes r;
+  r.state = 3 * state_bytes<T>(scene) + kListedBody * double(scene.particles.size() + scene.rigid_bodies.size());
+  const bool coupled = scene.nbody || !scene.springs.empty();
+  if (coupled) {
+    const double n = double(scene.particles.size()) + (scene.generate && !scene.generate->rigid ? double(scene.generate->count) : 0);
+    const Method& method = scene.method == "auto" ? rk6 : method_by_name(scene.method);
+    const double stages = double(std::max(method.evaluations(), 1));
+    r.scratch = std::min(kEstimateVectors * n, kEstimateCap) + n * (kDoubleProbe + (stages * 9 + 9) * sizeof(T));
+    double pairs = 0;
+    for (const Springs& network : scene.springs) pairs += double(network.pairs.size());
+    r.springs = pairs * (kSpringCopies + 2 * 1.5 * (4 + 3 * sizeof(T)) + 2 * 1.5 * (4 + 3 * sizeof(double)));
+  }
+  r.state *= kMargin, r.scratch *= kMargin, r.springs *= kMargin;
+  return r;
+}
+
+template <class T>
 void check_scene(const Scene& scene) {
   check_listed_bodies<T>(scene);
   check_generated<T>(scene);
+  const RunBytes need = run_bytes<T>(scene);
+  const double have = usable_memory_bytes();
+  if (need.total() > have) {
+    throw Error("the scene needs about " + size_text(need.total()) + " to run (" + size_text(need.state) + " for its bodies, " +
+                size_text(need.springs) + " for its springs, " + size_text(need.scratch) +
+                " for the stiffness estimate and the stages), more than the " + size_text(have) + " this process may use");
+  }
   const ForceModel<T> forces = make_forces<T>(scene);
   // Lowering the forces to T checks their sums; auto picks its own dt later.
   const Method& method = scene.method == "auto" ? rk4 : method_by_name(scene.method);
@@ -193,6 +230,8 @@ template void check_generated<double>(const Scene&);
 template void check_scene<float>(const Scene&);
 template void check_scene<double>(const Scene&);
 template double state_bytes<float>(const Scene&);
+template RunBytes run_bytes<float>(const Scene&);
+template RunBytes run_bytes<double>(const Scene&);
 template double state_bytes<double>(const Scene&);
 
 }  // namespace kinema

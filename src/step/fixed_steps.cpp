@@ -84,8 +84,8 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
 
 template <class T>
 void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps, Guard* guard) {
+  core_.reach(b);
   const LoweredForces<T>& lowered = core_.lowered();
-  check_reach(lowered.coupled, b);
   StepContext<T> c = core_.start(b, h, lowered.particle, w);
   const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
   if (core_.paths.block) {

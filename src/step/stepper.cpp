@@ -52,7 +52,7 @@ struct Stepper<T>::Impl {
 
   AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const StopRequest& stop) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
-    check_reach(core.lowered().coupled, bodies);
+    core.reach(bodies);
     // A call that goes on from one stopped early keeps its cap (the bodies have moved since)
     // and was checked when it began.
     const bool continues = continuation.continues(t_end, tolerances, bodies.size());
@@ -81,7 +81,7 @@ struct Stepper<T>::Impl {
   // Euler's stage 0 carries accelerations times h; with h = 1 they are the accelerations.
   // The stage reads the bodies and writes scratch only.
   void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]) {
-    check_reach(core.lowered().coupled, bodies);
+    core.reach(bodies);
     StagedPath<T>& probe = core.acceleration_probe();
     probe.reserve(bodies.padded_size());
     workers.run(std::uint64_t(StepperCall::accelerations), bodies.size(), 1, [&](const Workers& w) {

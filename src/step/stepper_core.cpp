@@ -58,6 +58,12 @@ StagedPath<T>& StepperCore<T>::acceleration_probe() {
   return *paths.probe;
 }
 
+template <class T>
+void StepperCore<T>::reach(const ParticleSet<T>& bodies) {
+  check_reach(paths.lowered->coupled, bodies);
+  paths.lowered->coupled.springs.lay_out();
+}
+
 template class StepperCore<float>;
 template class StepperCore<double>;
 

@@ -44,6 +44,9 @@ class StepperCore {
 
   const ForceModel<T>& forces() const { return *forces_; }
   const LoweredForces<T>& lowered() const { return *paths.lowered; }
+  // Refuses a set that lacks bodies the springs join (kinema::Error), then lays the
+  // network out if no set has yet: before any step, acceleration or estimate on `bodies`.
+  void reach(const ParticleSet<T>& bodies);
 
   Method method;
   StepperOptions options;

@@ -436,6 +436,47 @@ TEST_CASE("the long analyses answer a signal: chart and stability runs, auto's p
   }
 }
 
+TEST_CASE("a scene that would not fit is refused before it is built, naming what it needs", "[cli][hostile][memory]") {
+  // A 512 x 512 cloth (about 700 MiB at its peak: the springs' layouts and the stiffness
+  // estimate, not its 7 MiB of state) under a 400 MB address-space limit: this used to end in
+  // a bare std::bad_alloc after seconds of work.
+#ifdef KINEMA_SANITIZED
+  SUCCEED("sanitizers reserve terabytes of address space: ulimit -v cannot be tested there");
+  return;
+#endif
+  const fs::path scene = write("big_grid.json", R"({"steps": 1, "dt": 0.0001,
+      "forces": [{"type": "springs", "grid": {"rows": 512, "columns": 512, "spacing": 1, "k": 10}}]})");
+  const fs::path err = work_dir() / "limited_stderr.txt";
+  const std::string command = "ulimit -v 400000 && exec '" + std::string(KINEMA_CLI) + "' run '" + scene.string() +
+                              "' -q 2> '" + err.string() + "'";
+  const int status = std::system(command.c_str());
+  REQUIRE(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 1);
+  const std::string text = read(err);
+  CHECK(lines(text) == 1);
+  CHECK(text.find("big_grid.json: the scene needs about ") != std::string::npos);
+  CHECK(text.find(" for its springs, ") != std::string::npos);
+  CHECK(text.find("this process may use") != std::string::npos);
+}
+
+TEST_CASE("a stiffness estimate that would cost more than the run is left out, and the summary says so",
+          "[cli][hostile]") {
+  // 65536 bodies and 260610 springs for one step: the estimate's 57 evaluations in double
+  // and its Krylov vectors would be most of the run's time and memory.
+  const fs::path scene = write("one_step_grid.json", R"({"steps": 1, "dt": 0.0001,
+      "forces": [{"type": "springs", "grid": {"rows": 256, "columns": 256, "spacing": 1, "k": 10}}]})");
+  const fs::path summary = work_dir() / "one_step_grid_summary.json";
+  const Result r = run_kinema({"run", scene.string(), "--summary", summary.string()});
+  CHECK(r.code == 0);
+  CHECK(r.err.find("kinema: note: the stiffness estimate would cost more than the run's 1 steps; left out") == 0);
+  const auto j = nlohmann::json::parse(read(summary));
+  CHECK(j["stiffness"].is_null());
+  CHECK_FALSE(j.contains("largest_stable_step"));
+  CHECK(j["complete"] == true);
+  // Quiet: no note; the summary still says it.
+  CHECK(run_kinema({"run", scene.string(), "-q"}).err.empty());
+}
+
 TEST_CASE("more threads than cores: silent with -q, and the summary says what ran", "[cli][hostile]") {
   // Past inline_below, so the job system runs; oneTBB used to warn on stderr.
   const fs::path scene = write("threads.json", R"({"steps": 3,

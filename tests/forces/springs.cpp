@@ -280,6 +280,16 @@ TEST_CASE("springs: bad networks are refused, naming the pair", "[springs][error
   Stepper<double> s(f, rk4, test::serial_options());
   CHECK_THROWS_WITH(s.step(b, 0.1), "springs: a pair joins body 5, but the set has 1 bodies");
   CHECK(b.px()[0] == 0);
+  // The largest index on a 3-body set: refused before the network is laid out (its layout
+  // grows with the largest index: gigabytes here), so the stepper holds a few bytes.
+  ForceModel<float> far;
+  far.add(Springs{{{0, (1u << 30) - 1, 1, 1, 0}}});
+  ParticleSet<float> three;
+  for (float x : {0.f, 1.f, 2.f}) three.add({x, 0, 0}, {0, 0, 0}, 1);
+  Stepper<float> reaching(far, rk4, test::serial_options());
+  CHECK_THROWS_WITH(reaching.step(three, 0.1f), "springs: a pair joins body 1073741823, but the set has 3 bodies");
+  CHECK(reaching.scratch_bytes() < (std::size_t(1) << 20));
+  CHECK(three.px()[2] == 2);
 }
 
 namespace {
@@ -317,7 +327,8 @@ RandomNetwork<T> random_network() {
 // The spring kernel's forces on every body, on one instruction set.
 template <class T>
 std::vector<T> kernel_forces(const RandomNetwork<T>& net, Isa isa) {
-  const CoupledForces<T> lowered = lower_coupled<T>(net.forces);
+  CoupledForces<T> lowered = lower_coupled<T>(net.forces);
+  lowered.springs.lay_out();
   const std::size_t n = net.bodies.padded_size();
   AlignedArray<T> force(3 * n);
   const T* x[3] = {net.bodies.px(), net.bodies.py(), net.bodies.pz()};

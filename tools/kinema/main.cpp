@@ -3,6 +3,7 @@
 // (SIGINT 130, SIGTERM 143) at a safe point with every output complete to there.
 #include <cerrno>
 #include <cstdio>
+#include <new>
 #include <cstring>
 #include <exception>
 #include <string>
@@ -29,6 +30,9 @@ int run(const kinema::cli::CommandLine& line) {
     std::fprintf(stderr, "kinema: stopped by %s; the outputs written so far are incomplete\n",
                  signal_name(e.signal).c_str());
     return 128 + e.signal;
+  } catch (const std::bad_alloc&) {
+    // The scene's checks bound what a run takes; this is what they did not foresee.
+    std::fprintf(stderr, "kinema: error: out of memory (the machine's, or ulimit -v); try fewer bodies\n");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "kinema: error: %s\n", kinema::printable(e.what(), kMessageBytes).c_str());
   }
