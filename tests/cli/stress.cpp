@@ -191,3 +191,26 @@ TEST_CASE("stress: bad options are refused before any work", "[cli][stress][erro
   CHECK(full.code == 1);
   CHECK(full.err.find("cannot write the report") != std::string::npos);
 }
+
+TEST_CASE("stress: every method runs the built-in scene and a rigid scene, the report whole", "[cli][stress]") {
+  const fs::path rigid = write("stress_rigid.json", R"({"steps": 5, "dt": 0.01,
+      "rigid_bodies": [{"position": [0,0,0], "angular_velocity": [1,2,3], "inertia": [1,2,3]},
+                       {"position": [1,0,0], "velocity": [0,1,0]}],
+      "forces": [{"type": "gravity", "g": [0,-9.81,0]}, {"type": "angular_drag", "c": 0.1}]})");
+  for (const std::string method : {"euler", "rk4", "velocity_verlet", "bs3", "dopri5", "rk6"}) {
+    for (const bool file : {false, true}) {
+      INFO(method << (file ? " on the rigid scene" : " on the built-in scene"));
+      const fs::path report = work_dir() / "stress_method.json";
+      std::vector<std::string> args{"stress", "-q", "--steps", "5", "--method", method, "--report", report.string()};
+      if (file) args.insert(args.end(), {"--scene", rigid.string()});
+      else args.insert(args.end(), {"--bodies", "2000"});
+      const Result r = run_kinema(args);
+      CHECK(r.code == 0);
+      CHECK(r.err.empty());
+      const auto j = nlohmann::json::parse(read(report));
+      CHECK(j["method"] == method);
+      CHECK(j["complete"] == true);
+      CHECK(j["steps"] == 5);
+    }
+  }
+}
