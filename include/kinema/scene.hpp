@@ -114,6 +114,11 @@ double usable_memory_bytes();
 template <class T>
 double state_bytes(const Scene& scene);
 
+// What one force evaluation of the scene costs, in body-evaluations (about what a body's
+// local terms cost): each body, each spring, and under N-body gravity half of every other
+// body (its share of the pairs).
+double evaluation_cost(const Scene& scene);
+
 // What a run of the scene in T takes at its peak, a bound measured on this tool's own runs:
 // its bodies (the state and its copies, the bodies as parsed), its springs (the model's
 // copies and the network's layout, in T and in the double of the stiffness estimate), and

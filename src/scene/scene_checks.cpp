@@ -171,6 +171,14 @@ double state_bytes(const Scene& scene) {
   return (particles * kParticleArrays + rigid_bodies * kRigidArrays) * double(sizeof(T));
 }
 
+double evaluation_cost(const Scene& scene) {
+  const double bodies = double(scene.particles.size() + scene.rigid_bodies.size()) +
+                        (scene.generate ? double(scene.generate->count) : 0);
+  double springs = 0;
+  for (const Springs& network : scene.springs) springs += double(network.pairs.size());
+  return bodies + springs + (scene.nbody ? bodies * bodies / 2 : 0);
+}
+
 template <class T>
 RunBytes run_bytes(const Scene& scene) {
   // Calibrated on peak resident sizes of `kinema run` (grids of 256^2 to 4 x 1024^2 bodies,

@@ -216,6 +216,7 @@ std::vector<Case> scene_cases() {
 
 std::vector<Case> option_cases() {
   const std::string scene = kSpring;
+  const std::string cluster = std::string(KINEMA_SCENES) + "/plummer_cluster.json";
   auto run = [&](std::vector<std::string> extra) {
     std::vector<std::string> a{"run", scene, "-q"};
     a.insert(a.end(), extra.begin(), extra.end());
@@ -267,6 +268,12 @@ std::vector<Case> option_cases() {
       {"", {"stability", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
       {"", {"stability", scene, "--dt", "nan"}, 2, "--dt: expected a finite number > 0"},
       {"", {"stability", scene, "-q", "--dt", "100"}, 1, "is longer than the duration"},
+      // Hours of work, refused before the first run (SIGINT would end them, but nothing more).
+      {"", {"chart", cluster, "-q", "--out", (work_dir() / "refused_chart").string()}, 1,
+       "plummer_cluster.json: the chart would take about 3.2e+13 body-evaluations (3.79e+06 force evaluations of "
+       "8.39e+06 each), more than the 1.1e+12 it may spend; give fewer or longer --dts"},
+      {"", {"stability", cluster, "-q", "--out", (work_dir() / "refused_stability").string()}, 1,
+       "plummer_cluster.json: stability would take about 2.1e+12 body-evaluations"},
       // Outputs that cannot be written: refused before the run, naming the file.
       {"", run({"--summary", "/dev/full"}), 1, "/dev/full: cannot write the summary: No space left on device"},
       {"", run({"--out", "/dev/full"}), 1, "/dev/full: cannot write the trajectory: No space left on device"},
@@ -406,15 +413,17 @@ TEST_CASE("the long analyses answer a signal: chart and stability runs, auto's p
           "[cli][hostile][signals]") {
   const std::string cluster = std::string(KINEMA_SCENES) + "/plummer_cluster.json";
   const std::string cloth = std::string(KINEMA_SCENES) + "/cloth.json";
-  // Each takes minutes to hours: chart's reference on the cluster (rk4 at 64 x the most steps
-  // swept), stability's bisections, auto's pilots on the stiff cloth, and the estimate before
+  // Each takes minutes, within the work bound: chart's reference on the cluster (rk4 at 64 x
+  // the most steps swept), stability's bisections, auto's pilots on the stiff cloth, and the estimate before
   // the first step of 16384 bodies' pairs.
   const fs::path big = write("big_cluster.json", R"({"dt": 0.002, "steps": 500, "precision": "double",
       "generate": {"count": 16384, "seed": 7, "distribution": "plummer", "radius": 1, "mass": 6.103515625e-05},
       "forces": [{"type": "nbody", "G": 1, "softening": 0.05}]})");
   const std::vector<std::vector<std::string>> commands = {
-      {"chart", cluster, "-q", "--out", (work_dir() / "signal_chart").string()},
-      {"stability", cluster, "-q", "--out", (work_dir() / "signal_stability").string()},
+      {"chart", cluster, "-q", "--dts", "0.004", "--repeat", "1", "--duration", "0.5", "--out",
+       (work_dir() / "signal_chart").string()},
+      {"stability", cluster, "-q", "--duration", "0.5", "--methods", "rk4,velocity_verlet", "--out",
+       (work_dir() / "signal_stability").string()},
       {"run", cloth, "-q", "--method", "auto", "--tolerance", "1e-5"},
       {"run", big.string(), "-q"}};
   for (const auto& args : commands) {

@@ -11,6 +11,7 @@
 
 #include "kinema/scenes.hpp"
 #include "interrupt.hpp"
+#include "work_bound.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
 
@@ -382,10 +383,26 @@ void print_summary(const Sweep& s, const std::vector<Curve>& curves, const Writt
 
 }  // namespace
 
+// The sweep's force evaluations (every method at every step size, `repeat` times) and the
+// reference's (rk4 at 64 and 32 times the most steps, in double: twice the cost).
+double planned_evaluations(const Sweep& s, const std::vector<const Method*>& methods) {
+  double evaluations = 0;
+  std::uint64_t most_steps = 1;
+  for (double dt : s.dts) {
+    const std::uint64_t steps = step_count(s.duration, dt);
+    most_steps = std::max(most_steps, steps);
+    for (const Method* m : methods) evaluations += double(s.repeat) * double(steps) * m->evaluations();
+  }
+  const bool analytic = analytic_states(s.scene, s.duration).has_value();
+  return evaluations + (analytic ? 0 : 2 * 96 * double(most_steps) * rk4.evaluations());
+}
+
 int chart_scene(const ChartOptions& o) {
   const Scene full = load_checked(o.scene_path, o.precision);
   Sweep sweep = plan_sweep(o, full);
   const std::vector<const Method*> methods = pick_methods(o.methods, full);
+  check_work(o.scene_path, "the chart", planned_evaluations(sweep, methods), sweep.scene,
+             "give fewer or longer --dts, a shorter --duration or fewer --methods");
   measure_against_reference(sweep);
   fs::create_directories(o.out);
   Written written{o.out, {"work_precision.csv", "orders.csv"}, {}};

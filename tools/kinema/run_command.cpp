@@ -229,22 +229,14 @@ struct StepPlan {
   std::optional<Tolerances> tolerances;
 };
 
-// A coupled scene's force evaluation in body-evaluations: its bodies, its springs and, under
-// N-body gravity, half its pairs.
-double evaluation_work(const Scene& scene, double bodies) {
-  double springs = 0;
-  for (const Springs& network : scene.springs) springs += double(network.pairs.size());
-  return bodies + springs + (scene.nbody ? bodies * bodies / 2 : 0);
-}
-
 // The estimate costs 57 evaluations in double and 40 x 20 dot products of 6 numbers per
 // body: on a short run of a large coupled scene, more than the run. It is then left out
 // (with --strict it is always made: the run must be shown stable).
 bool estimate_pays(const Scene& scene, const RunOptions& o, double bodies) {
   constexpr double kAlwaysWorth = double(1 << 26);
   if (o.strict || (!scene.nbody && scene.springs.empty())) return true;  // local terms: 1024 bodies at most
-  const double estimate = 57 * evaluation_work(scene, bodies) + 800 * bodies;
-  const double run = double(scene.steps) * method_by_name(scene.method).evaluations() * evaluation_work(scene, bodies);
+  const double estimate = 57 * evaluation_cost(scene) + 800 * bodies;
+  const double run = double(scene.steps) * method_by_name(scene.method).evaluations() * evaluation_cost(scene);
   return estimate <= std::max(run, kAlwaysWorth);
 }
 

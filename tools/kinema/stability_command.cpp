@@ -14,6 +14,7 @@
 #include "kinema/scenes.hpp"
 #include "kinema/stability.hpp"
 #include "interrupt.hpp"
+#include "work_bound.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
 #include "stability_charts.hpp"
@@ -282,6 +283,15 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
 
 }  // namespace
 
+// The runs' force evaluations, before the estimate gives each method's stable step: the
+// energy run at dt, and about 16 bisection runs near the stable step, taken as dt here; the
+// estimate's 137; each energy point's potential sum about one evaluation.
+double planned_evaluations(const std::vector<const Method*>& methods, std::uint64_t steps, bool nbody) {
+  double evaluations = 137;
+  for (const Method* m : methods) evaluations += 17 * double(steps) * m->evaluations() + (nbody ? 100 : 0);
+  return evaluations;
+}
+
 int stability_scene(const StabilityOptions& o) {
   const Scene full = load_checked(o.scene_path, o.precision);
   const Scene scene = sample_bodies(full, o.max_bodies);
@@ -289,6 +299,8 @@ int stability_scene(const StabilityOptions& o) {
   const double duration = o.duration.value_or(full.dt * double(full.steps));
   const std::uint64_t steps = step_count(duration, dt);
   const std::vector<const Method*> methods = pick_methods(o.methods, full);
+  check_work(o.scene_path, "stability", planned_evaluations(methods, steps, bool(scene.nbody)), scene,
+             "give a shorter --duration, a longer --dt or fewer --methods");
   const fs::path dir = o.out;
   fs::create_directories(dir);
   OutputFile energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
