@@ -1,5 +1,6 @@
 // Fuzz target: the input is an argument list, arguments separated by NUL bytes. The
-// command line is parsed and checked, never run. A usage error (CLI::ParseError) or
+// command line is parsed and checked, never run (stress's options are also checked as before
+// a run, and a small scene's bodies built). A usage error (CLI::ParseError) or
 // kinema::Error is a clean refusal; anything else escaping is a finding.
 #include <cstddef>
 #include <cstdint>
@@ -9,6 +10,7 @@
 #include <CLI/CLI.hpp>
 
 #include "command_line.hpp"
+#include "stress_command.hpp"
 #include "kinema/error.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -32,6 +34,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const auto app = kinema::cli::make_app(line);
   try {
     kinema::cli::parse_command_line(*app, line, int(args.size()), argv.data());
+    // stress: its checks before work, and for small scenes its bodies and steppers.
+    if (line.command == "stress") kinema::cli::check_stress(line.stress, 4096);
   } catch (const CLI::ParseError&) {
   } catch (const kinema::Error&) {
   }

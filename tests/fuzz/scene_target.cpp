@@ -1,13 +1,32 @@
-// Fuzz target: any bytes as a scene file. kinema::Error is the expected refusal; anything
-// else escaping (or a sanitizer report) is a finding.
+// Fuzz target: any bytes as a scene file, parsed, checked, built and, when small, stepped.
+// kinema::Error is the expected refusal; anything else escaping (or a sanitizer report) is a
+// finding.
 #include <cstddef>
+#include <algorithm>
 #include <cstdint>
 #include <string_view>
 
 #include "kinema/error.hpp"
 #include "kinema/scene.hpp"
+#include "kinema/world.hpp"
 
 namespace {
+
+// A few steps of a small scene, coupled terms included (the springs' layout, N-body sums,
+// the staged path), on the calling thread: refusals are kinema::Error, results are not
+// checked (a blow-up is a scene's right).
+template <class T>
+void step(const kinema::Scene& scene) {
+  if (kinema::evaluation_cost(scene) > 4096 || scene.method == "auto") return;
+  (void)kinema::run_bytes<T>(scene);
+  try {
+    kinema::check_scene<T>(scene);
+    kinema::World<T> world(scene, kinema::method_by_name(scene.method), kinema::on_calling_thread());
+    world.advance(T(scene.dt), std::min<std::uint64_t>(scene.steps, 3));
+    (void)world.total_energy();
+  } catch (const kinema::Error&) {
+  }
+}
 
 template <class T>
 void build(const kinema::Scene& scene) {
@@ -30,6 +49,7 @@ void build(const kinema::Scene& scene) {
     (void)kinema::make_rigid_bodies<T>(scene);
   } catch (const kinema::Error&) {
   }
+  step<T>(scene);
 }
 
 }  // namespace

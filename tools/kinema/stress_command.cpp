@@ -616,14 +616,37 @@ FiniteGuard guard_by_name(const std::string& name) {
   throw Error("unknown guard '" + printable(name) + "' (off, check, clamp)");
 }
 
-int stress(const StressOptions& o) {
+namespace {
+
+// What the options ask for, checked before any work.
+struct StressPlan {
+  std::optional<Scene> scene;
+  Precision precision;
+};
+
+StressPlan plan_stress(const StressOptions& o) {
   check_distinct({{"--scene", o.scene_path}}, {{"--report", o.report_path}, {"--checkpoint", o.checkpoint.path}});
   if (o.method == "auto") throw Error("stress runs a fixed method; auto is for kinema run");
   if (o.method) method_by_name(*o.method);  // a bad name fails before any work
-  const std::optional<Scene> scene = stress_scene(o);
-  const Precision precision = scene ? scene->precision : o.precision.value_or(Precision::single);
-  if (!scene) check_fits(o, precision);
-  return with_precision(precision, [&]<class T>() { return run_stress<T>(o, scene ? &*scene : nullptr); });
+  StressPlan plan{stress_scene(o), Precision::single};
+  plan.precision = plan.scene ? plan.scene->precision : o.precision.value_or(Precision::single);
+  if (!plan.scene) check_fits(o, plan.precision);
+  return plan;
+}
+
+}  // namespace
+
+int stress(const StressOptions& o) {
+  const StressPlan plan = plan_stress(o);
+  const Scene* scene = plan.scene ? &*plan.scene : nullptr;
+  return with_precision(plan.precision, [&]<class T>() { return run_stress<T>(o, scene); });
+}
+
+void check_stress(const StressOptions& o, std::size_t most_bodies) {
+  const StressPlan plan = plan_stress(o);
+  const Scene* scene = plan.scene ? &*plan.scene : nullptr;
+  if (scene ? evaluation_cost(*scene) > double(most_bodies) : o.bodies > most_bodies) return;
+  with_precision(plan.precision, [&]<class T>() { (void)set_up<T>(o, scene); });
 }
 
 }  // namespace kinema::cli

@@ -36,6 +36,9 @@ struct StressOptions {
 
 // Returns the exit code: 0, 3 when a state stopped being finite, 128 + N on signal N.
 int stress(const StressOptions& options);
+// What stress checks before any step (kinema::Error for what it refuses), and, when the
+// scene is at most `most_bodies` body-evaluations, its bodies and steppers built: for fuzzing.
+void check_stress(const StressOptions& options, std::size_t most_bodies);
 
 // "off", "check", "clamp"; kinema::Error for any other name.
 FiniteGuard guard_by_name(const std::string& name);
