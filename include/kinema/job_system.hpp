@@ -22,7 +22,8 @@
 //   when its timings show that the workers do not pay (StepperOptions::workers); sets below
 //   StepperOptions::inline_below, and sets of one block, always run that way.
 // - `enqueue` may run ranges before it returns, but must not throw once it has taken any:
-//   they point into the caller's stack frame until `wait` returns.
+//   they point into the caller's stack frame until `wait` returns. A throw before that
+//   leaves the set and the stepper's clock as before the step that threw, on every path.
 // - A JobSystem must outlive every stepper that uses it.
 
 #include <cstddef>

@@ -453,7 +453,7 @@ TEST_CASE("a scene that would not fit is refused before it is built, naming what
   SUCCEED("sanitizers reserve terabytes of address space: ulimit -v cannot be tested there");
   return;
 #endif
-  const fs::path scene = write("big_grid.json", R"({"steps": 1, "dt": 0.0001,
+  const fs::path scene = write("big_grid.json", R"({"steps": 1000, "dt": 0.0001,
       "forces": [{"type": "springs", "grid": {"rows": 512, "columns": 512, "spacing": 1, "k": 10}}]})");
   const fs::path err = work_dir() / "limited_stderr.txt";
   const std::string command = "ulimit -v 400000 && exec '" + std::string(KINEMA_CLI) + "' run '" + scene.string() +
