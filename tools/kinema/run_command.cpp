@@ -286,6 +286,7 @@ struct Stepped {
   std::uint64_t checkpoints = 0;            // written by this process
   std::optional<std::string> error;         // what ended the run early
   std::string fingerprint;                  // of the scene and options, with checkpoints
+  std::optional<double> final_energy;       // once computed: N-body's costs N^2 / 2 pairs
 };
 
 // What the run's results depend on beyond the bodies: the scene file and the options that
@@ -384,7 +385,7 @@ bool trajectory_due(const Scene& scene, const RunOptions& o, std::uint64_t done,
 // Writes the world's checkpoint with the run's record, the trajectory synced first so that the
 // length it records is on disk.
 template <class T>
-void save_checkpoint(const World<T>& world, const Scene& scene, const RunOptions& o, Stepped& s, double initial_energy,
+void save_checkpoint(const World<T>& world, const RunOptions& o, Stepped& s, double initial_energy,
                      std::optional<TrajectoryWriter>& trajectory) {
   std::optional<std::uint64_t> length;
   if (trajectory) length = trajectory->sync();
@@ -406,7 +407,7 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
   while (s.done < scene.steps && interrupting_signal() == 0) {
     std::uint64_t n = std::min(chunk, scene.steps - s.done);
     if (trajectory) n = std::min(n, o.every - s.done % o.every);  // stop at each K-th step
-    const auto save = [&] { save_checkpoint(world, scene, o, s, initial_energy, trajectory), checkpoints.saved(); };
+    const auto save = [&] { save_checkpoint(world, o, s, initial_energy, trajectory), checkpoints.saved(); };
     // Short of the span's end only on a signal: the checkpoint below keeps the rest to do.
     if (!advance_timed(world, scene, tolerances, n, s, checkpoints, save)) break;
     const bool finite = world.finite();
@@ -420,7 +421,7 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
     if (checkpoints.due()) save();
   }
   // The end, or where a signal stopped it: what a resume goes on from.
-  if (checkpoints.enabled() && !s.blow_up) save_checkpoint(world, scene, o, s, initial_energy, trajectory);
+  if (checkpoints.enabled() && !s.blow_up) save_checkpoint(world, o, s, initial_energy, trajectory);
   if (trajectory) trajectory->close();
   progress.finish();
 }
@@ -501,7 +502,7 @@ void describe_cost(nlohmann::ordered_json& summary, const World<T>& world, const
   const double body_steps = double(body_count(world)) * double(steps_taken(plan, s));
   summary["body_steps_per_second"] = number(s.wall_seconds > 0 ? measured(body_steps / s.wall_seconds) : 0.0);
   summary["energy_initial"] = number(in_precision(initial_energy, p));
-  summary["energy_final"] = number(in_precision(world.total_energy(), p));
+  summary["energy_final"] = number(in_precision(s.final_energy.value_or(world.total_energy()), p));
 }
 
 void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const StepPlan& plan, const Stepped& s) {
@@ -659,10 +660,11 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     }
     throw;
   }
+  stepped.final_energy = world.total_energy();
   const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);
   summary_file.write(summary);
   if (!o.quiet) print_summary(summary);
-  warn_if_energy_overflows(initial_energy, world.total_energy());
+  warn_if_energy_overflows(initial_energy, *stepped.final_energy);
   return finish(summary, scene, o, stepped);
 }
 
