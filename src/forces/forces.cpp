@@ -97,7 +97,14 @@ void check_degrees(std::span<const SpringPair> pairs, const std::string& what) {
 
 void check_springs(std::span<const SpringPair> pairs, const std::string& what) {
   if (pairs.size() >= kMaxSpringPairs) throw Error(what + ": 2^31 pairs or more");
-  for (std::size_t k = 0; k < pairs.size(); ++k) check_pair(pairs[k], pair_name(what, k));
+  // check_pair's tests without its names (millions of pairs): the names only for a bad one.
+  const auto in_range = [](double x) { return std::isfinite(x) && x >= 0; };
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    const SpringPair& p = pairs[k];
+    const bool ok = p.i < kMaxSpringBodies && p.j < kMaxSpringBodies && p.i != p.j && in_range(p.rest) &&
+                    in_range(p.k) && in_range(p.damping);
+    if (!ok) check_pair(p, pair_name(what, k));
+  }
   check_repeats(pairs, what);
   check_degrees(pairs, what);
 }

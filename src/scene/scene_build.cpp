@@ -89,7 +89,13 @@ ForceModel<T> make_forces(const Scene& scene) {
   }
   try {
     if (scene.nbody) model.add(*scene.nbody);
-    for (const Springs& network : scene.springs) model.add(network);
+    // One network, checked once: each add would check every pair added before it again.
+    if (scene.springs.size() == 1) model.add(scene.springs[0]);
+    if (scene.springs.size() > 1) {
+      Springs all;
+      for (const Springs& network : scene.springs) all.pairs.insert(all.pairs.end(), network.pairs.begin(), network.pairs.end());
+      model.add(std::move(all));
+    }
   } catch (const Error& e) {
     throw Error(std::string("forces: ") + e.what());
   }
