@@ -2,8 +2,9 @@
 // Error control: what Stepper::advance_to is asked to meet, and what it reports.
 
 #include <cstdint>
-#include <functional>
 #include <limits>
+
+#include "kinema/error.hpp"  // StopRequest
 
 namespace kinema {
 
@@ -34,10 +35,5 @@ struct AdaptiveStats {
   bool stopped = false;
 };
 
-// Polled after each accepted step of an advance_to call: true stops the call there (between
-// steps; the set is at the last accepted step). For signals, frame budgets, checkpoints.
-// World::advance polls one between its calls of a few milliseconds, and the long analyses
-// (kinema/accuracy.hpp, estimate_stiffness) between their runs and force evaluations.
-using StopRequest = std::function<bool()>;
 
 }  // namespace kinema

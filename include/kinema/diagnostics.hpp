@@ -20,10 +20,12 @@ struct EnergyReport {
 
 template <class T>
 double kinetic_energy(const ParticleSet<T>& bodies);
+// N-body gravity's potential costs N^2 / 2 pairs (seconds at 32768 bodies): `stop` is polled
+// every few million of them, and kinema::Stopped thrown once it returns true.
 template <class T>
-double potential_energy(const ParticleSet<T>& bodies, const ForceModel<T>& forces);
+double potential_energy(const ParticleSet<T>& bodies, const ForceModel<T>& forces, const StopRequest& stop = {});
 template <class T>
-EnergyReport energy(const ParticleSet<T>& bodies, const ForceModel<T>& forces);
+EnergyReport energy(const ParticleSet<T>& bodies, const ForceModel<T>& forces, const StopRequest& stop = {});
 template <class T>
 Vec3<double> momentum(const ParticleSet<T>& bodies);
 // Total angular momentum about the origin: sum of m x cross v.

@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -39,6 +40,14 @@ class Stopped : public std::exception {
  public:
   const char* what() const noexcept override { return "stopped on request"; }
 };
+
+// Polled by the long loops: true stops them. Stepper::advance_to polls one after each
+// accepted step (the set at the last accepted step; for signals, frame budgets, checkpoints)
+// and an interrupt inside attempts too; Stepper::advance inside steps of N-body gravity or
+// user code; World::advance between its calls of a few milliseconds; the long analyses
+// (kinema/accuracy.hpp, estimate_stiffness, the N-body potential) between their runs, force
+// evaluations or millions of pairs, throwing Stopped.
+using StopRequest = std::function<bool()>;
 
 // `text` made safe for one line of a terminal or of a script's string literal: control
 // characters (C0, DEL, C1) and bytes that are not valid UTF-8 become \xNN (C1 code points

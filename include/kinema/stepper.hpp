@@ -110,6 +110,13 @@ class Stepper {
   // between those steps: call step() for that. What user code throws leaves the set as
   // before the step that threw; time() counts the steps completed.
   void advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps);
+  // The same, polling `stop` before each block of every pass of coupled terms (one N-body
+  // step takes seconds at 32768 bodies): once it returns true, the step under way is
+  // abandoned, the set and time() as before it (under a guard: as before the call), and the
+  // steps completed are returned; the call's applied forces are kept for the rest. `stop` may
+  // be called from every worker at once. Without coupled terms a step costs a few
+  // nanoseconds a body and nothing is polled: World::advance polls between short calls.
+  std::uint64_t advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps, const StopRequest& stop);
   // With an embedded pair (bs3, dopri5): steps from time() to t_end choosing each step's
   // size, and returns what it took. A step whose error is too large is taken back (the bodies
   // as they were) and tried shorter; the next size comes from a PI controller (see
@@ -126,6 +133,12 @@ class Stepper {
   // `stop` returns true; the next call to the same t_end goes on exactly from there.
   AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances,
                            const StopRequest& stop);
+  // The same, with `interrupt` polled where `stop` is and besides inside each attempt, as
+  // advance polls it (the attempt under way is taken back, its work lost: for signals, not
+  // for pauses such as a checkpoint due, which would never let a long attempt finish) and
+  // in the stable-step estimate of Tolerances::limit_to_stable_step.
+  AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances,
+                           const StopRequest& stop, const StopRequest& interrupt);
   // Rigid bodies: the same, with orientation and angular momentum: the fused path for a
   // built-in method and local terms, the rigid block path for RigidCallbacks or another
   // method; coupled terms are refused (kinema::Error). Use one stepper per body set: each

@@ -27,18 +27,21 @@ class World {
 
   void advance(T h, std::uint64_t steps);
   // The same steps, in calls of about a few milliseconds each (steps_per_call), polling
-  // `stop` between them; returns the steps taken, fewer than asked once `stop` returned true.
-  // The bits are those of one call.
+  // `stop` between them, and inside a step of coupled terms as Stepper::advance with a stop
+  // does (a step abandoned is not taken); returns the steps taken, fewer than asked once
+  // `stop` returned true. The bits are those of one call.
   std::uint64_t advance(T h, std::uint64_t steps, const StopRequest& stop);
   // Steps of about the same work: 2^22 body-evaluations, where a body costs its springs too
   // and, under N-body gravity, half of every body again (its share of the pairs).
   std::uint64_t steps_per_call() const;
   // Error-controlled steps to t_end (Stepper::advance_to); particles only (kinema::Error
   // when the world has rigid bodies).
-  // With `stop`, as Stepper::advance_to with a stop request.
-  AdaptiveStats advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop = {});
+  // With `stop` and `interrupt`, as Stepper::advance_to with them.
+  AdaptiveStats advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop = {},
+                           const StopRequest& interrupt = {});
   double time() const;
-  double total_energy() const;  // kinetic (with rotation) + potential, both sets
+  // Kinetic (with rotation) + potential, both sets; `stop` as in energy (kinema/diagnostics.hpp).
+  double total_energy(const StopRequest& stop = {}) const;
   bool finite() const;
   // Checkpoints (kinema/checkpoint.hpp): save adds two records, the particles and the rigid
   // bodies with their steppers; restore takes both back, all or nothing (kinema::Error, the
@@ -63,6 +66,8 @@ class World {
   RigidBodySet<T> rigid;
 
  private:
+  void advance_rigid(T h, std::uint64_t steps, bool cut_short);
+
   Stepper<T> particle_stepper_, rigid_stepper_;
 };
 

@@ -36,7 +36,7 @@ double kinetic_energy(const ParticleSet<T>& b) {
 }
 
 template <class T>
-double potential_energy(const ParticleSet<T>& b, const ForceModel<T>& forces) {
+double potential_energy(const ParticleSet<T>& b, const ForceModel<T>& forces, const StopRequest& stop) {
   double u = 0;
   for (std::size_t i = 0; i < b.size(); ++i) {
     if (b.inv_mass()[i] == 0) continue;
@@ -46,13 +46,13 @@ double potential_energy(const ParticleSet<T>& b, const ForceModel<T>& forces) {
   const ParticleState<T> all{b.padded_size(), b.px(), b.py(), b.pz(),
                              b.vx(), b.vy(), b.vz(), b.inv_mass()};
   for (const auto& term : forces.coupled_terms()) u += term->potential_energy(all);
-  if (forces.nbody()) u += nbody_potential(b, *forces.nbody());
+  if (forces.nbody()) u += nbody_potential(b, *forces.nbody(), stop);
   return u + spring_potential(b, forces.springs());
 }
 
 template <class T>
-EnergyReport energy(const ParticleSet<T>& b, const ForceModel<T>& forces) {
-  return {kinetic_energy(b), potential_energy(b, forces)};
+EnergyReport energy(const ParticleSet<T>& b, const ForceModel<T>& forces, const StopRequest& stop) {
+  return {kinetic_energy(b), potential_energy(b, forces, stop)};
 }
 
 template <class T>
@@ -165,8 +165,8 @@ double spring_frequency_bound(const ParticleSet<T>& b, std::span<const SpringPai
 #define KINEMA_INSTANTIATE(T)                                                  \
   template double spring_frequency_bound(const ParticleSet<T>&, std::span<const SpringPair>); \
   template double kinetic_energy(const ParticleSet<T>&);                       \
-  template double potential_energy(const ParticleSet<T>&, const ForceModel<T>&); \
-  template EnergyReport energy(const ParticleSet<T>&, const ForceModel<T>&);   \
+  template double potential_energy(const ParticleSet<T>&, const ForceModel<T>&, const StopRequest&); \
+  template EnergyReport energy(const ParticleSet<T>&, const ForceModel<T>&, const StopRequest&);   \
   template Vec3<double> momentum(const ParticleSet<T>&);                       \
   template bool all_finite(const ParticleSet<T>&);                             \
   template std::optional<NonFinite> first_non_finite(const ParticleSet<T>&);   \

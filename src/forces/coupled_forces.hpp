@@ -11,6 +11,7 @@
 
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
+#include "kinema/error.hpp"
 #include "kinema/forces.hpp"
 
 namespace kinema {
@@ -50,8 +51,9 @@ template <class T>
 CoupledForces<T> lower_coupled(const ForceModel<T>& forces);
 
 // -G sum_{i<j} m_i m_j / sqrt(|x_i - x_j|^2 + softening^2), over bodies with inv_mass != 0.
+// Polls `stop` every few million pairs; throws kinema::Stopped once it returns true.
 template <class T>
-double nbody_potential(const ParticleSet<T>& bodies, const NBody& term);
+double nbody_potential(const ParticleSet<T>& bodies, const NBody& term, const StopRequest& stop = {});
 // sum 1/2 k (|x_i - x_j| - rest)^2 over the pairs.
 template <class T>
 double spring_potential(const ParticleSet<T>& bodies, std::span<const SpringPair> pairs);

@@ -71,7 +71,7 @@ AdaptiveRun run_adaptive(const Scene& scene, const Method& method, double tolera
   World<T> world(scene, method, on_calling_thread());
   Tolerances t{tolerance, tolerance};
   t.max_step = max_step;
-  const AdaptiveStats stats = world.advance_to(duration, t, current_stop());
+  const AdaptiveStats stats = world.advance_to(duration, t, {}, current_stop());  // an attempt too
   if (stats.stopped) throw Stopped();
   return {states_of(world), stats.evaluations};
 }

@@ -27,8 +27,11 @@ std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& sto
   std::uint64_t done = 0;
   while (done < steps && !(stop && stop())) {
     const std::uint64_t n = std::min(chunk, steps - done);
-    advance(h, n);
-    done += n;
+    // A coupled step can outlast a call's budget: the particles poll inside it too.
+    const std::uint64_t taken = particles.size() > 0 ? particle_stepper_.advance(particles, h, n, stop) : n;
+    if (rigid.size() > 0) advance_rigid(h, taken, taken < n);
+    done += taken;
+    if (taken < n) break;
   }
   return done;
 }
@@ -48,15 +51,30 @@ double World<T>::time() const {
 }
 
 template <class T>
-double World<T>::total_energy() const {
-  return (particles.size() > 0 ? energy(particles, *forces_).total() : 0) +
+double World<T>::total_energy(const StopRequest& stop) const {
+  return (particles.size() > 0 ? energy(particles, *forces_, stop).total() : 0) +
          (rigid.size() > 0 ? energy(rigid, *forces_).total() : 0);
 }
 
+// A call cut short keeps the rigid bodies' applied forces for its rest, as the particles'.
 template <class T>
-AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop) {
+void World<T>::advance_rigid(T h, std::uint64_t steps, bool cut_short) {
+  const bool keeps = rigid.keeps_forces();
+  rigid.keep_forces(keeps || cut_short);
+  try {
+    rigid_stepper_.advance(rigid, h, steps);
+  } catch (...) {
+    rigid.keep_forces(keeps);
+    throw;
+  }
+  rigid.keep_forces(keeps);
+}
+
+template <class T>
+AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop,
+                                   const StopRequest& interrupt) {
   if (rigid.size() > 0) throw Error("error-controlled steps are for particles; the scene has rigid bodies");
-  return particle_stepper_.advance_to(particles, t_end, tolerances, stop);
+  return particle_stepper_.advance_to(particles, t_end, tolerances, stop, interrupt);
 }
 
 template <class T>

@@ -18,8 +18,9 @@ class AdaptiveRun {
   AdaptiveRun(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies, const Tolerances& tolerances)
       : core_(core), staged_(*core.paths.staged), workers_(workers), bodies_(bodies), tol_(tolerances) {}
 
-  AdaptiveStats to(double t_end, double max_step, AdaptiveContinuation& continuation, const StopRequest& stop) {
+  AdaptiveStats to(double t_end, double max_step, AdaptiveContinuation& continuation, const CallStops& stops) {
     staged_.reserve(bodies_.padded_size());
+    interrupt_ = stops.interrupt;
     double t = core_.clock.time();
     const bool continues = continuation.continues(t_end, tol_, bodies_.size()) && continuation.max_step == max_step;
     continuation.active = false;
@@ -30,8 +31,15 @@ class AdaptiveRun {
     if (continues) {
       h = continuation.h, kept_scale_ = T(continuation.kept_scale);
       controller.set_state(continuation.controller);
+    } else if (tol_.initial_step > 0) {
+      h = tol_.initial_step;
     } else {
-      h = tol_.initial_step > 0 ? tol_.initial_step : first_step(t_end - t);
+      try {
+        h = first_step(t_end - t);
+      } catch (const Stopped&) {  // nothing kept: the next call starts over, as this one did
+        stats_.stopped = true;
+        return stats_;
+      }
     }
     while (t < t_end) {
       h = std::min(h, max_step);
@@ -41,7 +49,14 @@ class AdaptiveRun {
       if (!(size > 0) || t + double(size) == t) underflow(t);
       const StepContext<T> c = start_attempt(size);
       last_size_ = size;
-      const double err = staged_.attempt(c, {tol_.rtol, tol_.atol, reuse_scale(c)});
+      double err = 0;
+      try {
+        err = staged_.attempt(c, {tol_.rtol, tol_.atol, reuse_scale(c)});
+      } catch (const Stopped&) {
+        abandon(c);
+        keep_for_next_call(t_end, max_step, h, controller, continuation);
+        break;
+      }
       stats_.evaluations += std::uint64_t(method.tableau.stages - (kept_scale_ > 0 ? 1 : 0));
       const bool accepted = err <= 1;
       if (accepted) {
@@ -51,10 +66,8 @@ class AdaptiveRun {
         reject(c);
       }
       h = controller.next(double(size), err, accepted);
-      if (accepted && t < t_end && stop && stop()) {
-        continuation = {true, t_end, tol_.rtol, tol_.atol, max_step, h, controller.state(), double(kept_scale_),
-                        bodies_.size()};
-        stats_.stopped = true;
+      if (accepted && t < t_end && stops.after_step()) {
+        keep_for_next_call(t_end, max_step, h, controller, continuation);
         break;
       }
     }
@@ -66,7 +79,24 @@ class AdaptiveRun {
   StepContext<T> start_attempt(T size) {
     StepContext<T> c = core_.start(bodies_, size, core_.lowered().particle, workers_);
     c.t0 = core_.clock.time();
+    c.stop = interrupt_;
     return c;
+  }
+
+  // What the next call to t_end goes on from: the step size to try, the controller's state
+  // and the acceleration scale of the first stage kept.
+  void keep_for_next_call(double t_end, double max_step, double h, const StepController& controller,
+                          AdaptiveContinuation& continuation) {
+    continuation = {true, t_end, tol_.rtol, tol_.atol, max_step, h, controller.state(), double(kept_scale_),
+                    bodies_.size()};
+    stats_.stopped = true;
+  }
+
+  // An attempt stopped inside (taken back). Stopping polls only in coupled passes, and with a
+  // first stage kept, the first poll comes after the stage pass that rescaled all of it to
+  // this attempt's scale: it stays kept at that scale. Without one it was half evaluated.
+  void abandon(const StepContext<T>& c) {
+    kept_scale_ = kept_scale_ > 0 ? c.accel_scale : T(0);
   }
 
   // Stage 0's kept accelerations, rescaled to this step's acceleration scale; 0: none kept.
@@ -114,7 +144,7 @@ class AdaptiveRun {
   double first_step(double span) {
     const T probe = T(std::min(span, 1.0));
     core_.check_step_size(probe, core_.lowered().particle);
-    const StepContext<T> c{bodies_, probe, core_.accel_scale(probe), core_.clock.time(), workers_};
+    const StepContext<T> c{bodies_, probe, core_.accel_scale(probe), core_.clock.time(), workers_, interrupt_};
     staged_.evaluate_first_stage(c);
     ++stats_.evaluations;
     kept_scale_ = c.accel_scale;
@@ -144,6 +174,7 @@ class AdaptiveRun {
   AdaptiveStats stats_;
   T kept_scale_ = 0;  // the acceleration scale stage 0's kept accelerations carry; 0: none
   T last_size_ = 0;  // of the last attempt
+  const StopRequest* interrupt_ = nullptr;  // the call's, for the attempts to poll
 };
 
 }  // namespace
@@ -151,13 +182,13 @@ class AdaptiveRun {
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
                                  double t_end, const Tolerances& tolerances, double max_step,
-                                 AdaptiveContinuation& continuation, const StopRequest& stop) {
-  return AdaptiveRun<T>(core, workers, bodies, tolerances).to(t_end, max_step, continuation, stop);
+                                 AdaptiveContinuation& continuation, const CallStops& stops) {
+  return AdaptiveRun<T>(core, workers, bodies, tolerances).to(t_end, max_step, continuation, stops);
 }
 
 template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, ParticleSet<float>&, double,
-                                          const Tolerances&, double, AdaptiveContinuation&, const StopRequest&);
+                                          const Tolerances&, double, AdaptiveContinuation&, const CallStops&);
 template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, ParticleSet<double>&, double,
-                                          const Tolerances&, double, AdaptiveContinuation&, const StopRequest&);
+                                          const Tolerances&, double, AdaptiveContinuation&, const CallStops&);
 
 }  // namespace kinema

@@ -28,14 +28,26 @@ struct AdaptiveContinuation {
   }
 };
 
+// What ends a call early: `pause` after an accepted step; `interrupt` there too and inside an
+// attempt (StepContext::stop: the attempt is taken back). Null: never.
+struct CallStops {
+  const StopRequest* pause = nullptr;
+  const StopRequest* interrupt = nullptr;
+
+  static CallStops of(const StopRequest& pause, const StopRequest& interrupt) {
+    return {pause ? &pause : nullptr, interrupt ? &interrupt : nullptr};
+  }
+  bool after_step() const { return (pause && (*pause)()) || (interrupt && (*interrupt)()); }
+};
+
 // Steps the bodies from the core's clock to t_end on `workers`, no step longer than
-// `max_step`; the last step lands on t_end, unless `stop` says to stop sooner: then
+// `max_step`; the last step lands on t_end, unless `stops` say to stop sooner: then
 // `continuation` keeps what the next call to t_end goes on from (and a call that continues
 // it takes it). The request must have passed check_adaptive. Throws kinema::Error when the
 // step size underflows.
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
                                  double t_end, const Tolerances& tolerances, double max_step,
-                                 AdaptiveContinuation& continuation, const StopRequest& stop);
+                                 AdaptiveContinuation& continuation, const CallStops& stops);
 
 }  // namespace kinema

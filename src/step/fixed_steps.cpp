@@ -6,19 +6,34 @@ namespace kinema {
 
 template <class T>
 template <class Set>
-void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps) {
+void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, const StopRequest* stop) {
+  struct CallStop {  // the call's own: no later call sees it
+    const StopRequest*& slot;
+    CallStop(const StopRequest*& s, const StopRequest* stop) : slot(s) { slot = stop; }
+    ~CallStop() { slot = nullptr; }
+  } call_stop(stop_, stop);
   if (core_.options.guard == FiniteGuard::off) return run(w, b, h, steps, nullptr);
   const StateArrays<T> state = state_arrays(b);
   checkpoint_.reserve(state);
-  if (!guarded_run(w, b, h, steps, state)) return;
+  const std::uint64_t start = core_.clock.steps;
+  std::optional<NonFinite> bad;
+  try {
+    bad = guarded_run(w, b, h, steps, state);
+  } catch (const Stopped&) {
+    checkpoint_.restore(w, state);
+    core_.clock.steps = start;
+    throw;
+  }
+  if (!bad) return;
   // Back to the start, then step by step to the step that made the value.
   checkpoint_.restore(w, state);
   core_.clock.steps -= steps;
+  stop_ = nullptr;  // the steps were taken once: the search finishes
   for (std::uint64_t k = 1; k <= steps; ++k) {
-    if (const auto bad = guarded_run(w, b, h, 1, state)) {
+    if (const auto found = guarded_run(w, b, h, 1, state)) {
       checkpoint_.restore(w, state);
       --core_.clock.steps;
-      throw NonFiniteError(k, core_.clock.time(), bad->body, bad->field);
+      throw NonFiniteError(k, core_.clock.time(), found->body, found->field);
     }
   }
 }
@@ -87,6 +102,7 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   core_.reach(b);
   const LoweredForces<T>& lowered = core_.lowered();
   StepContext<T> c = core_.start(b, h, lowered.particle, w);
+  c.stop = stop_;
   const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
   if (core_.paths.block) {
     BlockPath<T>& path = *core_.paths.block;
@@ -199,9 +215,11 @@ void FixedSteps<T>::run_steps(StagedPath<T>& staged, StepContext<T>& c, std::uin
 
 template class FixedSteps<float>;
 template class FixedSteps<double>;
-template void FixedSteps<float>::advance(const Workers&, ParticleSet<float>&, float, std::uint64_t);
-template void FixedSteps<float>::advance(const Workers&, RigidBodySet<float>&, float, std::uint64_t);
-template void FixedSteps<double>::advance(const Workers&, ParticleSet<double>&, double, std::uint64_t);
-template void FixedSteps<double>::advance(const Workers&, RigidBodySet<double>&, double, std::uint64_t);
+template void FixedSteps<float>::advance(const Workers&, ParticleSet<float>&, float, std::uint64_t, const StopRequest*);
+template void FixedSteps<float>::advance(const Workers&, RigidBodySet<float>&, float, std::uint64_t, const StopRequest*);
+template void FixedSteps<double>::advance(const Workers&, ParticleSet<double>&, double, std::uint64_t,
+                                          const StopRequest*);
+template void FixedSteps<double>::advance(const Workers&, RigidBodySet<double>&, double, std::uint64_t,
+                                          const StopRequest*);
 
 }  // namespace kinema

@@ -23,9 +23,12 @@ class FixedSteps {
   // Advances the set on `workers`. Under a guard, a step that leaves a value that is not
   // finite puts the bodies and the clock back to the step before it and throws
   // NonFiniteError.
+  // `stop` (may be null) is polled inside the steps of coupled terms (StepContext::stop):
+  // once it says stop, kinema::Stopped is thrown, the set and the clock at the last step
+  // completed (under a guard: where the call started, its steps unchecked).
   // (Instantiated for ParticleSet<T> and RigidBodySet<T>.)
   template <class Set>
-  void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps);
+  void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps, const StopRequest* stop = nullptr);
 
   std::size_t checkpoint_bytes() const { return checkpoint_.bytes(); }
   // What the block paths keep per block for `padded` bodies (allocates only to grow).
@@ -89,6 +92,7 @@ class FixedSteps {
   void clamp(RigidBodySet<T>& b, Block block) const;
 
   StepperCore<T>& core_;
+  const StopRequest* stop_ = nullptr;  // the call's, while it runs
   Checkpoint<T> checkpoint_;  // the state a guarded call starts from
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for
   // a block the call never started).

@@ -1,6 +1,7 @@
 #include "step/staged_path.hpp"
 
 #include "kernels/reductions.hpp"
+#include "kinema/error.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -76,10 +77,11 @@ void StagedPath<T>::reserve(std::size_t padded) {
 
 template <class T>
 void StagedPath<T>::step(const StepContext<T>& c) {
-  const bool host_may_tear = phases_change_bodies() && !enqueue_never_throws(c.workers.jobs);
-  if (!may_throw() && !host_may_tear) return run_phases(c);
-  // User code runs in this step, or a host's enqueue may throw between two passes that
-  // each change the bodies: keep their state, so a throw leaves them as they were.
+  const bool may_tear = phases_change_bodies() && (polls(c) || !enqueue_never_throws(c.workers.jobs));
+  if (!may_throw() && !may_tear) return run_phases(c);
+  // User code runs in this step, or a stop request or a host's enqueue may end it between
+  // two passes that each change the bodies: keep their state, so a throw leaves them as
+  // they were.
   for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { copy_state(c, b, true); });
   try {
     run_phases(c);
@@ -159,7 +161,11 @@ void StagedPath<T>::run_phases(const StepContext<T>& c) {
       // Gravity costs a block n interactions per body: worth the threads at any n.
       const bool quadratic = phases_[p].kind == PhaseKind::coupled && coupled_.nbody;
       const Workers workers = quadratic ? all_workers(*c.workers.jobs) : c.workers;
-      for_each_block(workers, n, [&](Block b) { run(c, phases_[p], b); });
+      const bool poll = polls(c) && phases_[p].kind == PhaseKind::coupled;
+      for_each_block(workers, n, [&](Block b) {
+        if (poll && (*c.stop)()) throw Stopped();
+        run(c, phases_[p], b);
+      });
     }
     return;
   }

@@ -155,6 +155,9 @@ class StagedPath {
   // More than one pass of a step changes the bodies (kick-drift methods with coupled terms:
   // each kick and drift is a pass of its own); else only the last pass does.
   bool phases_change_bodies() const { return method_.kind == MethodKind::kick_drift && coupled(); }
+  // Whether a step polls c.stop: only where a pass takes long (N-body gravity's n per body,
+  // user code); a spring pass takes microseconds a block, not worth keeping the state for.
+  bool polls(const StepContext<T>& c) const { return c.stop && *c.stop && (coupled_.nbody || may_throw()); }
   // An attempt saves each block as it starts on it, unless a block may throw (then every
   // block must be saved before any runs, to put them all back) or phases run as jobs of
   // their own.

@@ -5,6 +5,7 @@
 #include <cstddef>
 
 #include "kernels/kernels.hpp"
+#include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
 #include "parallel/blocks.hpp"
 
@@ -36,6 +37,9 @@ struct StepContext {
   T accel_scale;           // what stage accelerations are multiplied by (sigma h, or 1)
   double t0 = 0;           // time at the start of the step (staged path: callbacks see it)
   Workers workers{};       // where this call's blocks run
+  // Polled before each block of a coupled pass (one N-body step can take seconds); true
+  // abandons the step with kinema::Stopped, the bodies as before it. Null: never.
+  const StopRequest* stop = nullptr;
 };
 
 }  // namespace kinema

@@ -44,23 +44,50 @@ struct Stepper<T>::Impl {
     if (steps > 0) forces_used(bodies);
   }
 
+  std::uint64_t advance(ParticleSet<T>& bodies, T h, std::uint64_t steps, const StopRequest& stop) {
+    if (!stop) {
+      advance(bodies, h, steps);
+      return steps;
+    }
+    continuation.active = false;
+    const std::uint64_t start = core.clock.steps;
+    try {
+      workers.run(std::uint64_t(kind_of(bodies)), bodies.size(), steps, [&](const Workers& w) {
+        fixed.advance(w, bodies, h, steps, &stop);
+        return double(bodies.size()) * double(steps);
+      });
+    } catch (const Stopped&) {
+      return core.clock.steps - start;
+    }
+    if (steps > 0) forces_used(bodies);
+    return steps;
+  }
+
   // Applied forces last one call, unless the set keeps them.
   template <class Set>
   static void forces_used(Set& bodies) {
     if (!bodies.keeps_forces()) bodies.clear_forces();
   }
 
-  AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const StopRequest& stop) {
+  AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const CallStops& stops) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
     core.reach(bodies);
     // A call that goes on from one stopped early keeps its cap (the bodies have moved since)
     // and was checked when it began.
     const bool continues = continuation.continues(t_end, tolerances, bodies.size());
     if (!continues) check_tolerance_floor(bodies, tolerances);
-    const double max_step = continues ? continuation.max_step : step_cap(bodies, t_end, tolerances);
     AdaptiveStats stats;
+    double max_step = continuation.max_step;
+    if (!continues) {
+      try {
+        max_step = step_cap(bodies, t_end, tolerances, stops.interrupt);
+      } catch (const Stopped&) {  // nothing taken, nothing kept: the next call starts over
+        stats.stopped = true;
+        return stats;
+      }
+    }
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
-      stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stop);
+      stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stops);
       return double(bodies.size()) * double(stats.evaluations);
     });
     if (stats.accepted > 0 && !stats.stopped) forces_used(bodies);  // they act to the call's end
@@ -70,22 +97,26 @@ struct Stepper<T>::Impl {
 
   // The tolerances' max_step, capped at the method's largest stable step for the bodies now
   // when asked to (and when there is a step to take).
-  double step_cap(const ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances) {
+  double step_cap(const ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances,
+                  const StopRequest* interrupt) {
     const double t = core.clock.time();
     if (!tolerances.limit_to_stable_step || t_end == t) return tolerances.max_step;
-    const auto accelerations_now = [&](const ParticleSet<T>& set, T* const out[3]) { accelerations(set, t, out); };
+    const auto accelerations_now = [&](const ParticleSet<T>& set, T* const out[3]) {
+      if (interrupt != nullptr && (*interrupt)()) throw Stopped();
+      accelerations(set, t, out, interrupt);
+    };
     const double stable = largest_stable_step(core.method, estimate_stiffness<T>(bodies, accelerations_now, 40));
     return stable > 0 ? std::min(tolerances.max_step, stable) : tolerances.max_step;
   }
 
   // Euler's stage 0 carries accelerations times h; with h = 1 they are the accelerations.
   // The stage reads the bodies and writes scratch only.
-  void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]) {
+  void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3], const StopRequest* stop = nullptr) {
     core.reach(bodies);
     StagedPath<T>& probe = core.acceleration_probe();
     probe.reserve(bodies.padded_size());
     workers.run(std::uint64_t(StepperCall::accelerations), bodies.size(), 1, [&](const Workers& w) {
-      const StepContext<T> c{const_cast<ParticleSet<T>&>(bodies), T(1), T(1), t, w};
+      const StepContext<T> c{const_cast<ParticleSet<T>&>(bodies), T(1), T(1), t, w, stop};
       probe.evaluate_first_stage(c);
       return double(bodies.size());
     });
@@ -116,6 +147,12 @@ StagedPath<T>* StepperAccess<T>::staged(const Stepper<T>& s) {
 }
 
 template <class T>
+void StepperAccess<T>::accelerations(Stepper<T>& s, const ParticleSet<T>& bodies, double t, T* const out[3],
+                                     const StopRequest& stop) {
+  s.impl_->accelerations(bodies, t, out, &stop);
+}
+
+template <class T>
 Stepper<T>::Stepper(ForceModel<T> forces, const Method& method, StepperOptions options)
     : Stepper(std::make_shared<const ForceModel<T>>(std::move(forces)), method, options) {}
 
@@ -142,14 +179,25 @@ void Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps) {
 }
 
 template <class T>
+std::uint64_t Stepper<T>::advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps, const StopRequest& stop) {
+  return impl_->advance(io_bodies, h, steps, stop);
+}
+
+template <class T>
 AdaptiveStats Stepper<T>::advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances) {
   return impl_->advance_to(io_bodies, t_end, tolerances, {});
 }
 
 template <class T>
 AdaptiveStats Stepper<T>::advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances,
+                                     const StopRequest& stop, const StopRequest& interrupt) {
+  return impl_->advance_to(io_bodies, t_end, tolerances, CallStops::of(stop, interrupt));
+}
+
+template <class T>
+AdaptiveStats Stepper<T>::advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances,
                                      const StopRequest& stop) {
-  return impl_->advance_to(io_bodies, t_end, tolerances, stop);
+  return impl_->advance_to(io_bodies, t_end, tolerances, CallStops::of(stop, {}));
 }
 
 template <class T>
@@ -272,7 +320,7 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
   Stepper<T> stepper(forces, euler, options);
   const auto accelerations = [&](const ParticleSet<T>& set, T* const out[3]) {
     if (stop && stop()) throw Stopped();
-    stepper.accelerations(set, t, out);
+    StepperAccess<T>::accelerations(stepper, set, t, out, stop);
   };
   return estimate_stiffness<T>(bodies, accelerations, iterations);
 }

@@ -1,6 +1,7 @@
 #pragma once
 // What a checkpoint reads and writes of a stepper beyond its public face: the continuation of
-// an error-controlled call stopped early, and the staged path that keeps its first stage.
+// an error-controlled call stopped early, and the staged path that keeps its first stage; and
+// the stiffness estimate's accelerations, polling a stop request inside a coupled pass.
 
 #include "kinema/stepper.hpp"
 #include "step/adaptive_driver.hpp"
@@ -13,6 +14,9 @@ struct StepperAccess {
   static AdaptiveContinuation& continuation(Stepper<T>& s);
   static const AdaptiveContinuation& continuation(const Stepper<T>& s);
   static StagedPath<T>* staged(const Stepper<T>& s);  // nullptr when the stepper has none
+  // Stepper::accelerations, `stop` polled as Stepper::advance polls it (kinema::Stopped).
+  static void accelerations(Stepper<T>& s, const ParticleSet<T>& bodies, double t, T* const out[3],
+                            const StopRequest& stop);
 };
 
 extern template struct StepperAccess<float>;

@@ -1,11 +1,15 @@
 #include "interrupt.hpp"
 
+#include <atomic>
 #include <csignal>
 
 namespace kinema::cli {
 namespace {
 
-volatile std::sig_atomic_t received = 0;
+// Read by workers inside a step as well as by the main thread: a lock-free atomic, which a
+// handler may write.
+std::atomic<int> received{0};
+static_assert(std::atomic<int>::is_always_lock_free);
 
 extern "C" void note_signal(int signal) { received = signal; }
 
@@ -33,11 +37,15 @@ void stop_if_interrupted() {
 }
 
 const StopRequest& interrupt_request() {
-  static const StopRequest request = [] {
-    stop_if_interrupted();
-    return false;
-  };
+  static const StopRequest request = [] { return received != 0; };
   return request;
+}
+
+int interrupted_by(const Stopped&) { return received; }
+
+std::string error_text(const std::exception& e) {
+  const bool stop = dynamic_cast<const Stopped*>(&e) != nullptr || dynamic_cast<const Interrupted*>(&e) != nullptr;
+  return stop && received != 0 ? "stopped by " + signal_name(received) : e.what();
 }
 
 }  // namespace kinema::cli

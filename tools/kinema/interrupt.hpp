@@ -6,6 +6,7 @@
 #include <string>
 
 #include "kinema/adaptive.hpp"
+#include "kinema/error.hpp"
 
 namespace kinema::cli {
 
@@ -28,8 +29,16 @@ struct Interrupted : std::exception {
 // Throws Interrupted when a signal came.
 void stop_if_interrupted();
 
-// A stop request for the library's long loops (World::advance, the analyses): it throws
-// Interrupted, between two of their calls, once a signal came.
+// A stop request for the library's long loops (World::advance, error control, the analyses):
+// true once a signal came. It may be polled on any worker, inside a step; the analyses then
+// throw kinema::Stopped, which the program reports as the signal (interrupted_by).
 const StopRequest& interrupt_request();
+
+// The signal a kinema::Stopped answered, or 0 (a stop the program did not ask for).
+int interrupted_by(const Stopped& e);
+
+// What a summary says of the error that ended a command: "stopped by SIGINT" for a stop that
+// answered a signal, else e.what().
+std::string error_text(const std::exception& e);
 
 }  // namespace kinema::cli

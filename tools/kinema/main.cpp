@@ -19,6 +19,12 @@ namespace {
 // An error message is one line of bounded length, whatever the input put into it.
 constexpr std::size_t kMessageBytes = 1000;
 
+int stopped_by(int signal) {
+  std::fprintf(stderr, "kinema: stopped by %s; the outputs written so far are incomplete\n",
+               kinema::cli::signal_name(signal).c_str());
+  return 128 + signal;
+}
+
 int run(const kinema::cli::CommandLine& line) {
   using namespace kinema::cli;
   try {
@@ -27,9 +33,10 @@ int run(const kinema::cli::CommandLine& line) {
     if (line.command == "stress") return stress(line.stress);
     return run_scene(line.run);
   } catch (const Interrupted& e) {
-    std::fprintf(stderr, "kinema: stopped by %s; the outputs written so far are incomplete\n",
-                 signal_name(e.signal).c_str());
-    return 128 + e.signal;
+    return stopped_by(e.signal);
+  } catch (const kinema::Stopped& e) {  // an analysis answering interrupt_request
+    if (const int signal = interrupted_by(e)) return stopped_by(signal);
+    std::fprintf(stderr, "kinema: error: %s\n", e.what());
   } catch (const std::bad_alloc&) {
     // The scene's checks bound what a run takes; this is what they did not foresee.
     std::fprintf(stderr, "kinema: error: out of memory (the machine's, or ulimit -v); try fewer bodies\n");

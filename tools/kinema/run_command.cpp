@@ -145,9 +145,11 @@ template <class T>
 bool advance_adaptive(World<T>& world, double t, Tolerances tolerances, AdaptiveStats& total,
                       CheckpointTimer& checkpoints, const std::function<void()>& save) {
   tolerances.initial_step = total.next_step;
-  const StopRequest stop = [&] { return interrupting_signal() != 0 || checkpoints.due(); };
+  // A checkpoint waits for the step under way (stopping inside would lose it, and an attempt
+  // longer than the interval would never finish); a signal does not.
+  const StopRequest checkpoint_due = [&] { return checkpoints.due(); };
   for (;;) {
-    const AdaptiveStats s = world.advance_to(t, tolerances, stop);
+    const AdaptiveStats s = world.advance_to(t, tolerances, checkpoint_due, interrupt_request());
     add_stats(total, s);
     if (!s.stopped) return true;
     if (interrupting_signal() != 0) return false;
@@ -223,7 +225,7 @@ std::size_t body_count(const World<T>& world) {
 // What the run knows about its steps before the first: the scene's stiffness at the start,
 // the method's largest stable step there, and the error control if any.
 struct StepPlan {
-  bool estimated = true;  // false: the estimate would have cost more than the run
+  bool estimated = false;  // true once the estimate ran (false: it would have cost more than the run)
   StiffnessEstimate stiffness;
   double stable_step = 0;
   std::optional<Tolerances> tolerances;
@@ -242,13 +244,13 @@ bool estimate_pays(const Scene& scene, const RunOptions& o, double bodies) {
 
 StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOptions& options, double bodies) {
   StepPlan plan;
-  plan.estimated = estimate_pays(scene, o, bodies);
-  if (!plan.estimated && !o.quiet) {
+  const bool pays = estimate_pays(scene, o, bodies);
+  if (!pays && !o.quiet) {
     std::fprintf(stderr, "kinema: note: the stiffness estimate would cost more than the run's %llu steps; "
                  "left out, so dt is not checked against the stable step (--strict makes it)\n",
                  static_cast<unsigned long long>(scene.steps));
   }
-  if (plan.estimated) plan.stiffness = stiffness_at_start(scene, options);
+  if (pays) plan.stiffness = stiffness_at_start(scene, options), plan.estimated = true;
   plan.stable_step = plan.estimated ? largest_stable_step(method_by_name(scene.method), plan.stiffness)
                                     : std::numeric_limits<double>::infinity();
   plan.tolerances = tolerances_of(scene);
@@ -286,8 +288,27 @@ struct Stepped {
   std::uint64_t checkpoints = 0;            // written by this process
   std::optional<std::string> error;         // what ended the run early
   std::string fingerprint;                  // of the scene and options, with checkpoints
-  std::optional<double> final_energy;       // once computed: N-body's costs N^2 / 2 pairs
+  std::optional<double> final_energy;       // none when a signal came while it was summed
 };
+
+// A span a signal cut short is not searched for the step that stopped being finite: the
+// steps it completed are the range reported.
+template <class T>
+void note_non_finite(const World<T>& world, std::uint64_t from, Stepped& s) {
+  if (s.done == from) return;
+  if (auto bad = first_non_finite(world)) s.blow_up = BlowUp{from + 1, s.done, world.time(), bad->body, bad->field};
+}
+
+// The energy at the end; none when a signal comes while it is summed (N-body gravity's
+// potential at 32768 bodies takes seconds).
+template <class T>
+std::optional<double> final_energy(const World<T>& world) {
+  try {
+    return world.total_energy(interrupt_request());
+  } catch (const Stopped&) {
+    return std::nullopt;
+  }
+}
 
 // What the run's results depend on beyond the bodies: the scene file and the options that
 // change them (not --threads or --isa: every count and instruction set gives the same bits).
@@ -353,7 +374,8 @@ Resumed resume(World<T>& world, const Scene& scene, const RunOptions& o, const s
 }
 
 // Steps from `done` to done + n (error control: over that span), timed.
-// Returns false when a signal stopped error control short of the span's end. Only stepping is
+// Returns false when a signal stopped it short of the span's end: fixed steps add the steps
+// they completed to `done` (one N-body step can take seconds: a signal ends it inside). Only stepping is
 // timed: the clock pauses while a checkpoint is written, and what ran before it is counted in
 // it. A span a signal cut short is no call done (a resume makes it again).
 template <class T>
@@ -370,7 +392,8 @@ bool advance_timed(World<T>& world, const Scene& scene, const std::optional<Tole
   if (tolerances) {
     whole = advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive, checkpoints, timed_save);
   } else {
-    world.advance(T(scene.dt), n);
+    const std::uint64_t taken = world.advance(T(scene.dt), n, interrupt_request());
+    if (taken < n) s.done += taken, whole = false;
   }
   s.wall_seconds += seconds_since(segment);
   if (whole) ++s.calls;
@@ -409,7 +432,11 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
     if (trajectory) n = std::min(n, o.every - s.done % o.every);  // stop at each K-th step
     const auto save = [&] { save_checkpoint(world, o, s, initial_energy, trajectory), checkpoints.saved(); };
     // Short of the span's end only on a signal: the checkpoint below keeps the rest to do.
-    if (!advance_timed(world, scene, tolerances, n, s, checkpoints, save)) break;
+    const std::uint64_t from = s.done;
+    if (!advance_timed(world, scene, tolerances, n, s, checkpoints, save)) {
+      note_non_finite(world, from, s);
+      break;
+    }
     const bool finite = world.finite();
     if (!finite) s.blow_up = find_blow_up<T>(scene, options, world, s.done, n);
     s.done += n;
@@ -502,7 +529,7 @@ void describe_cost(nlohmann::ordered_json& summary, const World<T>& world, const
   const double body_steps = double(body_count(world)) * double(steps_taken(plan, s));
   summary["body_steps_per_second"] = number(s.wall_seconds > 0 ? measured(body_steps / s.wall_seconds) : 0.0);
   summary["energy_initial"] = number(in_precision(initial_energy, p));
-  summary["energy_final"] = number(in_precision(s.final_energy.value_or(world.total_energy()), p));
+  summary["energy_final"] = s.final_energy ? number(in_precision(*s.final_energy, p)) : nlohmann::ordered_json();
 }
 
 void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const StepPlan& plan, const Stepped& s) {
@@ -518,7 +545,9 @@ void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const Ste
                   {"field", s.blow_up->field}});
   }
   const int signal = interrupting_signal();
-  if (signal != 0 && s.done < scene.steps) {
+  // A signal while the final energy was summed leaves it out: the run is complete, its
+  // summary not.
+  if (signal != 0 && (s.done < scene.steps || !s.final_energy)) {
     summary["interrupted"] = signal_name(signal);
     if (plan.tolerances) {
       summary["t_requested"] = number(significant(scene.dt * double(scene.steps), 15));
@@ -631,7 +660,7 @@ template <class T>
 int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context, ReportFile& summary_file) {
   const StepperOptions options = stepper_options(o);
   World<T> world = build_world<T>(scene, o, options);
-  double initial_energy = world.total_energy();
+  double initial_energy = world.total_energy(interrupt_request());
   StepPlan plan;
   Stepped stepped;
   try {
@@ -653,18 +682,19 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     }
     step_scene(world, scene, o, options, plan.tolerances, trajectory, initial_energy, stepped);
   } catch (const std::exception& e) {
-    stepped.error = e.what();
+    stepped.error = error_text(e);
     try {
+      stepped.final_energy = final_energy(world);
       summary_file.write(summarize(world, scene, o, plan, stepped, initial_energy, context));
     } catch (const std::exception&) {  // the summary's own failure: the first error is the one to report
     }
     throw;
   }
-  stepped.final_energy = world.total_energy();
+  stepped.final_energy = final_energy(world);
   const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);
   summary_file.write(summary);
   if (!o.quiet) print_summary(summary);
-  warn_if_energy_overflows(initial_energy, *stepped.final_energy);
+  if (stepped.final_energy) warn_if_energy_overflows(initial_energy, *stepped.final_energy);
   return finish(summary, scene, o, stepped);
 }
 
@@ -684,7 +714,7 @@ int run_scene(const RunOptions& o) {
   } catch (const std::exception& e) {
     if (!summary_file.written()) {
       try {
-        summary_file.write(failed_summary(scene, e.what()));
+        summary_file.write(failed_summary(scene, error_text(e)));
       } catch (const std::exception&) {  // the summary's own failure: the first error is the one to report
       }
     }

@@ -128,6 +128,7 @@ std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t
     const std::uint64_t n = std::min(every, steps - std::min(steps, k));
     if (n == 0) break;
     world.advance(T(dt), n, interrupt_request());
+    stop_if_interrupted();  // the steps it did not take
   }
   return plotted;
 }
@@ -160,6 +161,7 @@ bool holds(const Scene& scene, const Method& m, double h, double duration) {
   World<T> world(scene, m, on_calling_thread());
   const double e0 = world.total_energy();
   world.advance(T(h), step_count(duration, h), interrupt_request());
+  stop_if_interrupted();  // the steps it did not take
   return world.finite() && std::abs(world.total_energy() - e0) <= std::max(std::abs(e0), 1e-300);
 }
 
