@@ -52,8 +52,14 @@ struct StepperOptions {
   // back, or once a frame with the workers asleep in between), and uses the count that runs
   // them fastest for that kind and size of call: the calling thread alone, or 2 .. all
   // workers. Each is tried a few times at first use and again now and then (at most about 1%
-  // of the time). `all` hands every call to all workers (a host that wants its own policy).
-  // A job system of one worker (a host's physics thread) gets every call either way.
+  // of the time once settled). `all` hands every call to all workers (a host that wants its
+  // own policy). A job system of one worker (a host's physics thread) gets every call either
+  // way. In its first frames a host sees the options take turns, two calls at a time, until
+  // each has three judged calls (the first after a switch is not judged: it pays the switch,
+  // and at a job system's first use its thread start, about 5 ms), then the fastest; an
+  // option that lost is tried again after 8 calls, then 16, 32 ... as more samples confirm
+  // it (at most every 4096), and a lower cost seen in two calls in a row is believed at
+  // once, so a choice misjudged on a cold start is undone within tens of calls.
   WorkerChoice workers = WorkerChoice::measured;
   // Sets with fewer (real) bodies than this always run on the calling thread.
   std::size_t inline_below = 0;

@@ -16,10 +16,14 @@ constexpr unsigned kNone = WorkerTuner::kMaxOptions;
 constexpr unsigned kFirstSamples = 3;
 // Calls between retries of an option that costs `ratio` times the best: a retry is two calls
 // (the first after a switch is not kept), their extra cost spread over about 200 calls of the
-// best (1%), at least every 8 calls, at most every 4096.
-std::uint64_t retry_period(double ratio) {
+// best (1%), at least every 8 calls, at most every 4096. An option judged on few samples may
+// have been judged on a cold start (a job system's first use starts its threads: 5 ms, 500
+// times a small step): it is retried within 8 calls of its settling, then 16, 32 ... as its
+// kept samples confirm it, so a misjudged option comes back within tens of calls.
+std::uint64_t retry_period(double ratio, unsigned samples) {
   const double calls = std::ceil(200 * (ratio - 1));
-  return std::uint64_t(std::clamp(calls, 8.0, 4096.0));
+  const unsigned confirmed = std::min(samples - std::min(samples, kFirstSamples), 9u);
+  return std::uint64_t(std::clamp(calls, 8.0, double(8u << confirmed)));
 }
 
 }  // namespace
@@ -80,15 +84,16 @@ void WorkerTuner::record(unsigned count, std::uint64_t ticks, double work) {
     o.cost = o.samples == 0 ? x : std::min(o.cost, x);  // the least disturbed of the first
   } else {
     // The median of the last three: one pre-empted call moves nothing, a real change shows
-    // in two.
+    // in two. A machine's noise only slows calls down: a lower median is taken at once (a
+    // cold start's samples forgotten), a higher one a quarter at a time.
     const double median = std::max(std::min(x, o.recent[0]), std::min(std::max(x, o.recent[0]), o.recent[1]));
-    o.cost += (median - o.cost) / 4;
+    o.cost = median < o.cost ? median : o.cost + (median - o.cost) / 4;
   }
   o.recent[1] = o.recent[0];
   o.recent[0] = x;
   ++o.samples;
   update_best();
-  if (i != best_) o.retry_at = calls_ + retry_period(o.cost / option_[best_].cost);
+  if (i != best_) o.retry_at = calls_ + retry_period(o.cost / option_[best_].cost, o.samples);
 }
 
 void WorkerTuner::update_best() {
@@ -99,7 +104,9 @@ void WorkerTuner::update_best() {
   if (best == best_) return;
   Option& previous = option_[best_];
   best_ = best;
-  if (previous.samples > 0) previous.retry_at = calls_ + retry_period(previous.cost / option_[best_].cost);
+  if (previous.samples > 0) {
+    previous.retry_at = calls_ + retry_period(previous.cost / option_[best_].cost, previous.samples);
+  }
 }
 
 WorkerTuner& WorkerTuners::find(std::uint64_t key, unsigned workers) {
