@@ -22,6 +22,7 @@ class RigidBodySet;
 
 namespace detail {
 struct CheckpointCodec;  // reads and writes the sets' arrays as they are (kinema/checkpoint.hpp)
+struct StateSwap;  // trades a set's state arrays with the finiteness guard's buffer (src/step)
 }
 
 // Storage alignment and padding unit, in bytes: one AVX-512 register.
@@ -213,6 +214,7 @@ class ParticleSet {
  private:
   friend class RigidBodySet<T>;
   friend struct detail::CheckpointCodec;
+  friend struct detail::StateSwap;
   void check_index(std::size_t i) const;
   // Whether copying `other` in place needs no allocation.
   bool copy_fits(const ParticleSet& other) const {

@@ -28,10 +28,14 @@ namespace kinema {
 // limit, a force that returns NaN).
 enum class FiniteGuard {
   off,    // nothing: the caller checks (all_finite, first_non_finite) if it wants to
-  // Each advance call keeps a copy of the state it starts from (the set's state arrays once
-  // more in memory, two more passes over them per call). When a step leaves a value that is
-  // not finite, the bodies and the clock are put back to the step before it and a
-  // NonFiniteError names the step, the body and the field.
+  // When a step leaves a value that is not finite, the bodies and the clock are put back to
+  // the step before it and a NonFiniteError names the step, the body and the field. On the
+  // fused particle path a call steps each block into a second copy of px .. vz while the
+  // block is in cache and scans it there; when every value is finite the set takes that
+  // copy and gives its own arrays for the next call (its px() .. vz() pointers change with
+  // each call; inv_mass and the applied forces stay): the state once more in memory, no
+  // more passes over it. Other paths keep a copy of the state a call starts from (two more
+  // passes over it per call) and put it back.
   check,
   // check, and after every step each velocity longer than max_speed, and each rigid body's
   // angular velocity above max_angular_speed, is scaled down to that length. This changes

@@ -280,15 +280,44 @@ KINEMA_INLINE void prefetch(const BodyArrays<T>& b, std::size_t i) {
   __builtin_prefetch(b.inv_mass + i + ahead, 0);
 }
 
+// Where a fused particle kernel reads the state: the job's source, or in place.
+template <class T>
+struct StateSource {
+  const T* x[3];
+  const T* v[3];
+};
+template <class T>
+StateSource<T> source_of(const FusedJob<T>& job) {
+  const T* const* s = job.source;
+  const BodyArrays<T>& b = job.bodies;
+  if (s == nullptr) return {{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}};
+  return {{s[0], s[1], s[2]}, {s[3], s[4], s[5]}};
+}
+
+// The source ahead too, when it is not where the state is written.
+template <class V, class T>
+KINEMA_INLINE void prefetch(const BodyArrays<T>& b, const StateSource<T>& in, std::size_t i) {
+  prefetch<V>(b, i);
+  if (in.x[0] == b.x[0]) return;
+  constexpr std::size_t ahead = 1024 / sizeof(T), line = 64 / sizeof(T);
+  if constexpr (Lane<V>::width < line) {
+    if (i % line != 0) return;
+  }
+  for (int d = 0; d < 3; ++d) {
+    __builtin_prefetch(in.x[d] + i + ahead, 0);
+    __builtin_prefetch(in.v[d] + i + ahead, 0);
+  }
+}
+
 // One batch of a Runge-Kutta step of positions and velocities, the bodies at i, all stages in
 // registers. `Pushed`: rigid bodies add the constant force of their point-force terms.
 template <const Method& M, bool Quadratic, bool Central, bool Pushed, Applied A, class V>
-KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forces<V>& f, value_t<V> h,
-                                     std::size_t i) {
+KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const StateSource<value_t<V>>& in,
+                                     const Forces<V>& f, value_t<V> h, std::size_t i) {
   constexpr ButcherTableau tab = M.tableau;
   constexpr int S = tab.stages;
   constexpr double sigma = acceleration_scale(tab);
-  const Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
+  const Vec<V> x = load3<V>(in.x, i), v = load3<V>(in.v, i);
   const auto body = body_terms_at<A, Pushed>(f, load<V>(b.inv_mass + i), b.applied, i);
   const Vec<V> p = linear_part(body, anchored(f, x));
   Vec<V> kx[S], kv[S];  // stage velocities and accelerations
@@ -305,14 +334,23 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forc
   store3(b.v, i, advanced<tab.b, sigma>(h, kv, v));
 }
 
+// In place (rigid bodies' centres).
+template <const Method& M, bool Quadratic, bool Central, bool Pushed, Applied A, class V>
+KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forces<V>& f, value_t<V> h,
+                                     std::size_t i) {
+  const StateSource<value_t<V>> in{{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}};
+  runge_kutta_batch<M, Quadratic, Central, Pushed, A>(b, in, f, h, i);
+}
+
 template <const Method& M, bool Quadratic, int Variant, class V>
 void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   const value_t<V> h = job.h;
   const Forces<V> f(job.forces, value_t<V>(acceleration_scale(M.tableau)) * h);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
+  const auto in = source_of(job);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    prefetch<V>(b, i);
-    runge_kutta_batch<M, Quadratic, has_central<Variant>, false, reads_applied<Variant>>(b, f, h, i);
+    prefetch<V>(b, in, i);
+    runge_kutta_batch<M, Quadratic, has_central<Variant>, false, reads_applied<Variant>>(b, in, f, h, i);
   }
 }
 
@@ -323,10 +361,11 @@ void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::s
   constexpr KickDriftScheme scheme = M.scheme;
   const Forces<V> f(job.forces);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
+  const auto in = source_of(job);
   V wh[kMaxStages];
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * job.h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    Vec<V> x = load3<V>(b.x, i), v = load3<V>(b.v, i);
+    Vec<V> x = load3<V>(in.x, i), v = load3<V>(in.v, i);
     const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.applied, i);
     static_for<scheme.count>([&](auto k) {
       if constexpr (scheme.ops[k].kind == OpKind::kick) {

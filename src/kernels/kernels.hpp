@@ -130,6 +130,10 @@ struct FusedJob {
   BodyArrays<T> bodies;
   LocalForces<T> forces;
   T h;
+  // Where the particle kernels read px .. vz (six arrays) when that is not where they write
+  // them: the finiteness guard steps the set's state into a second buffer in the same pass.
+  // Null: in place.
+  const T* const* source = nullptr;
 };
 template <class T>
 using FusedFn = void (*)(const FusedJob<T>& job, std::size_t begin, std::size_t end);

@@ -21,5 +21,8 @@ double scaled_squares(const double* a, const double* w, double scale, double rto
 // True when any of values[0 .. n) is not finite.
 bool any_not_finite(const float* values, std::size_t n);
 bool any_not_finite(const double* values, std::size_t n);
+// True when any of arrays[0 .. count)[begin, end) is not finite, in one pass.
+bool any_not_finite(const float* const* arrays, int count, std::size_t begin, std::size_t end);
+bool any_not_finite(const double* const* arrays, int count, std::size_t begin, std::size_t end);
 
 }  // namespace kinema

@@ -151,6 +151,7 @@ std::size_t Checkpoint<T>::bytes() const {
 template <class T>
 void FiniteScan<T>::scan(Block b) {
   const std::size_t end = std::min(b.end, state_.size);  // padding is always finite
+  if (b.begin >= end || !any_not_finite(state_.data.data(), state_.count, b.begin, end)) return;
   for (int a = 0; a < state_.count; ++a) {
     const std::size_t i = first_bad(state_.data[a], b.begin, end);
     if (i < end) keep_lowest(lowest_, key(i, a));
@@ -165,14 +166,64 @@ std::optional<NonFinite> FiniteScan<T>::found() const {
 }
 
 template <class T>
-void clamp_speeds(ParticleSet<T>& b, Block block, double max_speed) {
-  T *vx = b.vx(), *vy = b.vy(), *vz = b.vz();
-  const T* inv_mass = b.inv_mass();
-  const std::size_t end = std::min(block.end, b.size());
+void clamp_speeds(T* const velocity[3], const T* inv_mass, std::size_t size, Block block, double max_speed) {
+  T *vx = velocity[0], *vy = velocity[1], *vz = velocity[2];
+  const std::size_t end = std::min(block.end, size);
   if (count_over<T>(vx, vy, vz, nullptr, T(max_speed), block.begin, end) == 0) return;
   for (std::size_t i = block.begin; i < end; ++i) {
     if (inv_mass[i] != 0) clamp(vx[i], vy[i], vz[i], max_speed);
   }
+}
+
+template <class T>
+void clamp_speeds(ParticleSet<T>& b, Block block, double max_speed) {
+  T* const velocity[3] = {b.vx(), b.vy(), b.vz()};
+  clamp_speeds(velocity, b.inv_mass(), b.size(), block, max_speed);
+}
+
+}  // namespace kinema
+
+namespace kinema::detail {
+
+struct StateSwap {
+  template <class T>
+  static std::array<AlignedArray<T>*, 6> state(ParticleSet<T>& s) {
+    return {&s.px_, &s.py_, &s.pz_, &s.vx_, &s.vy_, &s.vz_};
+  }
+};
+
+}  // namespace kinema::detail
+
+namespace kinema {
+
+template <class T>
+void StateBuffer<T>::reserve(const ParticleSet<T>& set) {
+  if (copy_[0].size() == set.capacity()) return;
+  for (auto& a : copy_) a = AlignedArray<T>(set.capacity());
+  written_end_ = 0;
+}
+
+template <class T>
+StateArrays<T> StateBuffer<T>::arrays(const ParticleSet<T>& set) {
+  StateArrays<T> s = state_arrays(const_cast<ParticleSet<T>&>(set));
+  for (int a = 0; a < 6; ++a) s.data[a] = copy_[a].data();
+  return s;
+}
+
+template <class T>
+void StateBuffer<T>::swap_into(ParticleSet<T>& set) {
+  const std::size_t padded = set.padded_size();
+  if (written_end_ > padded) {
+    for (auto& a : copy_) std::fill(a.data() + padded, a.data() + written_end_, T(0));
+  }
+  const auto state = detail::StateSwap::state(set);
+  for (int a = 0; a < 6; ++a) std::swap(*state[a], copy_[a]);
+  written_end_ = padded;  // the set's old arrays: its state to there, zero past it
+}
+
+template <class T>
+std::size_t StateBuffer<T>::bytes() const {
+  return copy_.size() * copy_[0].size() * sizeof(T);
 }
 
 template <class T>
@@ -197,6 +248,8 @@ void clamp_speeds(RigidBodySet<T>& b, Block block, double max_speed, double max_
   template StateArrays<T> state_arrays(RigidBodySet<T>&);                                      \
   template class Checkpoint<T>;                                                                \
   template class FiniteScan<T>;                                                                \
+  template class StateBuffer<T>;                                                               \
+  template void clamp_speeds(T* const[3], const T*, std::size_t, Block, double);               \
   template void clamp_speeds(ParticleSet<T>&, Block, double);                                  \
   template void clamp_speeds(RigidBodySet<T>&, Block, double, double);
 KINEMA_GUARD(float)

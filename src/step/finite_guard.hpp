@@ -47,6 +47,29 @@ class Checkpoint {
   std::array<AlignedArray<T>, StateArrays<T>::kMax> copy_;
 };
 
+// Where a guarded call on the fused particle path writes: a second copy of the set's
+// px .. vz. Each block's first step reads the set and writes here, in one pass; the block is
+// scanned while in cache; when every block is finite the set takes these arrays and gives
+// its own (a swap of pointers, so the set's state pointers change with each call), the next
+// call's buffer. Nothing is copied, and nothing is put back when a value is not finite: the
+// set was never written.
+template <class T>
+class StateBuffer {
+ public:
+  // Sized as the set's arrays (allocates when the set's capacity changed).
+  void reserve(const ParticleSet<T>& set);
+  // The buffer's arrays, as state_arrays(set) names them.
+  StateArrays<T> arrays(const ParticleSet<T>& set);
+  void swap_into(ParticleSet<T>& set);
+  std::size_t bytes() const;
+
+ private:
+  std::array<AlignedArray<T>, 6> copy_;
+  // The buffer's elements past the set's padded size are zero up to here: a set that shrank
+  // leaves old state there, which must not become its padding.
+  std::size_t written_end_ = 0;
+};
+
 // Finds the lowest-numbered body with a value that is not finite, and its first such field,
 // over blocks scanned in any order on any thread.
 template <class T>
@@ -66,6 +89,9 @@ class FiniteScan {
 // the way; NaN is left for the scan to find.
 template <class T>
 void clamp_speeds(ParticleSet<T>& bodies, Block block, double max_speed);
+// The same on velocity arrays of the set's size and masses (the guard's buffer).
+template <class T>
+void clamp_speeds(T* const velocity[3], const T* inv_mass, std::size_t size, Block block, double max_speed);
 template <class T>
 void clamp_speeds(RigidBodySet<T>& bodies, Block block, double max_speed, double max_angular_speed);
 

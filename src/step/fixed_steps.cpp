@@ -2,6 +2,8 @@
 
 #include "step/step_checks.hpp"
 
+#include <type_traits>
+
 namespace kinema {
 
 template <class T>
@@ -13,6 +15,9 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
     ~CallStop() { slot = nullptr; }
   } call_stop(stop_, stop);
   if (core_.options.guard == FiniteGuard::off) return run(w, b, h, steps, nullptr);
+  if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
+    if (buffers(b)) return advance_buffered(w, b, h, steps);
+  }
   const StateArrays<T> state = state_arrays(b);
   checkpoint_.reserve(state);
   const std::uint64_t start = core_.clock.steps;
@@ -36,6 +41,62 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
       throw NonFiniteError(k, core_.clock.time(), found->body, found->field);
     }
   }
+}
+
+template <class T>
+bool FixedSteps<T>::buffers(const ParticleSet<T>& b) const {
+  return !core_.paths.block && core_.paths.fused_for(b.has_applied_forces()) != nullptr;
+}
+
+// A call whose steps leave a value that is not finite leaves the set as it was; then one
+// step at a time to the step that made it.
+template <class T>
+void FixedSteps<T>::advance_buffered(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps) {
+  buffer_.reserve(b);
+  if (!buffered_run(w, b, h, steps)) return;
+  for (std::uint64_t k = 1; k <= steps; ++k) {
+    if (const auto found = buffered_run(w, b, h, 1)) {
+      throw NonFiniteError(k, core_.clock.time(), found->body, found->field);
+    }
+  }
+}
+
+// Each block's first step reads the set and writes the buffer, its later steps run in the
+// buffer (the same operations as in place, so the same bits), then it is scanned while in
+// cache; a host's enqueue that throws leaves the set untouched.
+template <class T>
+std::optional<NonFinite> FixedSteps<T>::buffered_run(const Workers& w, ParticleSet<T>& b, T h,
+                                                     std::uint64_t steps) {
+  core_.reach(b);
+  const LoweredForces<T>& lowered = core_.lowered();
+  const StepContext<T> c = core_.start(b, h, lowered.particle, w);
+  const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
+  const StateArrays<T> into = buffer_.arrays(b);
+  kernels::BodyArrays<T> body = arrays(b);
+  for (int d = 0; d < 3; ++d) body.x[d] = into.data[d], body.v[d] = into.data[3 + d];
+  const kernels::FusedJob<T> in_buffer{body, lowered.particle, c.h};
+  const T* const set_state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  kernels::FusedJob<T> from_set = in_buffer;
+  from_set.source = set_state;
+  FiniteScan<T> scan(into);
+  const bool clamps = core_.options.guard == FiniteGuard::clamp;
+  // In slices whose state stays in L1 from the kernel's stores to the scan's loads: bodies
+  // are independent on this path, so a slice may take all the steps at once.
+  constexpr std::size_t kSlice = 1024 / sizeof(T) * 2;
+  for_each_block(w, b.padded_size(), [&](Block block) {
+    for (std::size_t at = block.begin; at < block.end; at += kSlice) {
+      const Block slice{at, std::min(at + kSlice, block.end)};
+      for (std::uint64_t k = 0; k < steps; ++k) {
+        fused_fn(k == 0 ? from_set : in_buffer, slice.begin, slice.end);
+        if (clamps) clamp_speeds(body.v, b.inv_mass(), b.size(), slice, core_.options.max_speed);
+      }
+      scan.scan(slice);
+    }
+  });
+  if (auto bad = scan.found()) return bad;
+  buffer_.swap_into(b);
+  core_.clock.steps += steps;
+  return std::nullopt;
 }
 
 template <class T>

@@ -30,7 +30,7 @@ class FixedSteps {
   template <class Set>
   void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps, const StopRequest* stop = nullptr);
 
-  std::size_t checkpoint_bytes() const { return checkpoint_.bytes(); }
+  std::size_t checkpoint_bytes() const { return checkpoint_.bytes() + buffer_.bytes(); }
   // What the block paths keep per block for `padded` bodies (allocates only to grow).
   void reserve_blocks(std::size_t padded) { completed_.resize(std::max(completed_.size(), block_count(padded))); }
 
@@ -47,6 +47,11 @@ class FixedSteps {
   template <class Set>
   std::optional<NonFinite> guarded_run(const Workers& w, Set& b, T h, std::uint64_t steps,
                                        const StateArrays<T>& state);
+  // The fused particle path under a guard: steps into buffer_, which the set takes when
+  // every value is finite (finite_guard.hpp): no copy to save, none to put back.
+  bool buffers(const ParticleSet<T>& b) const;
+  void advance_buffered(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
+  std::optional<NonFinite> buffered_run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
   template <class Set, class Step>
   void run_block(Set& b, Block block, std::uint64_t steps, Guard* guard, Step&& step);
   void run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard);
@@ -94,6 +99,7 @@ class FixedSteps {
   StepperCore<T>& core_;
   const StopRequest* stop_ = nullptr;  // the call's, while it runs
   Checkpoint<T> checkpoint_;  // the state a guarded call starts from
+  StateBuffer<T> buffer_;     // or, on the fused particle path, where it steps to
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for
   // a block the call never started).
   static constexpr std::uint64_t kNotRun = ~std::uint64_t(0);

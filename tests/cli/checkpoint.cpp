@@ -51,12 +51,17 @@ std::vector<std::string> with(std::vector<std::string> args, const std::vector<s
 }
 
 // Waits (a minute at most) until `path` exists, then sends `signal`.
+// Waits (a minute at most) for `path` to exist.
+void wait_for(const fs::path& path) {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::minutes(1);
+  while (!fs::exists(path) && std::chrono::steady_clock::now() < give_up) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+}
+
 std::function<void(pid_t)> signal_once_written(const fs::path& path, int signal) {
   return [=](pid_t pid) {
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::minutes(1);
-    while (!fs::exists(path) && std::chrono::steady_clock::now() < give_up) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    }
+    wait_for(path);
     ::kill(pid, signal);
   };
 }
@@ -144,6 +149,9 @@ TEST_CASE("run --checkpoint survives SIGKILL at 30 random moments", "[cli][check
                                                "--checkpoint-every", "0.2"});
     if (fs::exists(ckpt)) run = with(run, {"--resume", ckpt.string()});
     const Result r = run_kinema(run, {}, [&](pid_t pid) {
+      // The first kill comes once a checkpoint exists: a loaded machine (a sanitized run) can
+      // take longer than any fixed delay to start stepping.
+      wait_for(ckpt);
       std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms(random)));
       ::kill(pid, SIGKILL);
     });

@@ -269,3 +269,45 @@ TEMPLATE_TEST_CASE("scratch_bytes counts the guard's copy and the staged path's 
   // Three stages of their own positions and velocities, four of accelerations.
   CHECK(staged.scratch_bytes() >= (3 * 6 + 4 * 3) * array);
 }
+
+TEMPLATE_TEST_CASE("guard check on the fused path: the bits of unguarded steps, the set's arrays traded with "
+                   "its buffer, padding inert after the set shrinks and grows",
+                   "[guard]", float, double) {
+  using T = TestType;
+  const ForceModel<T> forces = test::all_local_terms<T>();
+  StepperOptions o = test::serial_options();
+  Stepper<T> plain(forces, rk4, o);
+  o.guard = FiniteGuard::check;
+  Stepper<T> guarded(forces, rk4, o);
+  ParticleSet<T> a = test::cloud<T>(300), b = a;
+  const auto step_both = [&](std::uint64_t n) {
+    plain.advance(a, T(0.01), n);
+    guarded.advance(b, T(0.01), n);
+    CHECK(test::state_hash(b) == test::state_hash(a));
+  };
+  // Every slot past the real bodies holds zero state, whichever buffer the set now has.
+  const auto inert_past_size = [&] {
+    bool inert = true;
+    for (const T* array : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()}) {
+      for (std::size_t i = b.size(); i < b.capacity(); ++i) inert = inert && array[i] == 0;
+    }
+    return inert;
+  };
+  const T* before = b.px();
+  step_both(1);
+  CHECK(b.px() != before);  // the set took the buffer's arrays
+  step_both(3);
+  // 100 bodies fewer: their slots in the buffer hold their old state until the guard clears them.
+  for (int k = 0; k < 100; ++k) a.remove(a.size() - 1), b.remove(b.size() - 1);
+  for (std::uint64_t n : {1, 2}) {
+    step_both(n);
+    CHECK(inert_past_size());
+  }
+  for (int k = 0; k < 37; ++k) {
+    const Vec3<T> p{T(k), T(1), T(-k)}, v{T(0.5), T(0), T(k) / 8};
+    a.add(p, v, T(1.5)), b.add(p, v, T(1.5));
+    CHECK(inert_past_size());
+  }
+  step_both(2);
+  CHECK(inert_past_size());
+}
