@@ -265,21 +265,6 @@ KINEMA_INLINE Vec<V> stage_linear_part(value_t<V> h, const B& body, const Vec<V>
   }
 }
 
-// Asks for the state 1 KiB ahead, once per cache line: with 13 streams in flight the
-// hardware prefetcher alone leaves DRAM latency exposed.
-template <class V, class T>
-KINEMA_INLINE void prefetch(const BodyArrays<T>& b, std::size_t i) {
-  constexpr std::size_t ahead = 1024 / sizeof(T), line = 64 / sizeof(T);
-  if constexpr (Lane<V>::width < line) {
-    if (i % line != 0) return;
-  }
-  for (int d = 0; d < 3; ++d) {
-    __builtin_prefetch(b.x[d] + i + ahead, 1);
-    __builtin_prefetch(b.v[d] + i + ahead, 1);
-  }
-  __builtin_prefetch(b.inv_mass + i + ahead, 0);
-}
-
 // Where a fused particle kernel reads the state: the job's source, or in place.
 template <class T>
 struct StateSource {
@@ -287,26 +272,31 @@ struct StateSource {
   const T* v[3];
 };
 template <class T>
+StateSource<T> in_place(const BodyArrays<T>& b) {
+  return {{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}};
+}
+template <class T>
 StateSource<T> source_of(const FusedJob<T>& job) {
   const T* const* s = job.source;
-  const BodyArrays<T>& b = job.bodies;
-  if (s == nullptr) return {{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}};
   return {{s[0], s[1], s[2]}, {s[3], s[4], s[5]}};
 }
 
-// The source ahead too, when it is not where the state is written.
+// Asks for the state 1 KiB ahead, once per cache line, and for the source where it is not
+// where the state is written: with 13 streams in flight the hardware prefetcher alone
+// leaves DRAM latency exposed.
 template <class V, class T>
 KINEMA_INLINE void prefetch(const BodyArrays<T>& b, const StateSource<T>& in, std::size_t i) {
-  prefetch<V>(b, i);
-  if (in.x[0] == b.x[0]) return;
   constexpr std::size_t ahead = 1024 / sizeof(T), line = 64 / sizeof(T);
   if constexpr (Lane<V>::width < line) {
     if (i % line != 0) return;
   }
+  const bool apart = in.x[0] != b.x[0];
   for (int d = 0; d < 3; ++d) {
-    __builtin_prefetch(in.x[d] + i + ahead, 0);
-    __builtin_prefetch(in.v[d] + i + ahead, 0);
+    __builtin_prefetch(b.x[d] + i + ahead, 1);
+    __builtin_prefetch(b.v[d] + i + ahead, 1);
+    if (apart) __builtin_prefetch(in.x[d] + i + ahead, 0), __builtin_prefetch(in.v[d] + i + ahead, 0);
   }
+  __builtin_prefetch(b.inv_mass + i + ahead, 0);
 }
 
 // One batch of a Runge-Kutta step of positions and velocities, the bodies at i, all stages in
@@ -338,32 +328,36 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Stat
 template <const Method& M, bool Quadratic, bool Central, bool Pushed, Applied A, class V>
 KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Forces<V>& f, value_t<V> h,
                                      std::size_t i) {
-  const StateSource<value_t<V>> in{{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}};
-  runge_kutta_batch<M, Quadratic, Central, Pushed, A>(b, in, f, h, i);
+  runge_kutta_batch<M, Quadratic, Central, Pushed, A>(b, in_place(b), f, h, i);
 }
 
 template <const Method& M, bool Quadratic, int Variant, class V>
-void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
-  const value_t<V> h = job.h;
-  const Forces<V> f(job.forces, value_t<V>(acceleration_scale(M.tableau)) * h);
-  const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
-  const auto in = source_of(job);
+KINEMA_INLINE void runge_kutta_loop(const BodyArrays<value_t<V>>& b, const StateSource<value_t<V>>& in,
+                                    const Forces<V>& f, value_t<V> h, std::size_t begin, std::size_t end) {
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     prefetch<V>(b, in, i);
     runge_kutta_batch<M, Quadratic, has_central<Variant>, false, reads_applied<Variant>>(b, in, f, h, i);
   }
 }
 
+// In place, the loop holds only the set's pointers; from a source, the source's too.
 template <const Method& M, bool Quadratic, int Variant, class V>
-void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const value_t<V> h = job.h;
+  const Forces<V> f(job.forces, value_t<V>(acceleration_scale(M.tableau)) * h);
+  const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
+  if (job.source == nullptr) return runge_kutta_loop<M, Quadratic, Variant>(b, in_place(b), f, h, begin, end);
+  runge_kutta_loop<M, Quadratic, Variant>(b, source_of(job), f, h, begin, end);
+}
+
+template <const Method& M, bool Quadratic, int Variant, class V>
+KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateSource<value_t<V>>& in,
+                                   const Forces<V>& f, value_t<V> h, std::size_t begin, std::size_t end) {
   using T = value_t<V>;
   constexpr bool Central = has_central<Variant>;
   constexpr KickDriftScheme scheme = M.scheme;
-  const Forces<V> f(job.forces);
-  const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
-  const auto in = source_of(job);
   V wh[kMaxStages];
-  for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * job.h);
+  for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     Vec<V> x = load3<V>(in.x, i), v = load3<V>(in.v, i);
     const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.applied, i);
@@ -377,6 +371,14 @@ void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::s
     store3(b.x, i, x);
     store3(b.v, i, v);
   }
+}
+
+template <const Method& M, bool Quadratic, int Variant, class V>
+void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const Forces<V> f(job.forces);
+  const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
+  if (job.source == nullptr) return kick_drift_loop<M, Quadratic, Variant>(b, in_place(b), f, job.h, begin, end);
+  kick_drift_loop<M, Quadratic, Variant>(b, source_of(job), f, job.h, begin, end);
 }
 
 template <const Method& M, bool Quadratic, int Variant, class V>

@@ -3,6 +3,7 @@
 #include "kernels/reductions.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -133,29 +134,27 @@ KINEMA_CLONED bool any_not_finite(const double* values, std::size_t n) {
 // when some value is not finite.
 namespace {
 template <class Bits, class T>
-[[gnu::always_inline]] inline bool any_exponent_full(const T* const* arrays, int count, std::size_t begin, std::size_t end, Bits exponent) {
+[[gnu::always_inline]] inline bool any_exponent_full(const T* const* arrays, int count, std::size_t begin,
+                                                     std::size_t end, Bits exponent) {
+  const auto field = [exponent](T value) { return Bits(std::bit_cast<Bits>(value) & exponent); };
   Bits top = 0;
   int k = 0;
   for (; k + 3 <= count; k += 3) {
-    const auto *p = reinterpret_cast<const Bits*>(arrays[k]), *q = reinterpret_cast<const Bits*>(arrays[k + 1]),
-               *r = reinterpret_cast<const Bits*>(arrays[k + 2]);
-    for (std::size_t i = begin; i < end; ++i) {
-      top = std::max(top, std::max(p[i] & exponent, std::max(q[i] & exponent, r[i] & exponent)));
-    }
+    const T *p = arrays[k], *q = arrays[k + 1], *r = arrays[k + 2];
+    for (std::size_t i = begin; i < end; ++i) top = std::max(top, std::max(field(p[i]), std::max(field(q[i]), field(r[i]))));
   }
   for (; k < count; ++k) {
-    const auto* p = reinterpret_cast<const Bits*>(arrays[k]);
-    for (std::size_t i = begin; i < end; ++i) top = std::max(top, Bits(p[i] & exponent));
+    for (std::size_t i = begin; i < end; ++i) top = std::max(top, field(arrays[k][i]));
   }
   return top == exponent;
 }
 }  // namespace
 
 KINEMA_CLONED bool any_not_finite(const float* const* arrays, int count, std::size_t begin, std::size_t end) {
-  return any_exponent_full<FloatBits>(arrays, count, begin, end, FloatBits(0x7F800000u));
+  return any_exponent_full<std::uint32_t>(arrays, count, begin, end, 0x7F800000u);
 }
 KINEMA_CLONED bool any_not_finite(const double* const* arrays, int count, std::size_t begin, std::size_t end) {
-  return any_exponent_full<DoubleBits>(arrays, count, begin, end, DoubleBits(0x7FF0000000000000ull));
+  return any_exponent_full<std::uint64_t>(arrays, count, begin, end, 0x7FF0000000000000ull);
 }
 
 }  // namespace kinema

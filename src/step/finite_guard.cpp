@@ -199,12 +199,17 @@ namespace kinema {
 template <class T>
 void StateBuffer<T>::reserve(const ParticleSet<T>& set) {
   if (copy_[0].size() == set.capacity()) return;
-  for (auto& a : copy_) a = AlignedArray<T>(set.capacity());
+  // All six or none: arrays of two lengths would become a set's.
+  std::array<AlignedArray<T>, 6> grown;
+  for (auto& a : grown) a = AlignedArray<T>(set.capacity());
+  copy_ = std::move(grown);
   written_end_ = 0;
 }
 
 template <class T>
 StateArrays<T> StateBuffer<T>::arrays(const ParticleSet<T>& set) {
+  // Whatever the call writes (up to the padded size) counts, even when the call then fails.
+  written_end_ = std::max(written_end_, set.padded_size());
   StateArrays<T> s = state_arrays(const_cast<ParticleSet<T>&>(set));
   for (int a = 0; a < 6; ++a) s.data[a] = copy_[a].data();
   return s;

@@ -58,7 +58,8 @@ class StateBuffer {
  public:
   // Sized as the set's arrays (allocates when the set's capacity changed).
   void reserve(const ParticleSet<T>& set);
-  // The buffer's arrays, as state_arrays(set) names them.
+  // The buffer's arrays, as state_arrays(set) names them, for a call to write up to the
+  // set's padded size.
   StateArrays<T> arrays(const ParticleSet<T>& set);
   void swap_into(ParticleSet<T>& set);
   std::size_t bytes() const;

@@ -70,6 +70,7 @@ std::optional<NonFinite> FixedSteps<T>::buffered_run(const Workers& w, ParticleS
   core_.reach(b);
   const LoweredForces<T>& lowered = core_.lowered();
   const StepContext<T> c = core_.start(b, h, lowered.particle, w);
+  if (steps == 0) return std::nullopt;  // the buffer holds nothing of this call: no trade
   const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
   const StateArrays<T> into = buffer_.arrays(b);
   kernels::BodyArrays<T> body = arrays(b);

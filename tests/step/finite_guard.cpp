@@ -296,6 +296,11 @@ TEMPLATE_TEST_CASE("guard check on the fused path: the bits of unguarded steps, 
   const T* before = b.px();
   step_both(1);
   CHECK(b.px() != before);  // the set took the buffer's arrays
+  // No step, no trade: the buffer holds the state before the last call.
+  const T* now = b.px();
+  guarded.advance(b, T(0.01), 0);
+  CHECK(b.px() == now);
+  CHECK(test::state_hash(b) == test::state_hash(a));
   step_both(3);
   // 100 bodies fewer: their slots in the buffer hold their old state until the guard clears them.
   for (int k = 0; k < 100; ++k) a.remove(a.size() - 1), b.remove(b.size() - 1);
@@ -310,4 +315,29 @@ TEMPLATE_TEST_CASE("guard check on the fused path: the bits of unguarded steps, 
   }
   step_both(2);
   CHECK(inert_past_size());
+}
+
+TEMPLATE_TEST_CASE("guard check on the fused path: a call that fails leaves no stale state to become padding",
+                   "[guard]", float, double) {
+  using T = TestType;
+  // The light body's spring force overflows in the first step of the first call: the call
+  // writes the buffer up to the set's padded size and is taken back, no trade made. Without
+  // the light body and the bodies after it, the next calls must leave every slot past the
+  // set's size at zero.
+  ParticleSet<T> b = stiff_cloud<T>();
+  b.set_position(kLight, {std::numeric_limits<T>::max() / 10, 0, 0});
+  StepperOptions o = test::serial_options();
+  o.guard = FiniteGuard::check;
+  Stepper<T> guarded(stiff_anchor<T>(), euler, o);
+  CHECK_THROWS_AS(guarded.advance(b, T(kH), 3), NonFiniteError);
+  CHECK(guarded.clock().steps == 0);
+  while (b.size() > 40) b.remove(b.size() - 1);
+  for (int k = 0; k < 2; ++k) {
+    guarded.step(b, T(kH));
+    bool inert = true;
+    for (const T* array : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()}) {
+      for (std::size_t i = b.size(); i < b.capacity(); ++i) inert = inert && array[i] == 0;
+    }
+    CHECK(inert);
+  }
 }
