@@ -20,8 +20,10 @@ KernelTable<value_t<V>> make_table(Isa isa) {
       t.fused[m][1][v] = fused_kernel<method, true, v, V>();
     });
     if constexpr (method.kind == MethodKind::runge_kutta) {
-      t.block_stage[m] = &block_stage<method, V>;
-      t.block_finish[m] = &block_finish<method, V>;
+      t.block_advance[m][0][0] = &block_advance<method, false, false, V>;
+      t.block_advance[m][0][1] = &block_advance<method, false, true, V>;
+      t.block_advance[m][1][0] = &block_advance<method, true, false, V>;
+      t.block_advance[m][1][1] = &block_advance<method, true, true, V>;
     }
     t.rigid[m][0][0] = rigid_kernel<method, false, false, V>();
     t.rigid[m][0][1] = rigid_kernel<method, false, true, V>();
@@ -37,10 +39,6 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.nbody = &nbody<V>;
   t.springs = &springs<V>;
   t.interpolate = &interpolate<V>;
-  t.block_rates[0][0] = &block_rates<false, false, V>;
-  t.block_rates[0][1] = &block_rates<false, true, V>;
-  t.block_rates[1][0] = &block_rates<true, false, V>;
-  t.block_rates[1][1] = &block_rates<true, true, V>;
   t.block_kick[0][0] = &block_kick<false, false, V>;
   t.block_kick[0][1] = &block_kick<false, true, V>;
   t.block_kick[1][0] = &block_kick<true, false, V>;

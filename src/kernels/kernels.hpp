@@ -103,26 +103,40 @@ struct RigidBlockJob {
 template <class T>
 using RigidBlockFn = void (*)(const RigidBlockJob<T>& job, std::size_t begin, std::size_t end);
 
-// The particle block path (callbacks with a built-in method): the phases of a step over bodies
-// [begin, end), stage state in memory where callbacks read it, the method's weights compile
-// time constants as in the fused kernels. Stage 0's state is the bodies' own.
+// The block paths step a block in slices of this many bodies (a multiple of the widest SIMD
+// width; callbacks see one slice): 128 floats or 64 doubles, the fastest of 64, 128 and 256
+// floats on the bench scenes.
+template <class T>
+inline constexpr std::size_t kSliceBodies = 512 / sizeof(T);
+
+// The particle block path (callbacks with a built-in method): the phases of a step over one
+// slice of bodies, the stage state in the slice's scratch where callbacks read it (kept in
+// the L1 cache while the slice takes its steps), the method's weights compile-time constants
+// as in the fused kernels. Stage 0's state is the bodies' own.
 template <class T>
 struct BlockJob {
-  BodyArrays<T> bodies;    // updated by finish, kicks and drifts
-  T* xs[kMaxStages][3];    // stage positions (stage 0: the bodies')
-  T* vs[kMaxStages][3];    // stage velocities, the position rates (stage 0: the bodies')
-  T* kv[kMaxStages][3];    // stage accelerations, times accel_scale
-  T* force[3];             // what callbacks add
+  BodyArrays<T> bodies;  // updated by the last stage, kicks and drifts
   LocalForces<T> forces;
   T h;
   T accel_scale;  // sigma h (see acceleration_scale); 1 for kicks
 };
+// Where each array of a slice's scratch starts, in arrays of kSliceBodies elements: stage
+// positions and velocities (the position rates; stages 1 and on), stage accelerations times
+// accel_scale, and what callbacks add. A kick-drift method counts as one stage.
+struct SliceLayout {
+  int stages;
+  constexpr std::size_t xs(int s, int d) const { return std::size_t((s - 1) * 3 + d); }
+  constexpr std::size_t vs(int s, int d) const { return std::size_t((stages + s - 2) * 3 + d); }
+  constexpr std::size_t kv(int s, int d) const { return std::size_t((2 * stages + s - 2) * 3 + d); }
+  constexpr std::size_t force(int d) const { return std::size_t((3 * stages - 2) * 3 + d); }
+  constexpr std::size_t arrays() const { return std::size_t((3 * stages - 1) * 3); }
+};
+// A stage's rates and the next stage's state (or the step's end) over `count` bodies from
+// `begin`, the slice's stage state in `scratch`.
 template <class T>
-using BlockStageFn = void (*)(const BlockJob<T>& job, int stage, std::size_t begin, std::size_t end);
+using BlockStageFn = void (*)(const BlockJob<T>& job, T* scratch, int stage, std::size_t begin, std::size_t count);
 template <class T>
-using BlockFn = void (*)(const BlockJob<T>& job, std::size_t begin, std::size_t end);
-template <class T>
-using BlockStepFn = void (*)(const BlockJob<T>& job, T step, std::size_t begin, std::size_t end);
+using BlockStepFn = void (*)(const BlockJob<T>& job, T* scratch, T step, std::size_t begin, std::size_t count);
 
 // One fused step over bodies [begin, end) (multiples of the SIMD width).
 template <class T>
@@ -355,9 +369,7 @@ struct KernelTable {
   // The particle block path, Runge-Kutta methods: a stage's state (zeroing the callbacks'
   // forces); its accelerations [quadratic][central]; the final combination. Kick-drift
   // methods: a kick [quadratic][central] and a drift. Null where a method is kick-drift.
-  BlockStageFn<T> block_stage[kBuiltinCount];
-  BlockStageFn<T> block_rates[2][2];
-  BlockFn<T> block_finish[kBuiltinCount];
+  BlockStageFn<T> block_advance[kBuiltinCount][2][2];
   BlockStepFn<T> block_kick[2][2];
   BlockStepFn<T> block_drift;
   // The rigid block path: stage state and the callbacks' view; the stage's rates

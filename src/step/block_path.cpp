@@ -8,23 +8,19 @@ template <class T>
 BlockPath<T>::BlockPath(const ForceModel<T>& forces, const Method& method, int builtin,
                         const kernels::KernelTable<T>& table, const kernels::LocalForces<T>& local)
     : forces_(forces), method_(method), table_(table), local_(local),
-      stage_fn_(table.block_stage[builtin]),
-      rates_fn_(table.block_rates[local.has_quadratic()][local.has_central()]),
-      finish_fn_(table.block_finish[builtin]),
+      advance_fn_(table.block_advance[builtin][local.has_quadratic()][local.has_central()]),
       kick_fn_(table.block_kick[local.has_quadratic()][local.has_central()]) {}
+
+template <class T>
+kernels::SliceLayout BlockPath<T>::layout() const {
+  return {method_.kind == MethodKind::runge_kutta ? method_.tableau.stages : 1};
+}
 
 template <class T>
 void BlockPath<T>::reserve(std::size_t padded) {
   if (padded <= capacity_) return;
-  const bool rk = method_.kind == MethodKind::runge_kutta;
-  const int stages = rk ? method_.tableau.stages : 0;
-  for (int s = 0; s < stages; ++s) {
-    for (int d = 0; d < 3; ++d) {
-      if (s > 0) xs_[s][d].resize(padded), vs_[s][d].resize(padded);
-      kv_[s][d].resize(padded);
-    }
-  }
-  for (auto& a : force_) a.resize(padded);
+  region_ = layout().arrays() * kernels::kSliceBodies<T>;
+  scratch_.resize(block_count(padded) * region_);
   if (may_throw()) {
     for (auto& a : saved_) a.resize(padded);
   }
@@ -33,12 +29,8 @@ void BlockPath<T>::reserve(std::size_t padded) {
 
 template <class T>
 std::size_t BlockPath<T>::bytes() const {
-  std::size_t n = 0;
-  auto add = [&](const auto& arrays) {
-    for (const AlignedArray<T>& a : arrays) n += a.size() * sizeof(T);
-  };
-  for (int s = 0; s < kMaxStages; ++s) add(xs_[s]), add(vs_[s]), add(kv_[s]);
-  add(force_), add(saved_);
+  std::size_t n = scratch_.size() * sizeof(T);
+  for (const AlignedArray<T>& a : saved_) n += a.size() * sizeof(T);
   return n;
 }
 
@@ -46,14 +38,6 @@ template <class T>
 void BlockPath<T>::prepare(const StepContext<T>& c) {
   kernels::BlockJob<T> j{};
   j.bodies = arrays(c.bodies);
-  for (int s = 0; s < kMaxStages; ++s) {
-    for (int d = 0; d < 3; ++d) {
-      j.xs[s][d] = s == 0 ? j.bodies.x[d] : xs_[s][d].data();
-      j.vs[s][d] = s == 0 ? j.bodies.v[d] : vs_[s][d].data();
-      j.kv[s][d] = kv_[s][d].data();
-    }
-  }
-  for (int d = 0; d < 3; ++d) j.force[d] = force_[d].data();
   j.forces = local_;
   j.h = c.h;
   j.accel_scale = c.accel_scale;
@@ -64,47 +48,55 @@ void BlockPath<T>::prepare(const StepContext<T>& c) {
 }
 
 template <class T>
-void BlockPath<T>::step_block(Block b, double t0) {
-  if (method_.kind == MethodKind::runge_kutta) return runge_kutta_step(b, t0);
-  kick_drift_step(b, t0);
+void BlockPath<T>::step_block(Block slice, double t0) {
+  T* scratch = scratch_.data() + slice.begin / kBlockBodies * region_;
+  if (method_.kind == MethodKind::runge_kutta) return runge_kutta_step(slice, scratch, t0);
+  kick_drift_step(slice, scratch, t0);
+}
+
+template <class T>
+T* BlockPath<T>::at(T* scratch, std::size_t array) {
+  return scratch + array * kernels::kSliceBodies<T>;
 }
 
 // The callbacks at stage s's state, time t.
 template <class T>
-void BlockPath<T>::call_back(int s, Block b, double t) const {
-  const std::size_t i = b.begin;
+void BlockPath<T>::call_back(int s, Block slice, T* scratch, double t) const {
+  const std::size_t i = slice.begin;
   ParticleBlock<T> v;
-  v.begin = i, v.count = b.end - b.begin, v.t = t;
-  v.px = job_.xs[s][0] + i, v.py = job_.xs[s][1] + i, v.pz = job_.xs[s][2] + i;
-  v.vx = job_.vs[s][0] + i, v.vy = job_.vs[s][1] + i, v.vz = job_.vs[s][2] + i;
+  v.begin = i, v.count = slice.end - i, v.t = t;
+  const kernels::SliceLayout l = layout();
+  if (s == 0) {
+    v.px = job_.bodies.x[0] + i, v.py = job_.bodies.x[1] + i, v.pz = job_.bodies.x[2] + i;
+    v.vx = job_.bodies.v[0] + i, v.vy = job_.bodies.v[1] + i, v.vz = job_.bodies.v[2] + i;
+  } else {
+    v.px = at(scratch, l.xs(s, 0)), v.py = at(scratch, l.xs(s, 1)), v.pz = at(scratch, l.xs(s, 2));
+    v.vx = at(scratch, l.vs(s, 0)), v.vy = at(scratch, l.vs(s, 1)), v.vz = at(scratch, l.vs(s, 2));
+  }
   v.inv_mass = job_.bodies.inv_mass + i;
-  v.fx = job_.force[0] + i, v.fy = job_.force[1] + i, v.fz = job_.force[2] + i;
+  v.fx = at(scratch, l.force(0)), v.fy = at(scratch, l.force(1)), v.fz = at(scratch, l.force(2));
   for (const auto& callback : forces_.callbacks()) callback(v);
 }
 
 template <class T>
-void BlockPath<T>::runge_kutta_step(Block b, double t0) {
+void BlockPath<T>::runge_kutta_step(Block slice, T* scratch, double t0) {
   const ButcherTableau& tab = method_.tableau;
   for (int s = 0; s < tab.stages; ++s) {
-    stage_fn_(job_, s, b.begin, b.end);
-    call_back(s, b, t0 + tab.c[s] * double(job_.h));
-    rates_fn_(job_, s, b.begin, b.end);
+    call_back(s, slice, scratch, t0 + tab.c[s] * double(job_.h));
+    advance_fn_(job_, scratch, s, slice.begin, slice.end - slice.begin);
   }
-  finish_fn_(job_, b.begin, b.end);
 }
 
 template <class T>
-void BlockPath<T>::kick_drift_step(Block b, double t0) {
+void BlockPath<T>::kick_drift_step(Block slice, T* scratch, double t0) {
   const KickDriftScheme& scheme = method_.scheme;
   for (int k = 0; k < scheme.count; ++k) {
     if (scheme.ops[k].kind == OpKind::drift) {
-      table_.block_drift(job_, op_steps_[k], b.begin, b.end);
+      table_.block_drift(job_, scratch, op_steps_[k], slice.begin, slice.end - slice.begin);
       continue;
     }
-    // A kick's state is the bodies' own: no stage kernel runs to zero the forces.
-    for (T* f : job_.force) std::fill(f + b.begin, f + b.end, T(0));
-    call_back(0, b, t0 + scheme.ops[k].time * double(job_.h));
-    kick_fn_(job_, op_steps_[k], b.begin, b.end);
+    call_back(0, slice, scratch, t0 + scheme.ops[k].time * double(job_.h));
+    kick_fn_(job_, scratch, op_steps_[k], slice.begin, slice.end - slice.begin);
   }
 }
 
@@ -116,8 +108,11 @@ void BlockPath<T>::keep_block(Block b) {
   }
 }
 
+// A callback that threw left forces in its slice's scratch, where the kernels that read them
+// leave zeros for the next callbacks.
 template <class T>
 void BlockPath<T>::restore_block(Block b) {
+  std::fill_n(scratch_.data() + b.begin / kBlockBodies * region_, region_, T(0));
   for (int d = 0; d < 3; ++d) {
     std::copy(saved_[d].data() + b.begin, saved_[d].data() + b.end, job_.bodies.x[d] + b.begin);
     std::copy(saved_[3 + d].data() + b.begin, saved_[3 + d].data() + b.end, job_.bodies.v[d] + b.begin);

@@ -212,22 +212,29 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
   const Clock<T> start = core_.clock;
   try {
     for_each_block(w, n, [&](Block block) {
+      // A slice takes every step of the call while its stage state stays in the L1 cache.
+      // The slices before the one under way took every step: `done` is that slice's count.
       std::uint64_t done = 0;
-      // A block's stage state is too large for the L1 cache: each step goes through the
-      // block in slices that fit (same operations per body, so the same bits).
-      auto step = [&](Block b) {
-        Clock<T> now = start;
-        now.steps += done;
-        for (std::size_t s = b.begin; s < b.end; s += kSliceBodies) {
-          path.step({s, std::min(s + kSliceBodies, b.end)}, now.time());
+      auto run = [&] {
+        if (guard) guard->checkpoint.save(guard->state, block);
+        for (std::size_t s = block.begin; s < block.end; s += kSliceBodies) {
+          const Block slice{s, std::min(s + kSliceBodies, block.end)};
+          for (std::uint64_t k = 0; k < steps; ++k) {
+            Clock<T> now = start;
+            now.steps += k;
+            done = k;
+            path.step(slice, now.time());
+            if (guard && guard->clamp) clamp(set, slice);
+          }
         }
-        ++done;
+        done = steps;
+        if (guard) guard->scan.scan(block);
       };
-      if (!may_throw) return run_block(set, block, steps, guard, step);
+      if (!may_throw) return run();
       std::uint64_t& completed = completed_[block.begin / kBlockBodies];
       path.keep(block);
       try {
-        run_block(set, block, steps, guard, step);
+        run();
       } catch (...) {
         completed = done;
         throw;

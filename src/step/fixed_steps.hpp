@@ -62,10 +62,9 @@ class FixedSteps {
   void run_blocks(const Workers& w, Set& set, Path& path, std::uint64_t steps, Guard* guard);
 
   // The block paths as run_blocks takes them: may_throw(), keep, restore and step a block.
-  // A step runs every phase over one slice of a block, whose stage state stays in the L1
-  // cache meanwhile (a multiple of the widest SIMD width; callbacks see one slice): 128
-  // floats or 64 doubles, the fastest of 64, 128 and 256 floats on the bench scenes.
-  static constexpr std::size_t kSliceBodies = 512 / sizeof(T);
+  // A slice of a block takes every step of a call, every phase over the slice, whose stage
+  // state stays in the L1 cache meanwhile (see kernels::kSliceBodies).
+  static constexpr std::size_t kSliceBodies = kernels::kSliceBodies<T>;
   struct ParticleBlocks {
     StagedPath<T>& staged;
     const StepContext<T>& c;

@@ -174,6 +174,34 @@ TEST_CASE("the fused and staged paths give applied forces the same bits", "[dete
   }
 }
 
+// Without springs, whose stage forces the fused kernels form from the step's start, the block
+// path's stages are the fused kernels' to the bit.
+TEST_CASE("a callback's force gives the bits of the same force applied", "[determinism][callbacks]") {
+  for (bool central : {false, true}) {
+    for (const Method* m : builtin_methods) {
+      ParticleSet<float> applied = test::cloud<float>(3000), called_back = applied;
+      apply_game_forces(applied);
+      ForceModel<float> f;
+      f.add(Gravity{{0.1, -9.81, 0.2}}).add(LinearDrag{0.3}).add(QuadraticDrag{0.05});
+      if (central) f.add(Central{{7, 3, -5}, 4});
+      Stepper<float> fused(f, *m, test::serial_options());
+      f.add([](const ParticleBlock<float>& b) {
+        for (std::size_t k = 0; k < b.count; ++k) {
+          if ((b.begin + k) % 3 != 0) continue;
+          const Vec3<float> F = game_force<float>(b.begin + k);
+          b.fx[k] += F[0], b.fy[k] += F[1], b.fz[k] += F[2];
+        }
+      });
+      Stepper<float> block(f, *m, test::serial_options());
+      REQUIRE(fused.fused());
+      fused.advance(applied, 0.01f, 7);
+      block.advance(called_back, 0.01f, 7);
+      INFO(m->name << " central " << central);
+      CHECK(test::state_hash(applied) == test::state_hash(called_back));
+    }
+  }
+}
+
 TEST_CASE("applied forces: the same bits on every ISA, thread count and job system", "[determinism][applied]") {
   for (const Method* m : {&rk4, &velocity_verlet}) {
     INFO(m->name);
