@@ -120,6 +120,43 @@ class AppliedVectors {
   bool active_ = false;
 };
 
+// Parameters engines keep per body: a gravity factor (the body feels factor times every
+// Gravity term; default 1), a linear damping rate c (an extra acceleration -c v, per second,
+// whatever the mass; default 0) and, for rigid bodies, an angular damping rate c (an extra
+// torque -c L, so omega decays as exp(-c t) about a principal axis; default 0). A set
+// allocates the three arrays at its first set_... call and never before; kernels read only
+// the kinds that were set. Every change that allocates does so before anything changes.
+enum class BodyParameter { gravity_factor, linear_damping, angular_damping };
+
+template <class T>
+class BodyParameters {
+ public:
+  static constexpr int kKinds = 3;
+  static constexpr T default_of(BodyParameter k) { return k == BodyParameter::gravity_factor ? T(1) : T(0); }
+
+  bool any() const { return used_[0] || used_[1] || used_[2]; }
+  bool used(BodyParameter k) const { return used_[int(k)]; }
+  T at(BodyParameter k, std::size_t i) const { return used(k) ? arrays_[int(k)][i] : default_of(k); }
+  // The kind's array (the set's capacity long) once set, else nullptr (what the kernels test).
+  const T* data(BodyParameter k) const { return used(k) ? arrays_[int(k)].data() : nullptr; }
+  // Sets body i's value, allocating the arrays (for `capacity` bodies) at the first call.
+  void set(BodyParameter k, std::size_t i, T value, std::size_t capacity);
+  void grow(std::size_t capacity);  // keeps arrays, if any, as long as the set's
+  bool fits(const BodyParameters& other, std::size_t capacity) const;
+  void assign(const BodyParameters& other);  // only where fits: allocates nothing
+  void copy_body(std::size_t from, std::size_t to);
+  void clear_body(std::size_t i);  // the defaults
+  void clear() { used_ = {}; }
+
+ private:
+  friend struct detail::CheckpointCodec;
+  bool allocated() const { return arrays_[0].size() > 0; }
+  void ensure(std::size_t capacity);  // all at least `capacity` long, new elements the defaults
+
+  std::array<AlignedArray<T>, kKinds> arrays_;
+  std::array<bool, kKinds> used_{};
+};
+
 template <class T>
 struct ParticleDesc {
   Vec3<T> position{};
@@ -200,6 +237,14 @@ class ParticleSet {
   // Component d (0..2: x, y, z) of the applied forces, padded_size() long; nullptr when none.
   const T* applied_force_data(int d) const { return applied_.data(d); }
 
+  // Per-body parameters (see BodyParameters): they stay until set again. kinema::Error for
+  // a bad index, a factor that is not finite or a rate that is negative or not finite.
+  void set_gravity_factor(std::size_t i, T factor) { set_parameter(BodyParameter::gravity_factor, i, factor); }
+  void set_linear_damping(std::size_t i, T rate) { set_parameter(BodyParameter::linear_damping, i, rate); }
+  T gravity_factor(std::size_t i) const { return params_.at(BodyParameter::gravity_factor, i); }
+  T linear_damping(std::size_t i) const { return params_.at(BodyParameter::linear_damping, i); }
+  const BodyParameters<T>& parameters() const { return params_; }
+
   // Removes body i by moving the last body into its place (no reallocation, no shift).
   // Returns the index the moved body had (the old last index), or kNoBody when i was last.
   static constexpr std::size_t kNoBody = std::size_t(-1);
@@ -216,9 +261,11 @@ class ParticleSet {
   friend struct detail::CheckpointCodec;
   friend struct detail::StateSwap;
   void check_index(std::size_t i) const;
+  void set_parameter(BodyParameter k, std::size_t i, T value);
   // Whether copying `other` in place needs no allocation.
   bool copy_fits(const ParticleSet& other) const {
-    return capacity() >= other.capacity() && applied_.fits(other.applied_, capacity());
+    return capacity() >= other.capacity() && applied_.fits(other.applied_, capacity()) &&
+           params_.fits(other.params_, capacity());
   }
   // Copies body `from` to `to` in every array, or clears `to` to inert padding.
   void copy_body(std::size_t from, std::size_t to);
@@ -231,6 +278,7 @@ class ParticleSet {
   std::size_t size_ = 0;
   AppliedVectors<T> applied_;
   bool keep_forces_ = false;
+  BodyParameters<T> params_;
 };
 
 template <class T>
@@ -299,6 +347,14 @@ class RigidBodySet {
   Vec3<T> applied_force(std::size_t i) const { return centers_.applied_force(i); }
   Vec3<T> applied_torque(std::size_t i) const { return torques_.at(i); }
   const T* applied_torque_data(int d) const { return torques_.data(d); }  // nullptr when none
+  // Per-body parameters, as ParticleSet's, plus angular damping (the torque -c L).
+  void set_gravity_factor(std::size_t i, T factor) { centers_.set_gravity_factor(i, factor); }
+  void set_linear_damping(std::size_t i, T rate) { centers_.set_linear_damping(i, rate); }
+  void set_angular_damping(std::size_t i, T rate) { centers_.set_parameter(BodyParameter::angular_damping, i, rate); }
+  T gravity_factor(std::size_t i) const { return centers_.gravity_factor(i); }
+  T linear_damping(std::size_t i) const { return centers_.linear_damping(i); }
+  T angular_damping(std::size_t i) const { return centers_.params_.at(BodyParameter::angular_damping, i); }
+  const BodyParameters<T>& parameters() const { return centers_.params_; }
 
   // As ParticleSet::remove: the last body moves into i; returns its old index or kNoBody.
   static constexpr std::size_t kNoBody = ParticleSet<T>::kNoBody;
@@ -396,6 +452,8 @@ void remove_bodies(Set& set, std::span<const std::size_t> indices, Moved&& moved
 extern template class AlignedArray<float>;
 extern template class AppliedVectors<float>;
 extern template class AppliedVectors<double>;
+extern template class BodyParameters<float>;
+extern template class BodyParameters<double>;
 extern template class AlignedArray<double>;
 extern template class ParticleSet<float>;
 extern template class ParticleSet<double>;

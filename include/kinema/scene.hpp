@@ -48,6 +48,8 @@ struct BodySpec {
   double mass = 1;
   bool kinematic = false;  // inv_mass 0: forces do not move it
   Vec3<double> force{};    // applied, constant, for the whole run (ParticleSet::apply_force)
+  // Per-body parameters, set only where given (see BodyParameters).
+  std::optional<double> damping, gravity_factor;
 };
 
 // A rigid body resolved to principal axes: `orientation` is that of the principal frame and
@@ -60,6 +62,7 @@ struct RigidSpec {
   double mass = 1;
   Vec3<double> inertia{1, 1, 1};
   Vec3<double> force{}, torque{};  // applied, constant, for the whole run (world frame)
+  std::optional<double> damping, angular_damping, gravity_factor;  // as BodySpec's
 };
 
 struct Scene {

@@ -1,6 +1,7 @@
 #include "kinema/diagnostics.hpp"
 
 #include <cmath>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -10,12 +11,17 @@
 namespace kinema {
 namespace {
 
-// Potential energy of a body of mass m at x under the local terms that have one.
-double local_potential(std::span<const LocalTerm> terms, const Vec3<double>& x, double mass) {
+// Potential energy of a body of mass m at x under the local terms that have one; gravity's
+// times the body's gravity factor.
+double local_potential(std::span<const LocalTerm> terms, const Vec3<double>& x, double mass, double gravity_factor) {
   double u = 0;
   for (const LocalTerm& term : terms) {
     visit_term(term, [&](const auto& t, auto info) {
-      if constexpr (decltype(info)::has_potential) u += info.potential(t, x, mass);
+      if constexpr (std::is_same_v<std::decay_t<decltype(t)>, Gravity>) {
+        u += gravity_factor * info.potential(t, x, mass);
+      } else if constexpr (decltype(info)::has_potential) {
+        u += info.potential(t, x, mass);
+      }
     });
   }
   return u;
@@ -41,7 +47,7 @@ double potential_energy(const ParticleSet<T>& b, const ForceModel<T>& forces, co
   for (std::size_t i = 0; i < b.size(); ++i) {
     if (b.inv_mass()[i] == 0) continue;
     const Vec3<double> x{double(b.px()[i]), double(b.py()[i]), double(b.pz()[i])};
-    u += local_potential(forces.local_terms(), x, 1.0 / double(b.inv_mass()[i]));
+    u += local_potential(forces.local_terms(), x, 1.0 / double(b.inv_mass()[i]), double(b.gravity_factor(i)));
   }
   const ParticleState<T> all{b.padded_size(), b.px(), b.py(), b.pz(),
                              b.vx(), b.vy(), b.vz(), b.inv_mass()};

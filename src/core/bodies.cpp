@@ -183,6 +183,75 @@ void AppliedVectors<T>::clear_body(std::size_t i) {
 }
 
 template <class T>
+void BodyParameters<T>::set(BodyParameter k, std::size_t i, T value, std::size_t capacity) {
+  ensure(capacity);
+  if (!used(k)) std::fill_n(arrays_[int(k)].data(), arrays_[int(k)].size(), default_of(k));
+  used_[int(k)] = true;
+  arrays_[int(k)][i] = value;
+}
+
+// New arrays first, moved in once all exist: a failed allocation changes nothing.
+template <class T>
+void BodyParameters<T>::ensure(std::size_t capacity) {
+  if (allocated() && arrays_[0].size() >= capacity) return;
+  std::array<AlignedArray<T>, kKinds> grown;
+  for (int k = 0; k < kKinds; ++k) {
+    grown[k] = AlignedArray<T>(std::max(capacity, arrays_[k].size()));
+    const std::size_t kept = allocated() ? arrays_[k].size() : 0;
+    if (kept > 0) std::copy_n(arrays_[k].data(), kept, grown[k].data());
+    std::fill(grown[k].data() + kept, grown[k].data() + grown[k].size(), default_of(BodyParameter(k)));
+  }
+  arrays_ = std::move(grown);
+}
+
+template <class T>
+void BodyParameters<T>::grow(std::size_t capacity) {
+  if (allocated()) ensure(capacity);  // never set: stays without arrays
+}
+
+template <class T>
+bool BodyParameters<T>::fits(const BodyParameters& other, std::size_t capacity) const {
+  return !other.allocated() || (allocated() && arrays_[0].size() >= std::max(capacity, other.arrays_[0].size()));
+}
+
+template <class T>
+void BodyParameters<T>::assign(const BodyParameters& other) {
+  if (other.allocated()) {
+    for (int k = 0; k < kKinds; ++k) {
+      AlignedArray<T>& a = arrays_[k];
+      std::copy_n(other.arrays_[k].data(), other.arrays_[k].size(), a.data());  // fits
+      std::fill(a.data() + other.arrays_[k].size(), a.data() + a.size(), default_of(BodyParameter(k)));
+    }
+  }
+  used_ = other.used_;
+}
+
+template <class T>
+void BodyParameters<T>::copy_body(std::size_t from, std::size_t to) {
+  if (!allocated()) return;
+  for (auto& a : arrays_) a[to] = a[from];
+}
+
+template <class T>
+void BodyParameters<T>::clear_body(std::size_t i) {
+  if (!allocated()) return;
+  for (int k = 0; k < kKinds; ++k) arrays_[k][i] = default_of(BodyParameter(k));
+}
+
+// A factor may be any finite value (negative: the body falls up); a rate is not negative.
+template <class T>
+void ParticleSet<T>::set_parameter(BodyParameter k, std::size_t i, T value) {
+  check_index(i);
+  const bool factor = k == BodyParameter::gravity_factor;
+  if (!std::isfinite(value) || (!factor && value < 0)) {
+    const char* name = factor ? "gravity factor" : k == BodyParameter::linear_damping ? "linear damping" : "angular damping";
+    throw Error("body " + std::to_string(i) + ": " + name + " must be " +
+                (factor ? "finite" : "zero or positive and finite") + ", got " + number_text(value));
+  }
+  params_.set(k, i, value, capacity());
+}
+
+template <class T>
 void ParticleSet<T>::apply_force(std::size_t i, const Vec3<T>& force) {
   check_index(i);
   applied_.add(i, force, capacity(), "force");
@@ -205,6 +274,7 @@ void ParticleSet<T>::grow_to(std::size_t count) {
   if (count <= capacity) return;
   std::size_t target = std::max(count, capacity * 2);
   applied_.grow(target);  // first: arrays longer than the capacity are harmless, shorter not
+  params_.grow(target);
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(target);
 }
 
@@ -249,6 +319,7 @@ ParticleSet<T>& ParticleSet<T>::operator=(const ParticleSet& other) {
   if (this == &other) return *this;
   if (!copy_fits(other)) return *this = ParticleSet(other);  // all or nothing
   applied_.assign(other.applied_);
+  params_.assign(other.params_);
   keep_forces_ = other.keep_forces_;
   for (auto [to, from] : {std::pair{&px_, &other.px_}, {&py_, &other.py_}, {&pz_, &other.pz_}, {&vx_, &other.vx_},
                           {&vy_, &other.vy_}, {&vz_, &other.vz_}, {&inv_mass_, &other.inv_mass_}}) {
@@ -265,6 +336,8 @@ ParticleSet<T>& ParticleSet<T>::operator=(ParticleSet&& other) noexcept {
   vx_ = std::move(other.vx_), vy_ = std::move(other.vy_), vz_ = std::move(other.vz_);
   inv_mass_ = std::move(other.inv_mass_);
   applied_ = std::move(other.applied_);
+  params_ = std::move(other.params_);
+  other.params_.clear();
   keep_forces_ = std::exchange(other.keep_forces_, false);
   size_ = std::exchange(other.size_, 0);
   return *this;
@@ -273,6 +346,7 @@ ParticleSet<T>& ParticleSet<T>::operator=(ParticleSet&& other) noexcept {
 template <class T>
 void ParticleSet<T>::reserve(std::size_t count) {
   applied_.grow(padded_count<T>(count));
+  params_.grow(padded_count<T>(count));
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) a->resize(count);
 }
 
@@ -282,6 +356,7 @@ void ParticleSet<T>::clear() {
     std::fill(a->data(), a->data() + a->size(), T(0));
   }
   applied_.clear();
+  params_.clear();
   size_ = 0;
 }
 
@@ -320,12 +395,14 @@ template <class T>
 void ParticleSet<T>::copy_body(std::size_t from, std::size_t to) {
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) (*a)[to] = (*a)[from];
   applied_.copy_body(from, to);
+  params_.copy_body(from, to);
 }
 
 template <class T>
 void ParticleSet<T>::clear_body(std::size_t i) {
   for (auto* a : {&px_, &py_, &pz_, &vx_, &vy_, &vz_, &inv_mass_}) (*a)[i] = 0;
   applied_.clear_body(i);
+  params_.clear_body(i);
 }
 
 template <class T>
@@ -355,6 +432,8 @@ template class AlignedArray<float>;
 template class AlignedArray<double>;
 template class AppliedVectors<float>;
 template class AppliedVectors<double>;
+template class BodyParameters<float>;
+template class BodyParameters<double>;
 template class ParticleSet<float>;
 template class ParticleSet<double>;
 

@@ -31,18 +31,16 @@ struct SliceArrays {
     for (int d = 0; d < 3; ++d) f[d] = at(L.force(d));
   }
   const T* inv_mass() const { return job.bodies.inv_mass + begin; }
-  void applied(const T* out[3]) const {
-    for (int d = 0; d < 3; ++d) out[d] = job.bodies.applied[0] ? job.bodies.applied[d] + begin : nullptr;
-  }
+  PerBody<T> per_body() const { return job.bodies.per_body.from(begin); }
 };
 
 // The callbacks' forces joined to the local terms and applied forces: accel_scale times the
 // acceleration at (x, v).
 template <bool Quadratic, bool Central, class V>
-KINEMA_INLINE Vec<V> callback_rates(const Forces<V>& f, const value_t<V>* inv_mass, const value_t<V>* const applied[3],
+KINEMA_INLINE Vec<V> callback_rates(const Forces<V>& f, const value_t<V>* inv_mass, const PerBody<value_t<V>>& own,
                                     const value_t<V>* const force[3], std::size_t i, const Vec<V>& x, const Vec<V>& v) {
   const V m = load<V>(inv_mass + i);
-  auto body = body_terms_at<Applied::if_present>(f, m, applied, i);
+  auto body = body_terms_at<Applied::if_present>(f, m, own, i);
   add_applied(body, f, m, load3<V>(force, i));
   return accel_at<Quadratic, Central>(f, body, x, v);
 }
@@ -65,9 +63,9 @@ KINEMA_INLINE void block_advance_at(const BlockJob<value_t<V>>& job, value_t<V>*
   const T h = job.h;  // a local: the stores below may not change it
   T *x0[3], *v0[3], *xs[3], *vs[3], *force[3], *next_x[3], *next_v[3];
   T *kx[tab.stages][3], *kv[tab.stages][3];
-  const T* applied[3];
+  const PerBody<T> own = a.per_body();
   const T* inv_mass = a.inv_mass();
-  a.stage(x0, v0, 0), a.stage(xs, vs, S), a.forces(force), a.applied(applied);
+  a.stage(x0, v0, 0), a.stage(xs, vs, S), a.forces(force);
   if constexpr (!last) a.stage(next_x, next_v, S + 1);
   static_for<S>([&](auto j) {
     T* unused[3];
@@ -82,7 +80,7 @@ KINEMA_INLINE void block_advance_at(const BlockJob<value_t<V>>& job, value_t<V>*
   }();
   for (std::size_t i = 0; i < count; i += Lane<V>::width) {
     const Vec<V> x = load3<V>(xs, i), v = load3<V>(vs, i);
-    const Vec<V> accel = callback_rates<Quadratic, Central>(f, inv_mass, applied, force, i, x, v);
+    const Vec<V> accel = callback_rates<Quadratic, Central>(f, inv_mass, own, force, i, x, v);
     Vec<V> kxs[tab.stages] = {}, kvs[tab.stages] = {};
     static_for<S + 1>([&](auto j) {
       if constexpr (row[j] == 0) return;
@@ -122,12 +120,12 @@ void block_kick(const BlockJob<value_t<V>>& job, value_t<V>* scratch, value_t<V>
   const Forces<V> f(job.forces);
   const V wh(step);
   T *x[3], *v[3], *force[3];
-  const T* applied[3];
+  const PerBody<T> own = a.per_body();
   const T* inv_mass = a.inv_mass();
-  a.stage(x, v, 0), a.forces(force), a.applied(applied);
+  a.stage(x, v, 0), a.forces(force);
   for (std::size_t i = 0; i < count; i += Lane<V>::width) {
     const Vec<V> xi = load3<V>(x, i), vi = load3<V>(v, i);
-    const Vec<V> accel = callback_rates<Quadratic, Central>(f, inv_mass, applied, force, i, xi, vi);
+    const Vec<V> accel = callback_rates<Quadratic, Central>(f, inv_mass, own, force, i, xi, vi);
     store3(force, i, Vec<V>{{V(0), V(0), V(0)}});
     store3(v, i, step_by(wh, accel, vi));
   }

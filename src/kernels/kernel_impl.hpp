@@ -103,24 +103,42 @@ KINEMA_INLINE void add_applied(B& body, const Forces<V>& f, const V& inv_mass, c
 // set has them (tested once per batch), or always (the fused variant for sets that have).
 enum class Applied { never, if_present, always };
 
-// The fused particle kernels' variants: plain, with central terms (and applied forces if
-// present), with applied forces. A model pays only for what it uses.
+// The fused particle kernels' variants: plain, with central terms (and the bodies' own forces
+// and parameters where present), with the bodies' own forces and parameters. A model pays
+// only for what it uses.
 template <int Variant>
 inline constexpr bool has_central = Variant == kCentralVariant;
 template <int Variant>
-inline constexpr Applied reads_applied = Variant == kPlainVariant     ? Applied::never
-                                         : Variant == kCentralVariant ? Applied::if_present
-                                                                      : Applied::always;
+inline constexpr Applied reads_applied = Variant == kPlainVariant ? Applied::never : Applied::if_present;
 
-// body_terms, plus the applied forces as A says.
+// The body's own parameters, where its set has them: gravity times its factor (ahead of the
+// point forces' push, as body_terms forms it) and its damping rate joined to the drag.
+template <bool Pushed, class V, class B, class T>
+KINEMA_INLINE void add_parameters(B& body, const Forces<V>& f, const V& inv_mass, const PerBody<T>& p,
+                                  std::size_t i) {
+  if (p.gravity_factor != nullptr) {
+    const V factor = load<V>(p.gravity_factor + i);
+    for (int d = 0; d < 3; ++d) {
+      const V g = factor * f.g[d];
+      body.g[d] = pick(body.dynamic, Pushed ? mul_add(inv_mass, f.force[d], g) : g, V(0));
+    }
+  }
+  if (p.linear_damping != nullptr) {
+    const V rate = load<V>(p.linear_damping + i);
+    body.neg_linear = pick(body.dynamic, mul_add(V(0) - f.scale, rate, body.neg_linear), V(0));
+  }
+}
+
+// body_terms, plus the body's parameters where its set has them (never for the plain
+// variant), plus the applied forces as A says.
 template <Applied A, bool Pushed = false, class V, class T>
-KINEMA_INLINE auto body_terms_at(const Forces<V>& f, const V& inv_mass, const T* const applied[3],
-                                 std::size_t i) {
+KINEMA_INLINE auto body_terms_at(const Forces<V>& f, const V& inv_mass, const PerBody<T>& p, std::size_t i) {
   auto body = body_terms<Pushed>(f, inv_mass);
+  if constexpr (A != Applied::never) add_parameters<Pushed>(body, f, inv_mass, p, i);
   if constexpr (A == Applied::always) {
-    add_applied(body, f, inv_mass, load3<V>(applied, i));
+    add_applied(body, f, inv_mass, load3<V>(p.applied, i));
   } else if constexpr (A == Applied::if_present) {
-    if (applied[0] != nullptr) add_applied(body, f, inv_mass, load3<V>(applied, i));
+    if (p.applied[0] != nullptr) add_applied(body, f, inv_mass, load3<V>(p.applied, i));
   }
   return body;
 }
@@ -308,7 +326,7 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Stat
   constexpr int S = tab.stages;
   constexpr double sigma = acceleration_scale(tab);
   const Vec<V> x = load3<V>(in.x, i), v = load3<V>(in.v, i);
-  const auto body = body_terms_at<A, Pushed>(f, load<V>(b.inv_mass + i), b.applied, i);
+  const auto body = body_terms_at<A, Pushed>(f, load<V>(b.inv_mass + i), b.per_body, i);
   const Vec<V> p = linear_part(body, anchored(f, x));
   Vec<V> kx[S], kv[S];  // stage velocities and accelerations
   static_for<S>([&](auto s) {
@@ -360,7 +378,7 @@ KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateS
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     Vec<V> x = load3<V>(in.x, i), v = load3<V>(in.v, i);
-    const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.applied, i);
+    const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.per_body, i);
     static_for<scheme.count>([&](auto k) {
       if constexpr (scheme.ops[k].kind == OpKind::kick) {
         v = step_by(wh[k], accel_at<Quadratic, Central>(f, body, x, v), v);
@@ -426,7 +444,7 @@ void stage(const StageJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
   const Forces<V> f(job.forces, job.accel_scale);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const Vec<V> x = load3<V>(job.x.in, i);
-    const auto body = body_terms_at<Applied::if_present>(f, load<V>(job.inv_mass + i), job.applied, i);
+    const auto body = body_terms_at<Applied::if_present>(f, load<V>(job.inv_mass + i), job.per_body, i);
     Vec<V> xs = x, p = linear_part(body, anchored(f, x));
     const Vec<V> vs = combined<V>(job.v, i);
     if (!job.x.empty()) {

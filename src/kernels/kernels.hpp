@@ -27,14 +27,28 @@ struct LocalForces {
   bool has_central() const { return central_count > 0; }
 };
 
+// What single bodies carry besides their state, each nullptr when the set has none: forces
+// applied to them (ParticleSet::apply_force; constant over the call), gravity factors and
+// linear damping rates (BodyParameters). The plain fused particle kernels read none of them.
+template <class T>
+struct PerBody {
+  const T* applied[3];
+  const T* gravity_factor;
+  const T* linear_damping;
+  bool any() const { return applied[0] != nullptr || gravity_factor != nullptr || linear_damping != nullptr; }
+  // The same arrays from body `begin` on.
+  PerBody from(std::size_t begin) const {
+    auto at = [&](const T* p) { return p != nullptr ? p + begin : nullptr; };
+    return {{at(applied[0]), at(applied[1]), at(applied[2])}, at(gravity_factor), at(linear_damping)};
+  }
+};
+
 template <class T>
 struct BodyArrays {
   T* x[3];         // px py pz
   T* v[3];         // vx vy vz
   const T* inv_mass;
-  // Forces applied to single bodies (ParticleSet::apply_force), constant over the call;
-  // nullptr when the set has none. The plain fused particle kernels never read them.
-  const T* applied[3];
+  PerBody<T> per_body;
 };
 
 // The rotational terms of a model, for rigid bodies.
@@ -59,6 +73,7 @@ struct RigidJob {
   T h;
   bool renormalize;
   const T* torque[3];  // applied per body (world frame); nullptr when none
+  const T* angular_damping;  // per body (BodyParameters); nullptr when none
 };
 template <class T>
 using RigidFn = void (*)(const RigidJob<T>& job, std::size_t begin, std::size_t end);
@@ -75,8 +90,9 @@ struct RigidBlockJob {
   T* l[3];
   const T* inv_mass;
   const T* inv_inertia[3];
-  const T* applied[3];         // applied forces and torques; nullptr when none
-  const T* applied_torque[3];
+  PerBody<T> per_body;
+  const T* applied_torque[3];  // nullptr when none
+  const T* angular_damping;    // nullptr when none
   // The stage state a callback sees, and what it adds.
   T* xs[3];
   T* vs[3];  // also the stage's position rate
@@ -257,7 +273,7 @@ struct StageJob {
   Combination<T> x, v;
   T accel_scale;
   const T* inv_mass;
-  const T* applied[3];  // as BodyArrays::applied
+  PerBody<T> per_body;
   T* acc[3];
   LocalForces<T> forces;
 };

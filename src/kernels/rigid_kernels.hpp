@@ -108,6 +108,23 @@ KINEMA_INLINE Vec<V> torque(const Rotational<V>& f, const B& body, const Rotatio
   return t;
 }
 
+// The body's angular damping, where its set has it: tau - c L, zero where inv_mass is 0.
+template <class V, class B>
+KINEMA_INLINE Vec<V> damped(const Vec<V>& tau, const B& body, const V* neg_rate, const Vec<V>& l) {
+  if (neg_rate == nullptr) return tau;
+  Vec<V> t;
+  for (int d = 0; d < 3; ++d) t.c[d] = pick(body.dynamic, mul_add(*neg_rate, l.c[d], tau.c[d]), V(0));
+  return t;
+}
+
+// -c per body at i, or nullptr when the set has no angular damping.
+template <class V>
+KINEMA_INLINE const V* neg_damping_at(const value_t<V>* rates, std::size_t i, V& storage) {
+  if (rates == nullptr) return nullptr;
+  storage = V(0) - load<V>(rates + i);
+  return &storage;
+}
+
 // The bodies' applied torques at i, or nullptr when the set has none.
 template <class V>
 KINEMA_INLINE const Vec<V>* applied_torque_at(const value_t<V>* const torques[3], std::size_t i, Vec<V>& storage) {
@@ -172,6 +189,8 @@ KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotatio
   Quat4<V> q0[U], kq[U][S];
   Vec<V> l0[U], inv_inertia[U], kl[U][S], applied_storage[U];
   const Vec<V>* applied[U];
+  V damping_storage[U];
+  const V* neg_damping[U];
   Dynamic<Mask> body[U];
   for (int u = 0; u < U; ++u) {
     q0[u] = load_n<4, V>(job.q, i + u * W);
@@ -179,6 +198,7 @@ KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotatio
     inv_inertia[u] = load3<V>(job.inv_inertia, i + u * W);
     body[u].dynamic = load<V>(job.bodies.inv_mass + i + u * W) != V(0);
     applied[u] = Applied ? applied_torque<V>(job, i + u * W, applied_storage[u]) : nullptr;
+    neg_damping[u] = Applied ? neg_damping_at<V>(job.angular_damping, i + u * W, damping_storage[u]) : nullptr;
   }
   static_for<S>([&](auto s) {
     constexpr Weights row = tab.a[s];
@@ -188,7 +208,7 @@ KINEMA_INLINE void rigid_rotation(const RigidJob<value_t<V>>& job, const Rotatio
       const Rotation<V> r = rotation(qs);
       const Vec<V> omega = angular_velocity(r, inv_inertia[u], ls);
       kq[u][s] = quaternion_rate(omega, qs);
-      kl[u][s] = torque(rf, body[u], r, omega, applied[u]);
+      kl[u][s] = damped(torque(rf, body[u], r, omega, applied[u]), body[u], neg_damping[u], ls);
     }
   });
   for (int u = 0; u < U; ++u) {
@@ -215,12 +235,12 @@ void rigid_runge_kutta(const RigidJob<value_t<V>>& shared, std::size_t begin, st
   constexpr double sigma = acceleration_scale(M.tableau);
   const Forces<V> f(job.forces, value_t<V>(sigma) * job.h);
   constexpr std::size_t W = Lane<V>::width;
-  if (job.bodies.applied[0] != nullptr) {
-    for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true, Applied::always>(job.bodies, f, job.h, i);
+  if (job.bodies.per_body.any()) {
+    for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true, Applied::if_present>(job.bodies, f, job.h, i);
   } else {
     for (std::size_t i = begin; i < end; i += W) runge_kutta_batch<M, Quadratic, Central, true, Applied::never>(job.bodies, f, job.h, i);
   }
-  if (job.torque[0] != nullptr) return rotation_pass<M, true, V>(job, begin, end);
+  if (job.torque[0] != nullptr || job.angular_damping != nullptr) return rotation_pass<M, true, V>(job, begin, end);
   rotation_pass<M, false, V>(job, begin, end);
 }
 
@@ -241,10 +261,12 @@ void rigid_kick_drift(const RigidJob<value_t<V>>& shared, std::size_t begin, std
   }
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     RigidState<V> s = load_rigid<V>(job, i);
-    const auto body = body_terms_at<Applied::if_present, true>(f, load<V>(job.bodies.inv_mass + i), job.bodies.applied, i);
+    const auto body = body_terms_at<Applied::if_present, true>(f, load<V>(job.bodies.inv_mass + i), job.bodies.per_body, i);
     const Vec<V> inv_inertia = load3<V>(job.inv_inertia, i);
     Vec<V> applied_storage;
     const Vec<V>* applied = applied_torque<V>(job, i, applied_storage);
+    V damping_storage;
+    const V* neg_damping = neg_damping_at<V>(job.angular_damping, i, damping_storage);
     auto rate = [&](const Quat4<V>& q) {
       return quaternion_rate(angular_velocity(rotation(q), inv_inertia, s.l), q);
     };
@@ -252,7 +274,7 @@ void rigid_kick_drift(const RigidJob<value_t<V>>& shared, std::size_t begin, std
       if constexpr (scheme.ops[k].kind == OpKind::kick) {
         const Rotation<V> r = rotation(s.q);
         const Vec<V> omega = angular_velocity(r, inv_inertia, s.l);
-        const Vec<V> tau = torque(rf, body, r, omega, applied);
+        const Vec<V> tau = damped(torque(rf, body, r, omega, applied), body, neg_damping, s.l);
         s.v = step_by(wh[k], accel_at<Quadratic, Central>(f, body, s.x, s.v), s.v);
         s.l = step_by(wh[k], tau, s.l);
       } else {
@@ -322,7 +344,7 @@ void rigid_block_rates(const RigidBlockJob<value_t<V>>& job, std::size_t begin, 
   const int s = job.stage;
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const V inv_mass = load<V>(job.inv_mass + i);
-    auto body = body_terms_at<Applied::if_present, true>(f, inv_mass, job.applied, i);
+    auto body = body_terms_at<Applied::if_present, true>(f, inv_mass, job.per_body, i);
     add_applied(body, f, inv_mass, load3<V>(job.force, i));
     const Vec<V> x = load3<V>(job.xs, i), v = load3<V>(job.vs, i), omega = load3<V>(job.omega, i);
     const Quat4<V> q = load_n<4, V>(job.qs, i);
@@ -333,7 +355,9 @@ void rigid_block_rates(const RigidBlockJob<value_t<V>>& job, std::size_t begin, 
       for (int d = 0; d < 3; ++d) extra.c[d] = extra.c[d] + applied->c[d];
     }
     // The rotation only where point forces turn with the body.
-    store3(job.kl[s], i, torque(rf, body, rf.point_count > 0 ? rotation(q) : Rotation<V>{}, omega, &extra));
+    const Vec<V> tau = torque(rf, body, rf.point_count > 0 ? rotation(q) : Rotation<V>{}, omega, &extra);
+    V damping_storage;
+    store3(job.kl[s], i, damped(tau, body, neg_damping_at<V>(job.angular_damping, i, damping_storage), load3<V>(job.ls, i)));
   }
 }
 

@@ -153,6 +153,9 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
     const std::size_t i = std::size_t((unsigned __int128)j * p.size() / np);  // no overflow
     const double inv = p.inv_mass()[i];
     out.particles.push_back({p.position(i), p.velocity(i), inv == 0 ? 1 : 1 / inv, inv == 0, p.applied_force(i)});
+    const BodyParameters<double>& own = p.parameters();
+    if (own.used(BodyParameter::linear_damping)) out.particles.back().damping = p.linear_damping(i);
+    if (own.used(BodyParameter::gravity_factor)) out.particles.back().gravity_factor = p.gravity_factor(i);
   }
   const RigidBodySet<double> r = make_rigid_bodies<double>(scene);
   const std::size_t nr = std::min(r.size(), max_bodies);
@@ -167,6 +170,10 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
     for (int d = 0; d < 3; ++d) b.inertia[d] = 1 / r.inv_inertia(d)[i];
     b.force = r.applied_force(i);
     b.torque = r.applied_torque(i);
+    const BodyParameters<double>& own = r.parameters();
+    if (own.used(BodyParameter::linear_damping)) b.damping = r.linear_damping(i);
+    if (own.used(BodyParameter::angular_damping)) b.angular_damping = r.angular_damping(i);
+    if (own.used(BodyParameter::gravity_factor)) b.gravity_factor = r.gravity_factor(i);
     out.rigid_bodies.push_back(b);
   }
   return out;
@@ -235,17 +242,17 @@ std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
     if (b.kinematic) {
       for (int d = 0; d < 3; ++d) m.x[d] = b.position[d] + b.velocity[d] * t, m.v[d] = b.velocity[d];
     } else if (kepler_only) {
-      if (b.force != Vec3<double>{}) return std::nullopt;  // a pushed orbit: no closed form
+      if (b.force != Vec3<double>{} || b.damping.value_or(0) != 0) return std::nullopt;  // no closed form
       const auto k = kepler(central, b, t);
       if (!k) return std::nullopt;
       m = *k;
     } else {
-      const double gamma = drag / b.mass, w2 = spring_k / b.mass;
+      const double gamma = drag / b.mass + b.damping.value_or(0), w2 = spring_k / b.mass;
       for (int d = 0; d < 3; ++d) {
         // y = x - anchor under y'' + gamma y' + w2 y = g (the spring pulls to its anchor).
         const double anchor = spring_k > 0 ? weighted_anchor[d] / spring_k : 0;
         // The body's applied force is one more constant acceleration.
-        const double a = g[d] + b.force[d] / b.mass;
+        const double a = g[d] * b.gravity_factor.value_or(1) + b.force[d] / b.mass;
         const auto [y, v] = linear_motion(b.position[d] - anchor, b.velocity[d], gamma, w2, a, t);
         m.x[d] = anchor + y, m.v[d] = v;
       }

@@ -62,7 +62,7 @@ LocalTerm parse_force(const Node& n) {
 }
 
 BodySpec parse_body(const Node& n) {
-  n.expect_object({"position", "velocity", "mass", "kinematic", "force"});
+  n.expect_object({"position", "velocity", "mass", "kinematic", "force", "damping", "gravity_factor"});
   BodySpec b;
   b.position = n.required("position").vec3();
   if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
@@ -70,6 +70,8 @@ BodySpec parse_body(const Node& n) {
   if (n.has("mass")) b.mass = n.child("mass").positive();
   if (n.has("force")) b.force = n.child("force").vec3();
   if (b.kinematic && n.has("force")) n.child("force").fail("a kinematic body ignores forces: give one or the other");
+  if (n.has("damping")) b.damping = n.child("damping").non_negative();
+  if (n.has("gravity_factor")) b.gravity_factor = n.child("gravity_factor").number();
   return b;
 }
 
@@ -126,13 +128,17 @@ Quat<double> parse_orientation(const Node& n) {
 
 RigidSpec parse_rigid(const Node& n) {
   n.expect_object({"position", "velocity", "orientation", "angular_velocity",
-                   "angular_momentum", "mass", "inertia", "force", "torque"});
+                   "angular_momentum", "mass", "inertia", "force", "torque", "damping", "angular_damping",
+                   "gravity_factor"});
   RigidSpec b;
   b.position = n.required("position").vec3();
   if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
   if (n.has("mass")) b.mass = n.child("mass").positive();
   if (n.has("force")) b.force = n.child("force").vec3();
   if (n.has("torque")) b.torque = n.child("torque").vec3();
+  if (n.has("damping")) b.damping = n.child("damping").non_negative();
+  if (n.has("angular_damping")) b.angular_damping = n.child("angular_damping").non_negative();
+  if (n.has("gravity_factor")) b.gravity_factor = n.child("gravity_factor").number();
   Quat<double> given{1, 0, 0, 0}, turn{1, 0, 0, 0};
   if (n.has("orientation")) given = parse_orientation(n.child("orientation"));
   if (n.has("inertia")) b.inertia = parse_inertia(n.child("inertia"), turn);

@@ -1,11 +1,13 @@
 #include "kinema/checkpoint.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <string>
 #include <string_view>
+#include <utility>
 
 #include "kinema/diagnostics.hpp"
 #include "core/fnv.hpp"
@@ -21,7 +23,20 @@ constexpr std::size_t kTrailerBytes = 4;
 constexpr std::size_t kMethodNameBytes = 32;
 
 enum class SetKind : std::uint8_t { particles = 1, rigid = 2 };
-enum Flags : std::uint8_t { kForces = 1, kTorques = 2, kKeepForces = 4, kKeptStage = 8 };
+enum Flags : std::uint8_t {
+  kForces = 1,
+  kTorques = 2,
+  kKeepForces = 4,
+  kKeptStage = 8,
+  // One array each, after the torques: the per-body parameters a set has set.
+  kGravityFactor = 16,
+  kLinearDamping = 32,
+  kAngularDamping = 64,
+};
+constexpr std::array<std::pair<Flags, BodyParameter>, 3> kParameterFlags{
+    {{kGravityFactor, BodyParameter::gravity_factor},
+     {kLinearDamping, BodyParameter::linear_damping},
+     {kAngularDamping, BodyParameter::angular_damping}}};
 // + 3 for forces, + 3 for torques, + 3 for a kept first stage
 constexpr std::size_t kParticleArrays = 7, kRigidArrays = 17;
 
@@ -85,6 +100,16 @@ struct detail::CheckpointCodec {
     for (int d = 0; d < 3; ++d) out.push_back(v.data(d));
   }
   template <class T>
+  static void parameters(const BodyParameters<T>& p, std::uint8_t& flags, std::vector<const T*>& out) {
+    for (const auto& [flag, kind] : kParameterFlags) {
+      if (p.used(kind)) flags |= flag, out.push_back(p.data(kind));
+    }
+  }
+  template <class T>
+  static const BodyParameters<T>& parameters(const ParticleSet<T>& b) { return b.params_; }
+  template <class T>
+  static const BodyParameters<T>& parameters(const RigidBodySet<T>& b) { return b.centers_.params_; }
+  template <class T>
   static const AppliedVectors<T>& forces(const ParticleSet<T>& b) { return b.applied_; }
   template <class T>
   static const AppliedVectors<T>& forces(const RigidBodySet<T>& b) { return b.centers_.applied_; }
@@ -107,6 +132,17 @@ struct detail::CheckpointCodec {
   }
 
   template <class T>
+  static void fill(BodyParameters<T>& p, std::size_t n, std::size_t capacity, std::uint8_t flags,
+                   const std::byte*& at) {
+    for (const auto& [flag, kind] : kParameterFlags) {
+      if (!(flags & flag)) continue;
+      p.ensure(capacity);
+      fill(p.arrays_[int(kind)], n, at);
+      p.used_[int(kind)] = true;
+    }
+  }
+
+  template <class T>
   static ParticleSet<T> particles(std::size_t n, const std::byte*& at) {
     ParticleSet<T> b;
     b.reserve(n);
@@ -120,6 +156,10 @@ struct detail::CheckpointCodec {
     b.keep_forces_ = (flags & kKeepForces) != 0;
   }
   template <class T>
+  static void finish_parameters(ParticleSet<T>& b, std::uint8_t flags, const std::byte*& at) {
+    fill(b.params_, b.size_, b.capacity(), flags, at);
+  }
+  template <class T>
   static RigidBodySet<T> rigid(std::size_t n, std::uint8_t flags, const std::byte*& at) {
     RigidBodySet<T> b;
     b.reserve(n);
@@ -131,6 +171,7 @@ struct detail::CheckpointCodec {
     for (auto& a : b.inv_inertia_) fill(a, n, at);
     finish(c, flags, at);
     if (flags & kTorques) fill(b.torques_, n, c.capacity(), at);
+    finish_parameters(c, flags, at);
     return b;
   }
 };
@@ -147,6 +188,7 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   std::uint8_t flags = bodies.keeps_forces() ? kKeepForces : 0;
   if (forces.active()) flags |= kForces, Codec::applied(forces, arrays);
   if (torques != nullptr && torques->active()) flags |= kTorques, Codec::applied(*torques, arrays);
+  Codec::parameters(Codec::parameters(bodies), flags, arrays);
   const AdaptiveContinuation& cont = StepperAccess<T>::continuation(stepper);
   if (cont.active && cont.kept_scale > 0) {
     flags |= kKeptStage;
@@ -271,6 +313,7 @@ namespace {
 std::size_t arrays_of(SetKind kind, std::uint8_t flags) {
   std::size_t n = kind == SetKind::particles ? kParticleArrays : kRigidArrays;
   for (const Flags f : {kForces, kTorques, kKeptStage}) n += flags & f ? 3 : 0;
+  for (const auto& p : kParameterFlags) n += flags & p.first ? 1 : 0;
   return n;
 }
 
@@ -283,7 +326,7 @@ std::size_t check_record_header(const std::byte* h, std::size_t left, std::size_
   const auto kind = SetKind(get<std::uint8_t>(h + rec::kind));
   const auto scalar = get<std::uint8_t>(h + rec::scalar), flags = get<std::uint8_t>(h + rec::flags);
   const bool known = (kind == SetKind::particles || kind == SetKind::rigid) && (scalar == 4 || scalar == 8) &&
-                     flags < 16 && !(kind == SetKind::particles && (flags & kTorques)) &&
+                     flags < 128 && !(kind == SetKind::particles && (flags & (kTorques | kAngularDamping))) &&
                      !(kind == SetKind::rigid && (flags & kKeptStage)) && get<std::uint8_t>(h + rec::guard) < 3 &&
                      get<std::uint8_t>(h + rec::continues) < 2 && get<std::uint8_t>(h + rec::rejected) < 2 &&
                      get<std::uint8_t>(h + rec::relaxed) < 2;
@@ -400,8 +443,24 @@ void check_inverse(const char* name, std::size_t k, const auto* values, std::siz
   }
 }
 
+// Gravity factors finite, damping rates finite and >= 0, as the setters keep them.
+template <class T>
+void check_parameters(const BodyParameters<T>& p, std::size_t k, std::size_t n) {
+  for (BodyParameter kind : {BodyParameter::linear_damping, BodyParameter::angular_damping}) {
+    if (p.used(kind)) check_inverse("damping rate", k, p.data(kind), n);
+  }
+  if (!p.used(BodyParameter::gravity_factor)) return;
+  const T* factor = p.data(BodyParameter::gravity_factor);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!std::isfinite(factor[i])) {
+      throw Error("checkpoint record " + std::to_string(k) + ": body " + std::to_string(i) + "'s gravity factor is not finite");
+    }
+  }
+}
+
 template <class Set>
 void check_values(const Set& b, std::size_t k) {
+  check_parameters(b.parameters(), k, b.size());
   if (const auto bad = first_non_finite(b)) {
     throw Error("checkpoint record " + std::to_string(k) + ": body " + std::to_string(bad->body) + "'s " +
                 bad->field + " is not finite");
@@ -423,6 +482,7 @@ ParticleSet<T> CheckpointReader::particles(std::size_t k, const Stepper<T>& step
   const std::byte* at = data_.data() + records_[k].arrays;
   ParticleSet<T> b = detail::CheckpointCodec::particles<T>(records_[k].bodies, at);
   detail::CheckpointCodec::finish(b, flags, at);
+  detail::CheckpointCodec::finish_parameters(b, flags, at);
   check_values(b, k);
   return b;
 }

@@ -45,7 +45,7 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
 
 template <class T>
 bool FixedSteps<T>::buffers(const ParticleSet<T>& b) const {
-  return !core_.paths.block && core_.paths.fused_for(b.has_applied_forces()) != nullptr;
+  return !core_.paths.block && core_.paths.fused_for(reads_per_body(b)) != nullptr;
 }
 
 // A call whose steps leave a value that is not finite leaves the set as it was; then one
@@ -71,7 +71,7 @@ std::optional<NonFinite> FixedSteps<T>::buffered_run(const Workers& w, ParticleS
   const LoweredForces<T>& lowered = core_.lowered();
   const StepContext<T> c = core_.start(b, h, lowered.particle, w);
   if (steps == 0) return std::nullopt;  // the buffer holds nothing of this call: no trade
-  const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
+  const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(reads_per_body(b));
   const StateArrays<T> into = buffer_.arrays(b);
   kernels::BodyArrays<T> body = arrays(b);
   for (int d = 0; d < 3; ++d) body.x[d] = into.data[d], body.v[d] = into.data[3 + d];
@@ -152,7 +152,8 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
                                  {b.inv_inertia(0), b.inv_inertia(1), b.inv_inertia(2)},
                                  lowered.rigid, lowered.rotation, h,
                                  core_.options.renormalize_quaternions,
-                                 {b.applied_torque_data(0), b.applied_torque_data(1), b.applied_torque_data(2)}};
+                                 {b.applied_torque_data(0), b.applied_torque_data(1), b.applied_torque_data(2)},
+                                 b.parameters().data(BodyParameter::angular_damping)};
   for_each_block(w, b.padded_size(), [&](Block block) {
     run_block(b, block, steps, guard, [&](Block k) { rigid_fn(job, k.begin, k.end); });
   });
@@ -165,7 +166,7 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   const LoweredForces<T>& lowered = core_.lowered();
   StepContext<T> c = core_.start(b, h, lowered.particle, w);
   c.stop = stop_;
-  const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(b.has_applied_forces());
+  const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(reads_per_body(b));
   if (core_.paths.block) {
     BlockPath<T>& path = *core_.paths.block;
     path.reserve(b.padded_size());

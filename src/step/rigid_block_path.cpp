@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "step/step_context.hpp"
+
 namespace kinema {
 
 template <class T>
@@ -61,13 +63,14 @@ kernels::RigidBlockJob<T> RigidBlockPath<T>::job(const Call& call) {
   for (int d = 0; d < 3; ++d) {
     j.x[d] = b.position_data(d), j.v[d] = b.velocity_data(d), j.l[d] = b.l(d);
     j.inv_inertia[d] = b.inv_inertia(d);
-    j.applied[d] = b.centers().applied_force_data(d);
     j.applied_torque[d] = b.applied_torque_data(d);
     j.xs[d] = xs_[d].data(), j.ls[d] = ls_[d].data();
     j.omega[d] = omega_[d].data();
     j.force[d] = force_[d].data(), j.torque[d] = torque_[d].data();
   }
   for (int k = 0; k < 4; ++k) j.q[k] = b.q(k), j.qs[k] = qs_[k].data();
+  j.per_body = per_body(b.centers());
+  j.angular_damping = b.parameters().data(BodyParameter::angular_damping);
   for (int s = 0; s < kMaxStages; ++s) {
     for (int d = 0; d < 3; ++d) {
       j.kx[s][d] = vs_[s][d].data();

@@ -285,7 +285,7 @@ kernels::StageJob<T> StagedPath<T>::stage_job(const StepContext<T>& c, int s) {
   job.inv_mass = c.bodies.inv_mass();
   job.forces = local_;
   auto body = arrays(c.bodies);
-  for (int d = 0; d < 3; ++d) job.applied[d] = body.applied[d];
+  job.per_body = body.per_body;
   for (int d = 0; d < 3; ++d) {
     job.x.in[d] = body.x[d];
     job.v.in[d] = body.v[d];

@@ -11,23 +11,35 @@
 
 namespace kinema {
 
+// What a set's bodies carry besides their state, as the kernels take it.
+template <class T>
+kernels::PerBody<T> per_body(const ParticleSet<T>& b) {
+  const BodyParameters<T>& p = b.parameters();
+  return {{b.applied_force_data(0), b.applied_force_data(1), b.applied_force_data(2)},
+          p.data(BodyParameter::gravity_factor),
+          p.data(BodyParameter::linear_damping)};
+}
+
+// Whether the kernels read anything of the bodies' own (the fused particle path's plain
+// variant reads none of it).
+template <class T>
+bool reads_per_body(const ParticleSet<T>& b) {
+  return per_body(b).any();
+}
+
 // A set's arrays as the kernels take them.
 template <class T>
 kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {
-  return {{b.px(), b.py(), b.pz()},
-          {b.vx(), b.vy(), b.vz()},
-          b.inv_mass(),
-          {b.applied_force_data(0), b.applied_force_data(1), b.applied_force_data(2)}};
+  return {{b.px(), b.py(), b.pz()}, {b.vx(), b.vy(), b.vz()}, b.inv_mass(), per_body(b)};
 }
 
 // The centres of mass of rigid bodies, likewise.
 template <class T>
 kernels::BodyArrays<T> center_arrays(RigidBodySet<T>& b) {
-  const ParticleSet<T>& c = b.centers();
   return {{b.position_data(0), b.position_data(1), b.position_data(2)},
           {b.velocity_data(0), b.velocity_data(1), b.velocity_data(2)},
-          c.inv_mass(),
-          {c.applied_force_data(0), c.applied_force_data(1), c.applied_force_data(2)}};
+          b.centers().inv_mass(),
+          per_body(b.centers())};
 }
 
 template <class T>
