@@ -1,5 +1,6 @@
 // Forces from the game, beside the fused rows of the same run: the bench scene (gravity,
 // linear drag, a spring) as built-in terms; the same with a force applied to every body; with
+// a gravity factor and damping rate per body (and angular damping for rigid bodies); with
 // gravity moved into a one-line callback (the block path); with a coupled term that adds
 // nothing (the staged path); and rigid bodies plain, with applied forces and torques, and
 // with their angular drag in a one-line callback (the rigid block path). Each iteration is one advance of kSteps steps, as a frame of a
@@ -7,6 +8,7 @@
 #include <benchmark/benchmark.h>
 
 #include <string>
+#include <type_traits>
 
 #include "bench_scene.hpp"
 
@@ -15,12 +17,13 @@ namespace {
 
 constexpr std::uint64_t kSteps = 20;
 
-enum class Variant { fused, applied, callback, staged };
+enum class Variant { fused, applied, parameters, callback, staged };
 
 const char* variant_name(Variant v) {
   switch (v) {
     case Variant::fused: return "fused";
     case Variant::applied: return "applied";
+    case Variant::parameters: return "parameters";
     case Variant::callback: return "callback";
     case Variant::staged: return "staged";
   }
@@ -34,6 +37,16 @@ class NoCoupling final : public CoupledTerm<T> {
   void accumulate(const ParticleState<T>&, const ParticleBlock<T>&) const override {}
   double potential_energy(const ParticleState<T>&) const override { return 0; }
 };
+
+// A gravity factor and a linear damping rate for every body, differing from body to body.
+template <class Set>
+void set_parameters(Set& bodies) {
+  using T = std::decay_t<decltype(bodies.gravity_factor(0))>;
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    bodies.set_gravity_factor(i, T(0.5) + T(0.25) * T(i % 3));
+    bodies.set_linear_damping(i, T(0.02) * T(i % 5));
+  }
+}
 
 // The bench scene's model, with gravity taken out of the built-in terms where the variant
 // gives it by callback.
@@ -64,6 +77,7 @@ void particle_forces(benchmark::State& state, Variant v) {
     bodies.keep_forces(true);  // a game applies them every frame; here once, and kept
     for (std::size_t i = 0; i < n; ++i) bodies.apply_force(i, {T(0.5), T(i % 3), T(-0.25)});
   }
+  if (v == Variant::parameters) set_parameters(bodies);
   stepper.advance(bodies, T(kDt), kSteps);  // warm: first touch, scratch
   std::int64_t k = 0;
   for (auto _ : state) {
@@ -97,6 +111,10 @@ void rigid_forces(benchmark::State& state, Variant v) {
   StepperOptions o;
   o.jobs = jobs.get();
   Stepper<T> stepper(rigid_variant_forces<T>(v, scene), rk4, o);
+  if (v == Variant::parameters) {
+    set_parameters(bodies);
+    for (std::size_t i = 0; i < n; ++i) bodies.set_angular_damping(i, T(0.01) * T(i % 4));
+  }
   if (v == Variant::applied) {
     bodies.keep_forces(true);
     for (std::size_t i = 0; i < n; ++i) {
@@ -115,12 +133,12 @@ void rigid_forces(benchmark::State& state, Variant v) {
 
 void register_all() {
   const std::string isa(isa_name(best_isa()));
-  for (Variant v : {Variant::fused, Variant::applied, Variant::callback, Variant::staged}) {
+  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback, Variant::staged}) {
     const std::string name = std::string("game/") + variant_name(v) + "/rk4/float/" + isa;
     benchmark::RegisterBenchmark(name.c_str(), particle_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
   }
-  for (Variant v : {Variant::fused, Variant::applied, Variant::callback}) {
+  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback}) {
     const std::string name = std::string("game/rigid-") + variant_name(v) + "/rk4/float/" + isa;
     benchmark::RegisterBenchmark(name.c_str(), rigid_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);

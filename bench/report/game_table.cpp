@@ -1,5 +1,5 @@
 // Forces from the game: the fused step beside the same bench scene with applied forces, with
-// a callback (the block path) and with a coupled term (the staged path), and the same for
+// per-body parameters, with a callback (the block path) and with a coupled term (the staged path), and the same for
 // rigid bodies, each against the fused row and the state stream of the same run.
 #include <cstdio>
 #include <string>
@@ -44,10 +44,12 @@ void print_game_table(const Results& results, Noise& noise) {
   const GameRow rows[] = {
       {"fused", "gravity, drag, spring: built-in terms", "fused", 52},
       {"applied", "the same and a force applied to every body", "fused", 64},
+      {"parameters", "a gravity factor and damping on every body", "fused", 60},
       {"callback", "gravity in a one-line callback (block path)", "fused", 52},
       {"staged", "a coupled term that adds nothing (staged)", "fused", 52},
       {"rigid-fused", "rigid bodies, angular drag built in", "rigid-fused", 120},
       {"rigid-applied", "and a force and torque on every body", "rigid-fused", 144},
+      {"rigid-parameters", "and gravity factor, damping, angular damping", "rigid-fused", 132},
       {"rigid-callback", "angular drag in a one-line callback", "rigid-fused", 120},
   };
   for (const GameRow& row : rows) print_row(results, noise, row, stream);
