@@ -48,9 +48,11 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
     const RigidSpec& b = scene.rigid_bodies[i];
     if (nonzero(b.force)) apply_scene_load("rigid_bodies", i, [&] { set.apply_force(i, converted<T>(b.force)); });
     if (nonzero(b.torque)) apply_scene_load("rigid_bodies", i, [&] { set.apply_torque(i, converted<T>(b.torque)); });
-    if (b.damping) set.set_linear_damping(i, T(*b.damping));
-    if (b.angular_damping) set.set_angular_damping(i, T(*b.angular_damping));
-    if (b.gravity_factor) set.set_gravity_factor(i, T(*b.gravity_factor));
+    apply_scene_load("rigid_bodies", i, [&] {
+      if (b.damping) set.set_linear_damping(i, T(*b.damping));
+      if (b.angular_damping) set.set_angular_damping(i, T(*b.angular_damping));
+      if (b.gravity_factor) set.set_gravity_factor(i, T(*b.gravity_factor));
+    });
   }
   set.keep_forces(true);
   for_each_generated_rigid_body(scene, add);
@@ -74,8 +76,10 @@ ParticleSet<T> make_particles(const Scene& scene) {
   for (std::size_t i = 0; i < scene.particles.size(); ++i) {
     const Vec3<double>& f = scene.particles[i].force;
     if (nonzero(f)) apply_scene_load("particles", i, [&] { set.apply_force(i, v3(f)); });
-    if (const auto& c = scene.particles[i].damping) set.set_linear_damping(i, T(*c));
-    if (const auto& g = scene.particles[i].gravity_factor) set.set_gravity_factor(i, T(*g));
+    apply_scene_load("particles", i, [&] {
+      if (const auto& c = scene.particles[i].damping) set.set_linear_damping(i, T(*c));
+      if (const auto& g = scene.particles[i].gravity_factor) set.set_gravity_factor(i, T(*g));
+    });
   }
   set.keep_forces(true);
   add_generated_particles(scene, set);

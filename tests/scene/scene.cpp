@@ -275,6 +275,48 @@ TEST_CASE("a scene's bodies may carry constant applied forces and torques", "[sc
   CHECK(exact->positions[0][1] == Approx(p.position(0)[1]).margin(1e-12));
 }
 
+TEST_CASE("a scene's bodies may carry a gravity factor and damping rates", "[scene][parameters]") {
+  const Scene s = parse_scene(R"({
+    "precision": "double",
+    "particles": [{"position": [0, 0, 0], "velocity": [1, 0, 0], "gravity_factor": 0.5, "damping": 0.8},
+                  {"position": [1, 0, 0]}],
+    "rigid_bodies": [{"position": [0, 0, 0], "angular_momentum": [0, 0, 2], "inertia": [0.5, 0.5, 0.5],
+                      "angular_damping": 1.5, "gravity_factor": 0}],
+    "forces": [{"type": "gravity", "g": [0, -9.81, 0]}]
+  })");
+  ParticleSet<double> p = make_particles<double>(s);
+  CHECK(p.gravity_factor(0) == 0.5);
+  CHECK(p.linear_damping(0) == 0.8);
+  CHECK(p.gravity_factor(1) == 1);
+  Stepper<double>(make_forces<double>(s), rk4, on_calling_thread()).advance(p, 0.01, 20);
+  RigidBodySet<double> r = make_rigid_bodies<double>(s);
+  CHECK(r.parameters().data(BodyParameter::linear_damping) == nullptr);  // only what the scene set
+  Stepper<double>(make_forces<double>(s), rk4, on_calling_thread()).advance(r, 0.01, 20);
+  CHECK(r.angular_momentum(0)[2] == Approx(2 * std::exp(-1.5 * 0.2)).epsilon(1e-8));  // rk4 at h = 0.01
+  CHECK(r.centers().velocity(0)[1] == 0);  // gravity factor 0
+
+  // The closed-form reference knows them.
+  Scene particles_only = s;
+  particles_only.rigid_bodies.clear();
+  const auto exact = analytic_states(particles_only, 0.2);
+  REQUIRE(exact);
+  for (std::size_t i : {0u, 1u}) {
+    for (int d = 0; d < 3; ++d) {
+      CHECK(exact->velocities[i][d] == Approx(p.velocity(i)[d]).margin(1e-10));
+      CHECK(exact->positions[i][d] == Approx(p.position(i)[d]).margin(1e-10));
+    }
+  }
+}
+
+TEST_CASE("per-body parameters in scenes are checked", "[scene][parameters][errors]") {
+  CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [0, 0, 0], "damping": -1}]})"),
+                    Catch::Contains("particles[0].damping"));
+  CHECK_THROWS_WITH(parse_scene(R"({"rigid_bodies": [{"position": [0, 0, 0], "angular_damping": "a"}]})"),
+                    Catch::Contains("rigid_bodies[0].angular_damping"));
+  const Scene big = parse_scene(R"({"particles": [{"position": [0, 0, 0], "gravity_factor": 1e39}]})");
+  CHECK_THROWS_WITH(make_particles<float>(big), Catch::Contains("particles[0]") && Catch::Contains("gravity factor"));
+}
+
 TEST_CASE("applied forces in scenes are checked", "[scene][applied][errors]") {
   CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [0, 0, 0], "kinematic": true, "force": [1, 0, 0]}]})"),
                     Catch::Contains("particles[0].force") && Catch::Contains("kinematic"));
