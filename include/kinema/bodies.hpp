@@ -137,6 +137,8 @@ class BodyParameters {
   bool any() const { return used_[0] || used_[1] || used_[2]; }
   bool used(BodyParameter k) const { return used_[int(k)]; }
   T at(BodyParameter k, std::size_t i) const { return used(k) ? arrays_[int(k)][i] : default_of(k); }
+  // The largest magnitude set since the kind was last cleared (what overflow checks use).
+  T largest(BodyParameter k) const { return used(k) ? largest_[int(k)] : default_of(k); }
   // The kind's array (the set's capacity long) once set, else nullptr (what the kernels test).
   const T* data(BodyParameter k) const { return used(k) ? arrays_[int(k)].data() : nullptr; }
   // Sets body i's value, allocating the arrays (for `capacity` bodies) at the first call.
@@ -146,15 +148,17 @@ class BodyParameters {
   void assign(const BodyParameters& other);  // only where fits: allocates nothing
   void copy_body(std::size_t from, std::size_t to);
   void clear_body(std::size_t i);  // the defaults
-  void clear() { used_ = {}; }
+  void clear() { used_ = {}, largest_ = {}; }
 
  private:
   friend struct detail::CheckpointCodec;
   bool allocated() const { return arrays_[0].size() > 0; }
-  void ensure(std::size_t capacity);  // all at least `capacity` long, new elements the defaults
+  // All at least `capacity` long (one SIMD width at least), new elements the defaults.
+  void ensure(std::size_t capacity);
 
   std::array<AlignedArray<T>, kKinds> arrays_;
   std::array<bool, kKinds> used_{};
+  std::array<T, kKinds> largest_{};
 };
 
 template <class T>

@@ -11,8 +11,10 @@
 //
 // What a record holds: every real body's state as its set stores it (positions, velocities,
 // inverse mass; rigid bodies also orientation, angular momentum, inverse moments), the
-// applied forces and torques when the set has them and whether it keeps them, the stepper's
-// clock exactly (Stepper::clock) and the step advance_to last proposed, and what the record
+// applied forces and torques when the set has them and whether it keeps them, the per-body
+// parameters it has set (gravity factors, damping rates; a particle record leaves out angular
+// damping), the stepper's clock exactly (Stepper::clock) and the step advance_to last
+// proposed, and what the record
 // may only be restored under: the precision, the kind of set, the method, the force model's
 // fingerprint (ForceModel::fingerprint), the finiteness guard's settings and relaxed_fma;
 // and when an advance_to call was stopped early (AdaptiveStats::stopped), what its next call

@@ -113,6 +113,23 @@ T inverse_mass(T mass, std::size_t i) {
   return inv_mass;
 }
 
+// Grows a set's optional arrays (all or none) to at least `capacity` elements (one at least:
+// an empty set's arrays exist too, once used), contents kept, new elements `fill`. New arrays
+// first, moved in once all exist: a failed allocation changes nothing.
+template <class T, std::size_t N>
+void grow_all(std::array<AlignedArray<T>, N>& arrays, std::size_t capacity, const std::array<T, N>& fill) {
+  capacity = std::max<std::size_t>(capacity, 1);
+  const std::size_t kept = arrays[0].size();
+  if (kept >= capacity) return;
+  std::array<AlignedArray<T>, N> grown;
+  for (std::size_t k = 0; k < N; ++k) {
+    grown[k] = AlignedArray<T>(capacity);
+    if (kept > 0) std::copy_n(arrays[k].data(), kept, grown[k].data());
+    std::fill(grown[k].data() + kept, grown[k].data() + grown[k].size(), fill[k]);
+  }
+  arrays = std::move(grown);
+}
+
 }  // namespace
 
 template <class T>
@@ -140,16 +157,9 @@ void AppliedVectors<T>::add(std::size_t i, const Vec3<T>& v, std::size_t capacit
   for (int d = 0; d < 3; ++d) arrays_[d][i] += v[d];
 }
 
-// New arrays first, moved in once all three exist: a failed allocation changes nothing.
 template <class T>
 void AppliedVectors<T>::ensure(std::size_t capacity) {
-  if (allocated() && arrays_[0].size() >= capacity) return;
-  std::array<AlignedArray<T>, 3> grown;
-  for (int d = 0; d < 3; ++d) {
-    grown[d] = AlignedArray<T>(std::max(capacity, arrays_[d].size()));
-    if (allocated()) grown[d] = arrays_[d];  // fits: no allocation
-  }
-  arrays_ = std::move(grown);
+  grow_all(arrays_, capacity, {});
 }
 
 template <class T>
@@ -185,23 +195,18 @@ void AppliedVectors<T>::clear_body(std::size_t i) {
 template <class T>
 void BodyParameters<T>::set(BodyParameter k, std::size_t i, T value, std::size_t capacity) {
   ensure(capacity);
-  if (!used(k)) std::fill_n(arrays_[int(k)].data(), arrays_[int(k)].size(), default_of(k));
+  if (!used(k)) {
+    std::fill_n(arrays_[int(k)].data(), arrays_[int(k)].size(), default_of(k));
+    largest_[int(k)] = std::abs(default_of(k));
+  }
   used_[int(k)] = true;
   arrays_[int(k)][i] = value;
+  largest_[int(k)] = std::max(largest_[int(k)], std::abs(value));
 }
 
-// New arrays first, moved in once all exist: a failed allocation changes nothing.
 template <class T>
 void BodyParameters<T>::ensure(std::size_t capacity) {
-  if (allocated() && arrays_[0].size() >= capacity) return;
-  std::array<AlignedArray<T>, kKinds> grown;
-  for (int k = 0; k < kKinds; ++k) {
-    grown[k] = AlignedArray<T>(std::max(capacity, arrays_[k].size()));
-    const std::size_t kept = allocated() ? arrays_[k].size() : 0;
-    if (kept > 0) std::copy_n(arrays_[k].data(), kept, grown[k].data());
-    std::fill(grown[k].data() + kept, grown[k].data() + grown[k].size(), default_of(BodyParameter(k)));
-  }
-  arrays_ = std::move(grown);
+  grow_all(arrays_, capacity, {default_of(BodyParameter(0)), default_of(BodyParameter(1)), default_of(BodyParameter(2))});
 }
 
 template <class T>
@@ -224,6 +229,7 @@ void BodyParameters<T>::assign(const BodyParameters& other) {
     }
   }
   used_ = other.used_;
+  largest_ = other.largest_;
 }
 
 template <class T>

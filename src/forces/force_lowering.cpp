@@ -91,11 +91,28 @@ void check_scaled_forces(const kernels::LocalForces<T>& f, const CoupledForces<T
   }
 }
 
+template <class T>
+void check_scaled_parameters(const BodyParameters<T>& own, const kernels::LocalForces<T>& f, T scale, T h) {
+  if (!own.any()) return;
+  const T factor = own.largest(BodyParameter::gravity_factor);
+  bool finite = std::isfinite(own.largest(BodyParameter::linear_damping) * scale) &&
+                std::isfinite(own.largest(BodyParameter::angular_damping) * h);
+  for (int d = 0; d < 3; ++d) finite = finite && std::isfinite(factor * (f.gravity[d] * scale));
+  if (!finite) {
+    throw Error("step size h = " + shortest_text(h) + " times the bodies' gravity factors or damping rates overflows " +
+                type_name<T>() + "; take a smaller step");
+  }
+}
+
 template LoweredForces<float> lower_forces<float>(std::span<const LocalTerm>);
 template LoweredForces<double> lower_forces<double>(std::span<const LocalTerm>);
 template void check_scaled_forces<float>(const kernels::LocalForces<float>&, const CoupledForces<float>&, float,
                                          float);
 template void check_scaled_forces<double>(const kernels::LocalForces<double>&, const CoupledForces<double>&, double,
                                           double);
+template void check_scaled_parameters<float>(const BodyParameters<float>&, const kernels::LocalForces<float>&, float,
+                                             float);
+template void check_scaled_parameters<double>(const BodyParameters<double>&, const kernels::LocalForces<double>&,
+                                              double, double);
 
 }  // namespace kinema

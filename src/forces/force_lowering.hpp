@@ -6,6 +6,7 @@
 
 #include "forces/coupled_forces.hpp"
 #include "kernels/kernels.hpp"
+#include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
 
 namespace kinema {
@@ -27,5 +28,9 @@ LoweredForces<T> lower_forces(std::span<const LocalTerm> terms);
 // names the step.
 template <class T>
 void check_scaled_forces(const kernels::LocalForces<T>& forces, const CoupledForces<T>& coupled, T scale, T h);
+// The same for a set's own parameters: the largest gravity factor times gravity, the largest
+// damping rates, times the step.
+template <class T>
+void check_scaled_parameters(const BodyParameters<T>& own, const kernels::LocalForces<T>& forces, T scale, T h);
 
 }  // namespace kinema

@@ -382,9 +382,9 @@ struct KernelTable {
   NBodyFn<T> nbody;
   SpringFn<T> springs;
   InterpolateFn<T> interpolate;
-  // The particle block path, Runge-Kutta methods: a stage's state (zeroing the callbacks'
-  // forces); its accelerations [quadratic][central]; the final combination. Kick-drift
-  // methods: a kick [quadratic][central] and a drift. Null where a method is kick-drift.
+  // The particle block path, Runge-Kutta methods: a stage's rates and the next stage's state
+  // or the step's end [quadratic][central] (null where a method is kick-drift); kick-drift
+  // methods: a kick [quadratic][central] and a drift.
   BlockStageFn<T> block_advance[kBuiltinCount][2][2];
   BlockStepFn<T> block_kick[2][2];
   BlockStepFn<T> block_drift;

@@ -99,10 +99,13 @@ struct detail::CheckpointCodec {
   static void applied(const AppliedVectors<T>& v, std::vector<const T*>& out) {
     for (int d = 0; d < 3; ++d) out.push_back(v.data(d));
   }
+  // A particle record leaves out angular damping (a set copied from rigid bodies' centres
+  // may carry it; particles never read it).
   template <class T>
-  static void parameters(const BodyParameters<T>& p, std::uint8_t& flags, std::vector<const T*>& out) {
-    for (const auto& [flag, kind] : kParameterFlags) {
-      if (p.used(kind)) flags |= flag, out.push_back(p.data(kind));
+  static void parameters(const BodyParameters<T>& p, SetKind kind, std::uint8_t& flags, std::vector<const T*>& out) {
+    for (const auto& [flag, parameter] : kParameterFlags) {
+      if (kind == SetKind::particles && parameter == BodyParameter::angular_damping) continue;
+      if (p.used(parameter)) flags |= flag, out.push_back(p.data(parameter));
     }
   }
   template <class T>
@@ -137,8 +140,11 @@ struct detail::CheckpointCodec {
     for (const auto& [flag, kind] : kParameterFlags) {
       if (!(flags & flag)) continue;
       p.ensure(capacity);
-      fill(p.arrays_[int(kind)], n, at);
+      AlignedArray<T>& a = p.arrays_[int(kind)];
+      fill(a, n, at);
       p.used_[int(kind)] = true;
+      p.largest_[int(kind)] = std::abs(BodyParameters<T>::default_of(kind));
+      for (std::size_t i = 0; i < n; ++i) p.largest_[int(kind)] = std::max(p.largest_[int(kind)], std::abs(a[i]));
     }
   }
 
@@ -188,7 +194,7 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   std::uint8_t flags = bodies.keeps_forces() ? kKeepForces : 0;
   if (forces.active()) flags |= kForces, Codec::applied(forces, arrays);
   if (torques != nullptr && torques->active()) flags |= kTorques, Codec::applied(*torques, arrays);
-  Codec::parameters(Codec::parameters(bodies), flags, arrays);
+  Codec::parameters(Codec::parameters(bodies), kind, flags, arrays);
   const AdaptiveContinuation& cont = StepperAccess<T>::continuation(stepper);
   if (cont.active && cont.kept_scale > 0) {
     flags |= kKeptStage;

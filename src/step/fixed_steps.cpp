@@ -139,6 +139,8 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
     throw Error("rigid bodies take no coupled terms (N-body gravity, springs, CoupledTerm)");
   }
   const LoweredForces<T>& lowered = core_.lowered();
+  core_.check_step_size(h, lowered.rigid);
+  check_scaled_parameters(b.parameters(), lowered.rigid, core_.accel_scale(h), h);
   core_.begin(h, lowered.rigid);
   if (rigid_fn == nullptr) {
     RigidBlockPath<T>& path = *core_.paths.rigid_block;
@@ -194,8 +196,9 @@ void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* gu
   run_blocks(c.workers, c.bodies, blocks, steps, guard);
 }
 
-// The block path: each block takes every step of the call while it is in cache, as the fused
-// path does; step k's callbacks see the clock's time k steps on. Where user code may throw,
+// The block path: each slice of a block takes every step of the call while its stage state is
+// in L1, as the fused path keeps a block in cache; step k's callbacks see the clock's time k
+// steps on. Where user code may throw,
 // each block keeps its state as it starts. After a throw, blocks have run ahead of one
 // another: every block started is put back and the steps before the first one that threw
 // are taken again (callbacks are pure functions of their block, so they give the same

@@ -73,8 +73,8 @@ class StagedPath {
     return {stage_a_[0][0].data(), stage_a_[0][1].data(), stage_a_[0][2].data()};
   }
 
-  // The block path (no coupled terms): a driver may run each block through all the steps of
-  // a call while it is in cache, one step_block per step. A block's steps see nothing of
+  // The block path (no coupled terms): a driver may run each slice of a block through all the
+  // steps of a call while it is in cache, one step_block per step. A block's steps see nothing of
   // the others, so the bits are those of step().
   bool blocks_alone() const { return !coupled(); }
   bool may_throw() const { return !forces_.callbacks().empty() || !forces_.coupled_terms().empty(); }

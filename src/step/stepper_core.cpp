@@ -45,6 +45,8 @@ void StepperCore<T>::begin(T h, const kernels::LocalForces<T>& local) {
 template <class T>
 StepContext<T> StepperCore<T>::start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local,
                                      const Workers& workers) {
+  check_step_size(h, local);
+  check_scaled_parameters(bodies.parameters(), local, accel_scale(h), h);
   begin(h, local);
   return {bodies, h, accel_scale(h), 0, workers};
 }

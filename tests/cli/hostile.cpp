@@ -207,8 +207,10 @@ std::vector<Case> scene_cases() {
       {R"({"rigid_bodies": [{"position": [0,0,0], "angular_velocity": [1,0,0], "angular_momentum": [1,0,0]}]})", run_args(), 1, "angular_velocity or angular_momentum, not both"},
       // Runaway searches: refused at once, or bounded.
       {"", {"run", kSpring, "-q", "--method", "auto", "--tolerance", "1e-300"}, 1, "is below the round-off of one step in double"},
+#ifndef KINEMA_SANITIZED  // 1 s of pilot runs here, over 3 minutes unoptimized under ASan
       {R"({"precision": "float", "rigid_bodies": [{"position": [0,0,0], "angular_velocity": [3e37, 1e37, 0], "inertia": [1,2,3]}], "method": "auto", "tolerance": 1e-3})",
        run_args(), 1, "auto: no method reaches tolerance 0.001"},
+#endif
       {"", {"run", kSpring, "-q", "--method", "auto", "--tolerance", "1e-6", "--steps", "1099511627776", "--dt", "1e-9"}, 1,
        "auto: no method reaches tolerance 1e-06 within 2^22 steps or 2^28 body-steps"},
   };

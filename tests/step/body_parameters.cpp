@@ -239,3 +239,47 @@ TEST_CASE("a checkpoint keeps the parameters: the resumed run gives the bits of 
   r.advance(resumed, 0.01f, 10);
   CHECK(test::state_hash(resumed) == test::state_hash(straight));
 }
+
+TEST_CASE("parameters of an empty set survive a checkpoint; a particle record leaves out angular damping",
+          "[checkpoint][parameters]") {
+  Stepper<float> s(ForceModel<float>{}, rk4, test::serial_options());
+  ParticleSet<float> emptied;
+  emptied.add({0, 0, 0}, {}, 1);
+  emptied.set_gravity_factor(0, 2);
+  emptied.apply_force(0, {1, 0, 0});
+  emptied.remove(0);
+  CheckpointWriter out;
+  out.add(emptied, s);
+  ParticleSet<float> back;
+  CheckpointReader(out.bytes()).restore(0, back, s);
+  for (int k = 0; k < 40; ++k) back.add({0, 0, 0}, {}, 1);  // grows arrays that exist
+  CHECK(back.gravity_factor(39) == 1.0f);
+  CHECK(back.applied_force(39) == Vec3<float>{});
+
+  RigidBodySet<float> r;
+  r.add({});
+  r.set_angular_damping(0, 0.5f);
+  ParticleSet<float> centers = r.centers();  // carries the angular damping array
+  CheckpointWriter particles;
+  particles.add(centers, s);
+  ParticleSet<float> restored;
+  CheckpointReader(particles.bytes()).restore(0, restored, s);
+  CHECK(restored.size() == 1);
+}
+
+TEST_CASE("a gravity factor or damping rate that overflows with the step is refused before the step",
+          "[errors][parameters]") {
+  ForceModel<float> f;
+  f.add(Gravity{{0, -10, 0}});
+  ParticleSet<float> b;
+  b.add({0, 0, 0}, {}, 1);
+  b.set_gravity_factor(0, 3e38f);  // finite; times g = 10 it is not
+  Stepper<float> s(f, rk4, test::serial_options());
+  CHECK_THROWS_WITH(s.step(b, 1.0f), Catch::Contains("gravity factors or damping rates overflows"));
+  CHECK(b.position(0) == Vec3<float>{});
+  CHECK(s.time() == 0);
+  RigidBodySet<float> r;
+  r.add({});
+  r.set_angular_damping(0, 3e38f);
+  CHECK_THROWS_WITH(s.step(r, 10.0f), Catch::Contains("overflows"));
+}
