@@ -47,9 +47,9 @@ KINEMA_INLINE Vec<V> callback_rates(const Forces<V>& f, const value_t<V>* inv_ma
 
 // Stage S's rates from its state and what the callbacks added (zeroed after they are read:
 // the next stage's callbacks add to zero); then the state of stage S + 1, or after the last
-// stage the step's end
-// x + h sum_j b_j kx_j, v + sum_j (b_j / sigma) kv_j. The same arithmetic as the fused kernels;
-// a stage's rates are kept only where a later stage or the end reads them.
+// stage the step's end x + h sum_j b_j kx_j, v + sum_j (b_j / sigma) kv_j. The same
+// arithmetic as the fused kernels; a stage's rates are kept only where a later stage or the
+// end reads them.
 template <const Method& M, int S, bool Quadratic, bool Central, class V>
 KINEMA_INLINE void block_advance_at(const BlockJob<value_t<V>>& job, value_t<V>* scratch, std::size_t begin,
                                     std::size_t count) {

@@ -99,9 +99,9 @@ KINEMA_INLINE void add_applied(B& body, const Forces<V>& f, const V& inv_mass, c
   }
 }
 
-// Whether a kernel reads the set's applied forces: never (a plain fused variant), when the
-// set has them (tested once per batch), or always (the fused variant for sets that have).
-enum class Applied { never, if_present, always };
+// Whether a kernel reads the bodies' own forces and parameters: never (a plain fused
+// variant), or those the set has (tested once per batch).
+enum class Applied { never, if_present };
 
 // The fused particle kernels' variants: plain, with central terms (and the bodies' own forces
 // and parameters where present), with the bodies' own forces and parameters. A model pays
@@ -129,15 +129,13 @@ KINEMA_INLINE void add_parameters(B& body, const Forces<V>& f, const V& inv_mass
   }
 }
 
-// body_terms, plus the body's parameters where its set has them (never for the plain
-// variant), plus the applied forces as A says.
+// body_terms, plus the body's parameters and applied forces where its set has them and A
+// reads them.
 template <Applied A, bool Pushed = false, class V, class T>
 KINEMA_INLINE auto body_terms_at(const Forces<V>& f, const V& inv_mass, const PerBody<T>& p, std::size_t i) {
   auto body = body_terms<Pushed>(f, inv_mass);
-  if constexpr (A != Applied::never) add_parameters<Pushed>(body, f, inv_mass, p, i);
-  if constexpr (A == Applied::always) {
-    add_applied(body, f, inv_mass, load3<V>(p.applied, i));
-  } else if constexpr (A == Applied::if_present) {
+  if constexpr (A == Applied::if_present) {
+    add_parameters<Pushed>(body, f, inv_mass, p, i);
     if (p.applied[0] != nullptr) add_applied(body, f, inv_mass, load3<V>(p.applied, i));
   }
   return body;

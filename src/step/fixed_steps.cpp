@@ -139,9 +139,7 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
     throw Error("rigid bodies take no coupled terms (N-body gravity, springs, CoupledTerm)");
   }
   const LoweredForces<T>& lowered = core_.lowered();
-  core_.check_step_size(h, lowered.rigid);
-  check_scaled_parameters(b.parameters(), lowered.rigid, core_.accel_scale(h), h);
-  core_.begin(h, lowered.rigid);
+  core_.begin(h, lowered.rigid, b.parameters());
   if (rigid_fn == nullptr) {
     RigidBlockPath<T>& path = *core_.paths.rigid_block;
     path.reserve(b.padded_size());

@@ -37,17 +37,16 @@ void StepperCore<T>::check_step_size(T h, const kernels::LocalForces<T>& local) 
 }
 
 template <class T>
-void StepperCore<T>::begin(T h, const kernels::LocalForces<T>& local) {
+void StepperCore<T>::begin(T h, const kernels::LocalForces<T>& local, const BodyParameters<T>& own) {
   check_step_size(h, local);
+  check_scaled_parameters(own, local, accel_scale(h), h);
   clock.use(h);
 }
 
 template <class T>
 StepContext<T> StepperCore<T>::start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local,
                                      const Workers& workers) {
-  check_step_size(h, local);
-  check_scaled_parameters(bodies.parameters(), local, accel_scale(h), h);
-  begin(h, local);
+  begin(h, local, bodies.parameters());
   return {bodies, h, accel_scale(h), 0, workers};
 }
 

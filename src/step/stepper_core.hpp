@@ -34,8 +34,9 @@ class StepperCore {
   // Throws what a step of size h would throw to a set feeling `local` (the particles' or the
   // rigid bodies' terms, which add the point forces' push).
   void check_step_size(T h, const kernels::LocalForces<T>& local) const;
-  // Starts a call of steps of size h: checks h, and a new h moves the clock's origin to now.
-  void begin(T h, const kernels::LocalForces<T>& local);
+  // Starts a call of steps of size h for a set whose own parameters are `own`: checks h (and
+  // the parameters' overflow with it), and a new h moves the clock's origin to now.
+  void begin(T h, const kernels::LocalForces<T>& local, const BodyParameters<T>& own);
   // begin(), and the call's context.
   StepContext<T> start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local, const Workers& workers);
   // The staged path that evaluates accelerations alone (Euler's first stage), made at the
