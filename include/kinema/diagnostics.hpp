@@ -48,7 +48,7 @@ template <class T>
 double spring_frequency_bound(const ParticleSet<T>& bodies, std::span<const SpringPair> pairs);
 
 // Rigid bodies: kinetic energy includes the rotational part 1/2 L . omega; the potential
-// is that of the centres of mass; angular momentum adds each body's spin L to m x cross v.
+// is that of the centres of mass plus the point springs' and body springs'; angular momentum adds each body's spin L to m x cross v.
 template <class T>
 double rotational_energy(const RigidBodySet<T>& bodies);
 template <class T>

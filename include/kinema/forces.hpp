@@ -60,9 +60,21 @@ struct PointForce {
   Vec3<double> point{};
   Vec3<double> force{};
 };
+// a body-fixed point (body frame, from the centre of mass) held to a world anchor by a
+// damped spring: with P = x + R point and V = v + omega x (R point) its world position and
+// velocity, the force F = -k (P - anchor) - damping V at P (on the centre, and the torque
+// (R point) x F). A top held at its tip, a pendulum at its pivot. It takes the rigid block
+// path (its force turns with the body).
+struct PointSpring {
+  Vec3<double> point{};
+  Vec3<double> anchor{};
+  double k = 0;
+  double damping = 0;
+};
 
-// Coupled terms: forces between the bodies of a set (particles; rigid bodies take local
-// terms only). They take the staged path.
+// Coupled terms: forces between the bodies of a set. They take the staged path (rigid
+// bodies: the rigid path's staged passes). N-body gravity, spring pairs and CoupledTerms
+// act on particles and on rigid bodies' centres; body springs on rigid bodies only.
 //
 // Softened Newtonian gravity among all bodies:
 //   a_i = G sum_{j != i} m_j (x_j - x_i) / (|x_j - x_i|^2 + softening^2)^(3/2).
@@ -96,8 +108,28 @@ inline constexpr std::size_t kMaxSpringBodies = std::size_t(1) << 30;
 inline constexpr std::size_t kMaxSpringsPerBody = 1024;
 inline constexpr std::size_t kMaxSpringPairs = std::size_t(1) << 31;
 
+// A damped spring between points of rigid bodies i and j (i != j), each point in its body's
+// frame from its centre of mass. With P the points' world positions, V their world velocities
+// (v + omega x (R point)) and d = P_i - P_j,
+//   F_i = -k (|d| - rest) d/|d| - damping ((V_i - V_j) . d/|d|) d/|d| = -F_j,
+// each at its point: the torques (R point_i) x F_i and (R point_j) x F_j. Coincident points
+// exert no force. Each body sums its springs in the order added and F_j is the exact
+// negation of F_i, so action equals reaction to the bit and the bits do not depend on
+// threads or instruction sets. A kinematic body (inv_mass 0) is an anchor that moves on its
+// own; particles ignore body springs.
+struct BodySpring {
+  std::uint32_t i = 0, j = 0;
+  Vec3<double> point_i{}, point_j{};
+  double rest = 0;     // finite and >= 0
+  double k = 0;        // finite and >= 0
+  double damping = 0;  // finite and >= 0
+};
+struct BodySprings {
+  std::vector<BodySpring> springs;
+};
+
 using LocalTerm = std::variant<Gravity, LinearDrag, QuadraticDrag, Spring, Central, Torque,
-                               AngularDrag, PointForce>;
+                               AngularDrag, PointForce, PointSpring>;
 
 // At most this many central attractors, and point forces, per model (they are evaluated
 // in registers).
@@ -188,6 +220,8 @@ class ForceModel {
   // refused, naming both.
   ForceModel& add(const Springs& term);
   ForceModel& add(Springs&& term);  // the first network's pairs move in, uncopied
+  // Joins the model's body springs (the same limits as spring pairs).
+  ForceModel& add(const BodySprings& term);
 
   std::span<const LocalTerm> local_terms() const { return local_; }
   std::span<const ForceCallback<T>> callbacks() const { return callbacks_; }
@@ -195,8 +229,11 @@ class ForceModel {
   std::span<const std::shared_ptr<const CoupledTerm<T>>> coupled_terms() const { return coupled_; }
   const std::optional<NBody>& nbody() const { return nbody_; }
   std::span<const SpringPair> springs() const { return springs_; }
-  // True when the model couples bodies: N-body gravity, springs or a CoupledTerm.
+  std::span<const BodySpring> body_springs() const { return body_springs_; }
+  // True when the model couples particles: N-body gravity, springs or a CoupledTerm.
   bool coupled() const { return nbody_ || !springs_.empty() || !coupled_.empty(); }
+  // True when it couples rigid bodies: those, or body springs.
+  bool couples_rigid() const { return coupled() || !body_springs_.empty(); }
   // True when every term is local and built in: the fused path applies (to particles; to
   // rigid bodies when there is no RigidCallback either).
   bool fusable() const { return callbacks_.empty() && !coupled(); }
@@ -212,12 +249,15 @@ class ForceModel {
   std::vector<std::shared_ptr<const CoupledTerm<T>>> coupled_;
   std::optional<NBody> nbody_;
   std::vector<SpringPair> springs_;
+  std::vector<BodySpring> body_springs_;
 };
 
 // Throws kinema::Error naming `what`[k] and the field of the first bad pair in `pairs`
 // (an index past kMaxSpringBodies, i == j, a parameter out of range, a pair repeated, a
 // body with more than kMaxSpringsPerBody springs).
 void check_springs(std::span<const SpringPair> pairs, const std::string& what);
+// The same for body springs (a point not finite too).
+void check_body_springs(std::span<const BodySpring> springs, const std::string& what);
 // Throws kinema::Error naming `what` when G or the softening is not finite and >= 0.
 void check_nbody(const NBody& term, const std::string& what);
 

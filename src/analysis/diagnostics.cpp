@@ -7,6 +7,7 @@
 
 #include "forces/coupled_forces.hpp"
 #include "forces/force_terms.hpp"
+#include "forces/rigid_coupling.hpp"
 
 namespace kinema {
 namespace {
@@ -131,7 +132,7 @@ double rotational_energy(const RigidBodySet<T>& b) {
 template <class T>
 EnergyReport energy(const RigidBodySet<T>& b, const ForceModel<T>& forces) {
   return {kinetic_energy(b.centers()) + rotational_energy(b),
-          potential_energy(b.centers(), forces)};
+          potential_energy(b.centers(), forces) + rigid_coupling_potential(b, forces)};
 }
 
 template <class T>

@@ -210,6 +210,21 @@ struct TermInfo<PointForce> {
   static double potential(const PointForce&, const Position&, double) { return 0; }
 };
 
+template <>
+struct TermInfo<PointSpring> {
+  static constexpr std::string_view name = "point_spring";
+  static constexpr TermKind kind = TermKind::rotational;
+  static constexpr std::tuple fields{vector_field("point", true, &PointSpring::point),
+                                     vector_field("anchor", false, &PointSpring::anchor),
+                                     number_field("k", true, &PointSpring::k),
+                                     number_field("damping", false, &PointSpring::damping)};
+  static constexpr int max_count = 0;
+  static constexpr ReferenceRule reference = ReferenceRule::none;  // moves rigid bodies only, no closed form
+  static void lower(const PointSpring&, LocalSums&) {}  // the rigid path reads the model's own (rigid_coupling)
+  static constexpr bool has_potential = false;  // of the centres alone; rigid_potential_energy counts it
+  static double potential(const PointSpring&, const Position&, double) { return 0; }
+};
+
 // fn.template operator()<Term>() for every alternative of LocalTerm, in order.
 template <class Fn>
 void for_each_term(Fn&& fn) {

@@ -109,6 +109,22 @@ void check_springs(std::span<const SpringPair> pairs, const std::string& what) {
   check_degrees(pairs, what);
 }
 
+void check_body_springs(std::span<const BodySpring> springs, const std::string& what) {
+  if (springs.size() >= kMaxSpringPairs) throw Error(what + ": 2^31 springs or more");
+  std::vector<SpringPair> pairs(springs.size());
+  for (std::size_t k = 0; k < springs.size(); ++k) {
+    const BodySpring& s = springs[k];
+    pairs[k] = {s.i, s.j, s.rest, s.k, s.damping};
+    check_pair(pairs[k], pair_name(what, k));
+    for (auto [key, point] : {std::pair{".point_i", &s.point_i}, std::pair{".point_j", &s.point_j}}) {
+      if (!std::all_of(point->begin(), point->end(), [](double x) { return std::isfinite(x); })) {
+        throw Error(pair_name(what, k) + key + ": must be finite");
+      }
+    }
+  }
+  check_degrees(pairs, what);  // two bodies may share several springs (at other points)
+}
+
 void check_nbody(const NBody& term, const std::string& what) {
   check_number(term.G, what + ".G");
   check_number(term.softening, what + ".softening");
@@ -176,6 +192,15 @@ ForceModel<T>& ForceModel<T>::add(Springs&& term) {
   return *this;
 }
 
+template <class T>
+ForceModel<T>& ForceModel<T>::add(const BodySprings& term) {
+  std::vector<BodySpring> joined = body_springs_;
+  joined.insert(joined.end(), term.springs.begin(), term.springs.end());
+  check_body_springs(joined, "body_springs");
+  body_springs_ = std::move(joined);
+  return *this;
+}
+
 namespace {
 
 void add_term(Fnv& fnv, const LocalTerm& term) {
@@ -197,6 +222,12 @@ std::uint64_t ForceModel<T>::fingerprint() const {
   if (nbody_) fnv.add(nbody_->G), fnv.add(nbody_->softening);
   fnv.add(std::uint64_t(springs_.size()));
   for (const SpringPair& p : springs_) fnv.add(p.i), fnv.add(p.j), fnv.add(p.rest), fnv.add(p.k), fnv.add(p.damping);
+  if (body_springs_.empty()) return fnv.value();  // the models before body springs keep their value
+  fnv.add(std::uint64_t(body_springs_.size()));
+  for (const BodySpring& s : body_springs_) {
+    fnv.add(s.i), fnv.add(s.j), fnv.add(s.rest), fnv.add(s.k), fnv.add(s.damping);
+    for (int d = 0; d < 3; ++d) fnv.add(s.point_i[d]), fnv.add(s.point_j[d]);
+  }
   return fnv.value();
 }
 

@@ -135,17 +135,16 @@ void FixedSteps<T>::run_block(Set& b, Block block, std::uint64_t steps, Guard* g
 template <class T>
 void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard) {
   const kernels::RigidFn<T> rigid_fn = core_.paths.rigid;
-  if (rigid_fn == nullptr && !core_.paths.rigid_block) {
-    throw Error("rigid bodies take no coupled terms (N-body gravity, springs, CoupledTerm)");
-  }
   const LoweredForces<T>& lowered = core_.lowered();
   core_.begin(h, lowered.rigid, b.parameters());
   if (rigid_fn == nullptr) {
     RigidBlockPath<T>& path = *core_.paths.rigid_block;
+    if (path.coupled()) core_.reach(b.centers());
     path.reserve(b.padded_size());
     RigidBlocks blocks{path, {b, h, core_.options.renormalize_quaternions}};
     path.prepare(blocks.call);
-    return run_blocks(w, b, blocks, steps, guard);
+    if (!path.coupled()) return run_blocks(w, b, blocks, steps, guard);
+    return run_steps(w, b, steps, guard, [&](double t0) { path.step_all(blocks.call, w, t0, stop_); });
   }
   const kernels::RigidJob<T> job{center_arrays(b), {b.q(0), b.q(1), b.q(2), b.q(3)},
                                  {b.l(0), b.l(1), b.l(2)},
@@ -188,7 +187,12 @@ template <class T>
 void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
   StagedPath<T>& staged = *core_.paths.staged;
   staged.reserve(c.bodies.padded_size());
-  if (!staged.blocks_alone()) return run_steps(staged, c, steps, guard);
+  if (!staged.blocks_alone()) {
+    return run_steps(c.workers, c.bodies, steps, guard, [&](double t0) {
+      c.t0 = t0;
+      staged.step(c);
+    });
+  }
   staged.prepare(c);
   ParticleBlocks blocks{staged, c};
   run_blocks(c.workers, c.bodies, blocks, steps, guard);
@@ -260,26 +264,26 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
 // One pass per step (and per stage where coupled terms need every body's stage state): the
 // guard's save, clamp and scan are passes of their own.
 template <class T>
-void FixedSteps<T>::run_steps(StagedPath<T>& staged, StepContext<T>& c, std::uint64_t steps, Guard* guard) {
-  const std::size_t n = c.bodies.padded_size();
+template <class Set, class Step>
+void FixedSteps<T>::run_steps(const Workers& w, Set& set, std::uint64_t steps, Guard* guard, Step&& step) {
+  const std::size_t n = set.padded_size();
   const std::uint64_t start = core_.clock.steps;
   // A host's enqueue that throws in one of the guard's own passes leaves steps unchecked
   // (or unclamped): the set and the clock go back to where the call started.
   const auto guard_pass = [&](auto&& pass) {
     try {
-      for_each_block(c.workers, n, pass);
+      for_each_block(w, n, pass);
     } catch (...) {
-      guard->checkpoint.restore(c.workers, guard->state);
+      guard->checkpoint.restore(w, guard->state);
       core_.clock.steps = start;
       throw;
     }
   };
-  if (guard) for_each_block(c.workers, n, [&](Block b) { guard->checkpoint.save(guard->state, b); });
+  if (guard) for_each_block(w, n, [&](Block b) { guard->checkpoint.save(guard->state, b); });
   for (std::uint64_t k = 0; k < steps; ++k) {
-    c.t0 = core_.clock.time();
-    staged.step(c);
+    step(core_.clock.time());
     ++core_.clock.steps;
-    if (guard && guard->clamp) guard_pass([&](Block b) { clamp(c.bodies, b); });
+    if (guard && guard->clamp) guard_pass([&](Block b) { clamp(set, b); });
   }
   if (guard) guard_pass([&](Block b) { guard->scan.scan(b); });
 }

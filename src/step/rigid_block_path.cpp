@@ -9,7 +9,7 @@ namespace kinema {
 template <class T>
 RigidBlockPath<T>::RigidBlockPath(const ForceModel<T>& forces, const Method& method,
                                   const kernels::KernelTable<T>& table, const LoweredForces<T>& lowered)
-    : forces_(forces), method_(method), table_(table), lowered_(lowered) {}
+    : forces_(forces), method_(method), table_(table), lowered_(lowered), coupling_(forces) {}
 
 template <class T>
 void RigidBlockPath<T>::reserve(std::size_t padded) {
@@ -20,7 +20,7 @@ void RigidBlockPath<T>::reserve(std::size_t padded) {
   };
   grow(xs_), grow(ls_), grow(omega_), grow(force_), grow(torque_), grow(qs_);
   for (int s = 0; s < stages; ++s) grow(vs_[s]), grow(kv_[s]), grow(kl_[s]), grow(kq_[s]);
-  if (may_throw()) grow(saved_);
+  if (may_throw() || coupled()) grow(saved_);  // coupled: step_all may keep the state
   capacity_ = padded;
 }
 
@@ -82,6 +82,7 @@ kernels::RigidBlockJob<T> RigidBlockPath<T>::job(const Call& call) {
   j.forces = lowered_.rigid;
   j.rotation = lowered_.rotation;
   j.renormalize = call.renormalize;
+  padded_ = b.padded_size();
   return j;
 }
 
@@ -106,6 +107,7 @@ kernels::RigidBlockJob<T> RigidBlockPath<T>::with_terms(const kernels::RigidBloc
 // Every phase's job for the call, so that a slice of a block only runs kernels.
 template <class T>
 void RigidBlockPath<T>::prepare(const Call& call) {
+  coupling_.check_reach(call.bodies.size());
   const kernels::RigidBlockJob<T> base = job(call);
   if (method_.kind == MethodKind::runge_kutta) {
     const ButcherTableau& tab = method_.tableau;
@@ -148,9 +150,43 @@ RigidBlock<T> RigidBlockPath<T>::view(const kernels::RigidBlockJob<T>& j, Block 
 template <class T>
 void RigidBlockPath<T>::evaluate(const kernels::RigidBlockJob<T>& j, Block b, double t) {
   table_.rigid_block_stage(j, b.begin, b.end);
+  rates(j, b, t);
+}
+
+template <class T>
+void RigidBlockPath<T>::rates(const kernels::RigidBlockJob<T>& j, Block b, double t) {
+  const RigidStage<T> stage{{j.xs[0], j.xs[1], j.xs[2]},     {j.vs[0], j.vs[1], j.vs[2]},
+                            {j.qs[0], j.qs[1], j.qs[2], j.qs[3]}, {j.omega[0], j.omega[1], j.omega[2]},
+                            {j.force[0], j.force[1], j.force[2]}, {j.torque[0], j.torque[1], j.torque[2]}};
+  if (!coupling_.empty()) coupling_.add(stage, b.begin, b.end);
+  if (forces_.coupled()) add_coupled(j, b, t);
   const RigidBlock<T> v = view(j, b, t);
   for (const auto& callback : forces_.rigid_callbacks()) callback(v);
   table_.rigid_block_rates[lowered_.rigid.has_quadratic()][lowered_.rigid.has_central()](j, b.begin, b.end);
+  if (const auto& nbody = lowered_.coupled.nbody) {
+    kernels::NBodyJob<T> g{};
+    for (int d = 0; d < 3; ++d) g.x[d] = j.xs[d], g.acc[d] = j.kv[j.stage][d];
+    g.inv_mass = j.inv_mass;
+    g.sources = padded_;
+    g.eps2 = lowered_.coupled.eps2;
+    g.scale_G = T(nbody->G);
+    table_.nbody(g, b.begin, b.end);
+  }
+}
+
+// The coupled terms the centres feel as particles do: spring pairs and CoupledTerms, as forces.
+template <class T>
+void RigidBlockPath<T>::add_coupled(const kernels::RigidBlockJob<T>& j, Block b, double t) {
+  if (!lowered_.coupled.springs.empty()) table_.springs(lowered_.coupled.springs.job(j.xs, j.vs, j.force), b.begin, b.end);
+  if (forces_.coupled_terms().empty()) return;
+  const ParticleState<T> all{padded_, j.xs[0], j.xs[1], j.xs[2], j.vs[0], j.vs[1], j.vs[2], j.inv_mass};
+  ParticleBlock<T> view;
+  view.begin = b.begin, view.count = b.end - b.begin, view.t = t;
+  view.px = j.xs[0] + b.begin, view.py = j.xs[1] + b.begin, view.pz = j.xs[2] + b.begin;
+  view.vx = j.vs[0] + b.begin, view.vy = j.vs[1] + b.begin, view.vz = j.vs[2] + b.begin;
+  view.inv_mass = j.inv_mass + b.begin;
+  view.fx = j.force[0] + b.begin, view.fy = j.force[1] + b.begin, view.fz = j.force[2] + b.begin;
+  for (const auto& term : forces_.coupled_terms()) term->accumulate(all, view);
 }
 
 // Stage s from y0 + h sum_j a_sj k_j, then y1 = y0 + h sum_j b_j k_j.
@@ -177,6 +213,71 @@ void RigidBlockPath<T>::kick_drift_step(Block b, double t0, T h) {
       combine(j.x, j.v, op_steps_[k], b);
       table_.rigid_block_turn(turn_jobs_[k], b.begin, b.end);
     }
+  }
+}
+
+template <class T>
+bool RigidBlockPath<T>::keeps_state(const Workers& w, const StopRequest* stop) const {
+  const bool polls = stop != nullptr && *stop && (lowered_.coupled.nbody || may_throw());
+  return may_throw() || !enqueue_never_throws(w.jobs) || (method_.kind == MethodKind::kick_drift && polls);
+}
+
+template <class T>
+void RigidBlockPath<T>::step_all(const Call& call, const Workers& w, double t0, const StopRequest* stop) {
+  if (!keeps_state(w, stop)) return run_phases(call, w, t0, stop);
+  const std::size_t n = call.bodies.padded_size();
+  for_each_block(w, n, [&](Block b) { keep_block(call, b); });
+  try {
+    run_phases(call, w, t0, stop);
+  } catch (...) {
+    for (std::size_t i = 0; i < block_count(n); ++i) restore_block(call, block(i, n));
+    throw;
+  }
+}
+
+// The phases of step_block, each a pass over every block: a stage's state everywhere before
+// any body's rates read it.
+template <class T>
+void RigidBlockPath<T>::run_phases(const Call& call, const Workers& w, double t0, const StopRequest* stop) {
+  const std::size_t n = call.bodies.padded_size();
+  const bool polls = stop != nullptr && *stop && (lowered_.coupled.nbody || may_throw());
+  // Gravity costs a block n interactions per body: worth the threads at any n.
+  const Workers rates_on = lowered_.coupled.nbody ? all_workers(*w.jobs) : w;
+  const auto state_pass = [&](const kernels::RigidBlockJob<T>& j) {
+    for_each_block(w, n, [&](Block b) { table_.rigid_block_stage(j, b.begin, b.end); });
+  };
+  const auto rates_pass = [&](const kernels::RigidBlockJob<T>& j, double t, auto&& then) {
+    for_each_block(rates_on, n, [&](Block b) {
+      if (polls && (*stop)()) throw Stopped();
+      rates(j, b, t);
+      then(b);
+    });
+  };
+  if (method_.kind == MethodKind::runge_kutta) {
+    const ButcherTableau& tab = method_.tableau;
+    for (int s = 0; s < tab.stages; ++s) {
+      state_pass(stage_jobs_[s]);
+      rates_pass(stage_jobs_[s], t0 + tab.c[s] * double(call.h), [](Block) {});
+    }
+    for_each_block(w, n, [&](Block b) { table_.rigid_block_finish(finish_job_, b.begin, b.end); });
+    return;
+  }
+  const KickDriftScheme& scheme = method_.scheme;
+  const kernels::RigidBlockJob<T>& j = stage_jobs_[0];
+  for (int k = 0; k < scheme.count; ++k) {
+    if (scheme.ops[k].kind == OpKind::drift) {
+      for_each_block(w, n, [&](Block b) {
+        combine(j.x, j.v, op_steps_[k], b);
+        table_.rigid_block_turn(turn_jobs_[k], b.begin, b.end);
+      });
+      continue;
+    }
+    state_pass(j);
+    // A kick changes v and L, which no block's rates read (they read the stage's copies).
+    rates_pass(j, t0 + scheme.ops[k].time * double(call.h), [&](Block b) {
+      combine(j.v, j.kv[0], op_steps_[k], b);
+      combine(j.l, j.kl[0], op_steps_[k], b);
+    });
   }
 }
 

@@ -1,14 +1,18 @@
 #pragma once
-// The rigid block path: rigid bodies under RigidCallbacks (or a method without a fused
-// kernel). Each stage (or kick) of a block writes the stage state where the callbacks read
-// it, calls them, and turns what they add into the stage's rates; a block takes every step
-// of a call while in cache (the driver, FixedSteps, runs the blocks). Weights are the
-// method's, at run time: one set of kernels serves every method.
+// The rigid path: rigid bodies under RigidCallbacks, point springs or coupled terms, or a
+// method without a fused kernel. Each stage (or kick) of a block writes the stage state where
+// the callbacks read it, adds the point springs', body springs', coupled terms' and
+// callbacks' forces and torques, and turns them into the stage's rates (N-body gravity adds
+// to them). Without coupled terms a block takes every step of a call while in cache (the
+// driver, FixedSteps, runs the blocks); with them each phase is a pass over every block
+// (step_all), since they read every body's stage state. Weights are the method's, at run
+// time: one set of kernels serves every method.
 
 #include <array>
 #include <cstddef>
 
 #include "forces/force_lowering.hpp"
+#include "forces/rigid_coupling.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
@@ -35,11 +39,19 @@ class RigidBlockPath {
     T h;
     bool renormalize;
   };
-  bool may_throw() const { return !forces_.rigid_callbacks().empty(); }
-  // Builds the phases' jobs for the call: before any step_block.
+  // User code runs in a step (a callback or a CoupledTerm).
+  bool may_throw() const { return !forces_.rigid_callbacks().empty() || !forces_.coupled_terms().empty(); }
+  // Coupled terms: each phase is a pass over every block (step_all), not step_block.
+  bool coupled() const { return forces_.couples_rigid(); }
+  // Builds the phases' jobs for the call: before any step. Throws kinema::Error when a spring
+  // joins a body the set lacks.
   void prepare(const Call& call);
-  // One step of one block from time t0.
+  // One step of one block from time t0 (no coupled terms).
   void step_block(const Call& call, Block b, double t0);
+  // One step of every block from time t0, each phase a pass on `workers` (N-body gravity's on
+  // all of them), polling `stop` (may be null) before each block of a pass of N-body gravity
+  // or user code. When anything throws, the bodies are put back as they were.
+  void step_all(const Call& call, const Workers& workers, double t0, const StopRequest* stop);
   // Keeps the block's state (save), or puts it back.
   void keep_block(const Call& call, Block b);
   void restore_block(const Call& call, Block b);
@@ -52,6 +64,11 @@ class RigidBlockPath {
   void kick_drift_step(Block b, double t0, T h);
   // A stage's state, the callbacks at time t, and the stage's rates.
   void evaluate(const kernels::RigidBlockJob<T>& job, Block b, double t);
+  // The stage's rates from its state: every term's forces and torques at time t.
+  void rates(const kernels::RigidBlockJob<T>& job, Block b, double t);
+  void add_coupled(const kernels::RigidBlockJob<T>& job, Block b, double t);
+  void run_phases(const Call& call, const Workers& workers, double t0, const StopRequest* stop);
+  bool keeps_state(const Workers& workers, const StopRequest* stop) const;
   void combine(T* const out[3], const T* const rate[3], T step, Block b) const;
   RigidBlock<T> view(const kernels::RigidBlockJob<T>& job, Block b, double t) const;
 
@@ -59,7 +76,9 @@ class RigidBlockPath {
   const Method& method_;
   const kernels::KernelTable<T>& table_;
   const LoweredForces<T>& lowered_;
+  RigidCoupling<T> coupling_;
   std::size_t capacity_ = 0;
+  std::size_t padded_ = 0;  // the call's set, padded
   // Stage state (velocities per stage: they are the position rates), callback outputs, the
   // rates of each stage, and the state kept while user code may throw.
   std::array<AlignedArray<T>, 3> xs_, ls_, omega_, force_, torque_;

@@ -1,10 +1,21 @@
 #include "step/step_paths.hpp"
 
+#include <algorithm>
+#include <variant>
+
 namespace kinema {
 
 template <class T>
 std::size_t StepPaths<T>::particle_capacity() const {
   return staged ? staged->capacity() : block ? block->capacity() : 0;
+}
+
+// A point spring's force turns with the body: the fused rigid kernels, which step the centre
+// and the rotation apart, do not take it.
+template <class T>
+bool has_point_springs(const ForceModel<T>& f) {
+  const auto is_point_spring = [](const LocalTerm& t) { return std::holds_alternative<PointSpring>(t); };
+  return std::any_of(f.local_terms().begin(), f.local_terms().end(), is_point_spring);
 }
 
 template <class T>
@@ -16,10 +27,11 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
   const LoweredForces<T>& l = *paths.lowered;
   const int quad = l.particle.has_quadratic();
   const int builtin = builtin_index(method);
-  // Rigid bodies ignore particle callbacks, as particles ignore rigid ones.
-  if (builtin >= 0 && !f.coupled() && f.rigid_callbacks().empty()) {
+  // Rigid bodies ignore particle callbacks, as particles ignore rigid ones (and point springs
+  // and body springs).
+  if (builtin >= 0 && !f.couples_rigid() && f.rigid_callbacks().empty() && !has_point_springs(f)) {
     paths.rigid = table.rigid[builtin][l.rigid.has_quadratic()][l.rigid.has_central()];
-  } else if (!f.coupled()) {
+  } else {
     paths.rigid_block = std::make_unique<RigidBlockPath<T>>(f, method, table, l);
     paths.rigid_block->reserve(capacity.rigid);
   }

@@ -2,8 +2,8 @@
 // The path a force model and a method take: the fused kernels (one pass per step, every
 // stage in registers) when every term is local and the method built in, else the staged
 // path (one pass per stage; without coupled terms, the block path: every stage of a block
-// while it is in cache). Rigid bodies: fused, or the rigid block path (RigidCallbacks, user
-// tableaus); they take no coupled terms.
+// while it is in cache). Rigid bodies: fused, or the rigid path (RigidCallbacks, point
+// springs, coupled terms, user tableaus).
 
 #include <cstddef>
 #include <memory>
@@ -27,7 +27,7 @@ struct StepPaths {
   std::unique_ptr<StagedPath<T>> staged;      // particles otherwise
   std::unique_ptr<StagedPath<T>> probe;       // evaluates accelerations alone (made on demand)
   kernels::RigidFn<T> rigid = nullptr;        // rigid bodies, when the fused path applies
-  std::unique_ptr<RigidBlockPath<T>> rigid_block;  // rigid bodies otherwise (no coupled terms)
+  std::unique_ptr<RigidBlockPath<T>> rigid_block;  // rigid bodies otherwise
 
   kernels::FusedFn<T> fused_for(bool applied) const { return applied ? fused_applied : fused; }
   // Bodies the particle paths' scratch holds, and the rigid block path's.

@@ -270,9 +270,9 @@ TEST_CASE("bad rigid bodies are refused by name", "[rigid][errors]") {
                     "rigid body 1: inertia moments must be positive");
   CHECK(set.size() == 1);
   ForceModel<float> f;
-  f.add(NBody{1, 0});
+  f.add(Springs{{{0, 3, 1, 1, 0}}});  // spring pairs join rigid centres as they join particles
   Stepper<float> s(f, rk4, test::serial_options());
-  CHECK_THROWS_WITH(s.step(set, 0.01f), Catch::StartsWith("rigid bodies take no coupled terms"));
+  CHECK_THROWS_WITH(s.step(set, 0.01f), "springs: a pair joins body 3, but the set has 1 bodies");
 }
 
 namespace {

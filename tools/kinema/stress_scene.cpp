@@ -35,6 +35,7 @@ bool energy_conserved_by(const ForceModel<T>& f, bool rigid) {
           using Term = std::decay_t<decltype(t)>;
           if constexpr (std::is_same_v<Term, Gravity> || std::is_same_v<Term, Central>) return true;
           if constexpr (std::is_same_v<Term, Spring>) return t.damping == 0;
+          if constexpr (std::is_same_v<Term, PointSpring>) return !rigid || t.damping == 0;
           // Rotational terms do not act on particles.
           if constexpr (std::is_same_v<Term, Torque> || std::is_same_v<Term, AngularDrag> ||
                         std::is_same_v<Term, PointForce>) {
