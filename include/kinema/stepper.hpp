@@ -150,11 +150,17 @@ class Stepper {
   AdaptiveStats advance_to(ParticleSet<T>& io_bodies, double t_end, const Tolerances& tolerances,
                            const StopRequest& stop, const StopRequest& interrupt);
   // Rigid bodies: the same, with orientation and angular momentum: the fused path for a
-  // built-in method and local terms, the rigid block path for RigidCallbacks or another
-  // method; coupled terms are refused (kinema::Error). Use one stepper per body set: each
-  // keeps its own clock.
+  // built-in method and local terms, the rigid path for RigidCallbacks, point springs,
+  // coupled terms (body springs, N-body gravity and spring pairs among the centres,
+  // CoupledTerms) or another method. Use one stepper per body set: each keeps its own clock.
   void step(RigidBodySet<T>& io_bodies, T h);
   void advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps);
+  // Error control for rigid bodies, as for particles, the error norm's mean taken over the
+  // 13 components of each body: x, v, the orientation quaternion q (dimensionless: atol 1e-6
+  // allows about 2e-6 rad of turn) and the world angular momentum L, all weighted by
+  // atol + rtol max(|y_old|, |y_new|). Every stage is evaluated (no first stage reused); no
+  // stop requests; Tolerances::limit_to_stable_step is refused (kinema::Error).
+  AdaptiveStats advance_to(RigidBodySet<T>& io_bodies, double t_end, const Tolerances& tolerances);
   // Throws the kinema::Error a step of size h would throw (h not positive and finite in T,
   // or h times the force parameters, a rigid body's point forces included, overflowing T),
   // without touching any body.

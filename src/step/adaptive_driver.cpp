@@ -186,6 +186,52 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, P
   return AdaptiveRun<T>(core, workers, bodies, tolerances).to(t_end, max_step, continuation, stops);
 }
 
+template <class T>
+AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
+                                 double t_end, const Tolerances& tol) {
+  RigidBlockPath<T>& path = *core.paths.rigid_block;
+  if (path.coupled()) core.reach(bodies.centers());
+  path.reserve(bodies.padded_size());
+  const Method& method = core.method;
+  StepController controller(std::min(method.order, method.embedded_order));
+  AdaptiveStats stats;
+  double t = core.clock.time();
+  double h = tol.initial_step > 0 ? tol.initial_step : 0.01 * (t_end - t);
+  while (t < t_end) {
+    h = std::min(h, tol.max_step);
+    const bool last = t + 1.01 * h >= t_end && t_end - t <= tol.max_step;
+    const T size = T(last ? t_end - t : h);
+    if (!(size > 0) || t + double(size) == t) {
+      throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
+                  "; the tolerances cannot be met in " + type_name<T>());
+    }
+    core.begin(size, core.lowered().rigid, bodies.parameters());
+    const typename RigidBlockPath<T>::Call call{bodies, size, core.options.renormalize_quaternions};
+    path.prepare(call);
+    const double err = path.attempt(call, workers, t, tol.rtol, tol.atol);
+    stats.evaluations += std::uint64_t(method.tableau.stages);
+    const bool accepted = err <= 1;
+    if (accepted) {
+      ++core.clock.steps;
+      if (last) core.clock.set(t_end);
+      ++stats.accepted;
+      stats.smallest_step = stats.accepted == 1 ? double(size) : std::min(stats.smallest_step, double(size));
+      stats.largest_step = std::max(stats.largest_step, double(size));
+      t = core.clock.time();
+    } else {
+      path.take_back(call, workers);
+      ++stats.rejected;
+    }
+    h = controller.next(double(size), err, accepted);
+  }
+  stats.next_step = h;
+  return stats;
+}
+
+template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, RigidBodySet<float>&, double,
+                                          const Tolerances&);
+template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, RigidBodySet<double>&, double,
+                                          const Tolerances&);
 template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, ParticleSet<float>&, double,
                                           const Tolerances&, double, AdaptiveContinuation&, const CallStops&);
 template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, ParticleSet<double>&, double,

@@ -50,4 +50,11 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, P
                                  double t_end, const Tolerances& tolerances, double max_step,
                                  AdaptiveContinuation& continuation, const CallStops& stops);
 
+// Rigid bodies on the rigid path: the same steps, sizes and last step, the error over x, v, q
+// and L (RigidBlockPath::attempt); every stage evaluated (no first stage reused), no stop
+// requests. An initial_step of 0 starts at a hundredth of the span.
+template <class T>
+AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
+                                 double t_end, const Tolerances& tolerances);
+
 }  // namespace kinema

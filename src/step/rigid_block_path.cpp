@@ -1,7 +1,9 @@
 #include "step/rigid_block_path.hpp"
 
 #include <algorithm>
+#include <cmath>
 
+#include "kernels/reductions.hpp"
 #include "step/step_context.hpp"
 
 namespace kinema {
@@ -20,7 +22,9 @@ void RigidBlockPath<T>::reserve(std::size_t padded) {
   };
   grow(xs_), grow(ls_), grow(omega_), grow(force_), grow(torque_), grow(qs_);
   for (int s = 0; s < stages; ++s) grow(vs_[s]), grow(kv_[s]), grow(kl_[s]), grow(kq_[s]);
-  if (may_throw() || coupled()) grow(saved_);  // coupled: step_all may keep the state
+  // step_all may keep the state with coupled terms, and an attempt always does.
+  if (may_throw() || coupled() || method_.embedded_order > 0) grow(saved_);
+  if (method_.embedded_order > 0) block_error_.resize(block_count(padded));
   capacity_ = padded;
 }
 
@@ -214,6 +218,57 @@ void RigidBlockPath<T>::kick_drift_step(Block b, double t0, T h) {
       table_.rigid_block_turn(turn_jobs_[k], b.begin, b.end);
     }
   }
+}
+
+template <class T>
+double RigidBlockPath<T>::attempt(const Call& call, const Workers& w, double t0, double rtol, double atol) {
+  const std::size_t n = call.bodies.padded_size();
+  for_each_block(w, n, [&](Block b) { keep_block(call, b); });
+  try {
+    if (coupled()) {
+      run_phases(call, w, t0, nullptr);
+    } else {
+      for_each_block(w, n, [&](Block b) { runge_kutta_step(b, t0, call.h); });
+    }
+  } catch (...) {
+    for (std::size_t i = 0; i < block_count(n); ++i) restore_block(call, block(i, n));
+    throw;
+  }
+  for_each_block(w, n, [&](Block b) { block_error_[b.begin / kBlockBodies] = block_error(call, b, rtol, atol); });
+  double sum = 0;
+  for (std::size_t i = 0; i < block_count(n); ++i) sum += block_error_[i];
+  return std::sqrt(sum / (13.0 * double(std::max<std::size_t>(call.bodies.size(), 1))));
+}
+
+template <class T>
+void RigidBlockPath<T>::take_back(const Call& call, const Workers& w) {
+  for_each_block(w, call.bodies.padded_size(), [&](Block b) { restore_block(call, b); });
+}
+
+template <class T>
+const T* RigidBlockPath<T>::rate(int component, int s) const {
+  if (component < 3) return vs_[s][component].data();  // stage velocities: the position rates
+  if (component < 6) return kv_[s][component - 3].data();
+  if (component < 10) return kq_[s][component - 6].data();
+  return kl_[s][component - 10].data();
+}
+
+// The block's sum of (e / (atol + rtol max(|y0|, |y1|)))^2, e = h sum_s (b_s - b_hat_s) k_s.
+template <class T>
+double RigidBlockPath<T>::block_error(const Call& call, Block b, double rtol, double atol) const {
+  const ButcherTableau& tab = method_.tableau;
+  std::array<double, kMaxStages> w{};
+  for (int s = 0; s < tab.stages; ++s) w[s] = (tab.b[s] - tab.b_hat[s]) * double(call.h);
+  const std::array<T*, 13> state = state_of(call.bodies);
+  // Real bodies only: padding stays at rest.
+  const std::size_t size = call.bodies.size(), count = std::min(b.end, size) - std::min(b.begin, size);
+  double sum = 0;
+  for (int a = 0; a < 13; ++a) {
+    std::array<const T*, kMaxStages> k{};
+    for (int s = 0; s < tab.stages; ++s) k[s] = rate(a, s) + b.begin;
+    sum += error_squares(saved_[a].data() + b.begin, state[a] + b.begin, k.data(), w.data(), tab.stages, rtol, atol, count);
+  }
+  return sum;
 }
 
 template <class T>

@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstddef>
+#include <vector>
 
 #include "forces/force_lowering.hpp"
 #include "forces/rigid_coupling.hpp"
@@ -56,6 +57,14 @@ class RigidBlockPath {
   void keep_block(const Call& call, Block b);
   void restore_block(const Call& call, Block b);
 
+  // Error control, for a Runge-Kutta method with an embedded pair: one step from t0 that can
+  // be taken back, and its error estimate's weighted RMS norm over every body's 13 state
+  // components (x, v, q, L), each weighted by atol + rtol max(|y0|, |y1|) (Tolerances); the
+  // blocks' sums added in block order, so the norm does not depend on threads. Whatever
+  // throws leaves the bodies as they were.
+  double attempt(const Call& call, const Workers& workers, double t0, double rtol, double atol);
+  void take_back(const Call& call, const Workers& workers);
+
  private:
   kernels::RigidBlockJob<T> job(const Call& call);
   kernels::RigidBlockJob<T> with_terms(const kernels::RigidBlockJob<T>& base, const std::array<double, kMaxStages>& row,
@@ -69,6 +78,8 @@ class RigidBlockPath {
   void add_coupled(const kernels::RigidBlockJob<T>& job, Block b, double t);
   void run_phases(const Call& call, const Workers& workers, double t0, const StopRequest* stop);
   bool keeps_state(const Workers& workers, const StopRequest* stop) const;
+  double block_error(const Call& call, Block b, double rtol, double atol) const;
+  const T* rate(int component, int stage) const;  // the rate of state component 0..12 at a stage
   void combine(T* const out[3], const T* const rate[3], T step, Block b) const;
   RigidBlock<T> view(const kernels::RigidBlockJob<T>& job, Block b, double t) const;
 
@@ -86,6 +97,7 @@ class RigidBlockPath {
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> vs_, kv_, kl_;
   std::array<std::array<AlignedArray<T>, 4>, kMaxStages> kq_;
   std::array<AlignedArray<T>, 13> saved_;
+  std::vector<double> block_error_;  // an attempt's sum of squared weighted errors per block
   // The call's jobs (prepare): per stage, the finish; per kick-drift operation, its step
   // (w h) and its turn.
   std::array<kernels::RigidBlockJob<T>, kMaxStages> stage_jobs_{}, turn_jobs_{};

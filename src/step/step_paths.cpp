@@ -29,7 +29,9 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
   const int builtin = builtin_index(method);
   // Rigid bodies ignore particle callbacks, as particles ignore rigid ones (and point springs
   // and body springs).
-  if (builtin >= 0 && !f.couples_rigid() && f.rigid_callbacks().empty() && !has_point_springs(f)) {
+  const bool rigid_fused = builtin >= 0 && method.embedded_order == 0 && !f.couples_rigid() &&
+                           f.rigid_callbacks().empty() && !has_point_springs(f);
+  if (rigid_fused) {
     paths.rigid = table.rigid[builtin][l.rigid.has_quadratic()][l.rigid.has_central()];
   } else {
     paths.rigid_block = std::make_unique<RigidBlockPath<T>>(f, method, table, l);

@@ -95,6 +95,21 @@ struct Stepper<T>::Impl {
     return stats;
   }
 
+  AdaptiveStats advance_to(RigidBodySet<T>& bodies, double t_end, const Tolerances& tolerances) {
+    check_adaptive(core.method, t_end, tolerances, core.clock.time());
+    if (tolerances.limit_to_stable_step) throw Error("advance_to: limit_to_stable_step takes particles only");
+    check_tolerance_floor(bodies.centers(), tolerances);
+    continuation.active = false;
+    AdaptiveStats stats;
+    workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
+      stats = advance_adaptively(core, w, bodies, t_end, tolerances);
+      return double(bodies.size()) * double(stats.evaluations);
+    });
+    if (stats.accepted > 0) forces_used(bodies);
+    if (stats.next_step > 0) proposed_step = stats.next_step;
+    return stats;
+  }
+
   // The tolerances' max_step, capped at the method's largest stable step for the bodies now
   // when asked to (and when there is a step to take).
   double step_cap(const ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances,
@@ -208,6 +223,11 @@ void Stepper<T>::step(RigidBodySet<T>& io_bodies, T h) {
 template <class T>
 void Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps) {
   impl_->advance(io_bodies, h, steps);
+}
+
+template <class T>
+AdaptiveStats Stepper<T>::advance_to(RigidBodySet<T>& io_bodies, double t_end, const Tolerances& tolerances) {
+  return impl_->advance_to(io_bodies, t_end, tolerances);
 }
 
 template <class T>
