@@ -43,6 +43,20 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
                                      const std::type_identity_t<AccelerationFn<T>>& accelerations,
                                      int iterations = 120);
 
+// Rigid bodies: writes the rates of the 13 state components of every body (padded_size()
+// each) into out: the velocity, acceleration, dq/dt and torque (dL/dt).
+template <class T>
+using RigidRatesFn = std::function<void(const RigidBodySet<T>& bodies, T* const out[13])>;
+
+// The same for rigid bodies, over the state (x, v, q, L): the Jacobian has the rotational
+// degrees of freedom too, so a stiff spring at a body point (a fast rotational mode) shows.
+// Positions and orientations are balanced against velocities and angular momenta alike. Up to
+// 21 vectors of 13 doubles per body. For a force model, estimate_stiffness(bodies, forces,
+// ...) in kinema/stepper.hpp.
+template <class T>
+StiffnessEstimate estimate_stiffness(const RigidBodySet<T>& bodies,
+                                     const std::type_identity_t<RigidRatesFn<T>>& rates, int iterations = 120);
+
 // The largest h > 0 up to which every step is stable for the estimate's mode (0: none, as
 // for Euler on an undamped oscillation; infinity when the estimate's magnitude is 0).
 double largest_stable_step(const Method& method, const StiffnessEstimate& estimate);
@@ -63,5 +77,7 @@ StabilityLimits stability_limits(const Method& method);
 
 extern template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const AccelerationFn<float>&, int);
 extern template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const AccelerationFn<double>&, int);
+extern template StiffnessEstimate estimate_stiffness(const RigidBodySet<float>&, const RigidRatesFn<float>&, int);
+extern template StiffnessEstimate estimate_stiffness(const RigidBodySet<double>&, const RigidRatesFn<double>&, int);
 
 }  // namespace kinema

@@ -218,11 +218,22 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
                                      int iterations = 120, StepperOptions options = on_calling_thread(),
                                      const StopRequest& stop = {});
 
+// The same for rigid bodies, over their positions, velocities, orientations and angular
+// momenta (kinema/stability.hpp): a stiff body-point spring makes a fast rotational mode.
+template <class T>
+StiffnessEstimate estimate_stiffness(const RigidBodySet<T>& bodies, const ForceModel<T>& forces, double t = 0,
+                                     int iterations = 120, StepperOptions options = on_calling_thread(),
+                                     const StopRequest& stop = {});
+
 extern template class Stepper<float>;
 extern template class Stepper<double>;
 extern template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double,
                                                      int, StepperOptions, const StopRequest&);
 extern template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const ForceModel<double>&, double,
+                                                     int, StepperOptions, const StopRequest&);
+extern template StiffnessEstimate estimate_stiffness(const RigidBodySet<float>&, const ForceModel<float>&, double,
+                                                     int, StepperOptions, const StopRequest&);
+extern template StiffnessEstimate estimate_stiffness(const RigidBodySet<double>&, const ForceModel<double>&, double,
                                                      int, StepperOptions, const StopRequest&);
 
 }  // namespace kinema

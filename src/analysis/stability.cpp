@@ -149,53 +149,68 @@ std::pair<std::complex<double>, std::vector<double>> dominant_of(const std::vect
   return {root, u};
 }
 
-// f(y) = (v, a(x, v)) of a set, y = (x, v) in six component blocks of `n` each.
+// The state arrays of a set, and which of them are position-like (balance scales those).
 template <class T>
+std::array<T*, 6> state_arrays(ParticleSet<T>& b) {
+  return {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+}
+template <class T>
+std::array<T*, 13> state_arrays(RigidBodySet<T>& b) {
+  return {b.position_data(0), b.position_data(1), b.position_data(2), b.velocity_data(0), b.velocity_data(1),
+          b.velocity_data(2), b.q(0), b.q(1), b.q(2), b.q(3), b.l(0), b.l(1), b.l(2)};
+}
+constexpr bool position_like(int components, int c) { return c < 3 || (components == 13 && c >= 6 && c < 10); }
+
+// f(y) of a set, y its state in C component blocks of `n` each (particles: x, v; rigid
+// bodies: x, v, q, L), f from `rates`, which writes the C rates of a set (padded each).
+template <class T, class Set, int C>
 class Derivative {
  public:
-  Derivative(const ParticleSet<T>& bodies, const AccelerationFn<T>& accelerations)
-      : work_(bodies), accelerations_(accelerations), n_(bodies.size()) {
-    for (auto& a : acc_) a.resize(work_.padded_size());
+  using Rates = std::function<void(const Set&, T* const out[C])>;
+  Derivative(const Set& bodies, Rates rates) : work_(bodies), rates_(std::move(rates)), n_(bodies.size()) {
+    for (auto& a : out_) a.resize(work_.padded_size());
   }
 
-  std::size_t size() const { return 6 * n_; }
-  std::vector<double> state() const {
+  static constexpr int components = C;
+  using value_type = T;
+  std::size_t size() const { return C * n_; }
+  std::size_t count() const { return n_; }
+  std::vector<double> state() {
     std::vector<double> y(size());
-    const T* arrays[6] = {work_.px(), work_.py(), work_.pz(), work_.vx(), work_.vy(), work_.vz()};
-    for (int c = 0; c < 6; ++c) std::copy(arrays[c], arrays[c] + n_, y.begin() + std::ptrdiff_t(c * n_));
+    const auto arrays = state_arrays(work_);
+    for (int c = 0; c < C; ++c) std::copy(arrays[c], arrays[c] + n_, y.begin() + std::ptrdiff_t(c * n_));
     return y;
   }
   std::vector<double> operator()(const std::vector<double>& y) {
-    T* arrays[6] = {work_.px(), work_.py(), work_.pz(), work_.vx(), work_.vy(), work_.vz()};
-    for (int c = 0; c < 6; ++c) {
+    const auto arrays = state_arrays(work_);
+    for (int c = 0; c < C; ++c) {
       for (std::size_t i = 0; i < n_; ++i) arrays[c][i] = T(y[c * n_ + i]);
     }
-    T* out[3] = {acc_[0].data(), acc_[1].data(), acc_[2].data()};
-    accelerations_(work_, out);
+    T* out[C];
+    for (int c = 0; c < C; ++c) out[c] = out_[c].data();
+    rates_(work_, out);
     ++evaluations;
     std::vector<double> f(size());
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t i = 0; i < n_; ++i) f[d * n_ + i] = double(arrays[3 + d][i]), f[(3 + d) * n_ + i] = acc_[d][i];
-    }
+    for (int c = 0; c < C; ++c) std::copy(out[c], out[c] + n_, f.begin() + std::ptrdiff_t(c * n_));
     return f;
   }
   int evaluations = 0;
 
  private:
-  ParticleSet<T> work_;
-  const AccelerationFn<T>& accelerations_;
+  Set work_;
+  Rates rates_;
   std::size_t n_;
-  std::array<std::vector<T>, 3> acc_;
+  std::array<std::vector<T>, C> out_;
 };
 
 // J u ~ (f(y + eps u) - f(y)) / eps at the bodies' state y, with positions scaled by
 // `position_scale` (D J D^-1, D = diag(s, 1): see balance). eps is scaled so that the largest
 // component of eps u moves y by about sqrt(machine epsilon) of its size: the usual balance of
 // truncation and rounding, for every component that matters.
-template <class T>
+template <class D>
 class JacobianProducts {
  public:
-  explicit JacobianProducts(Derivative<T>& f) : f_(f), y_(f.state()), f0_(f(y_)) {
+  explicit JacobianProducts(D& f) : f_(f), y_(f.state()), f0_(f(y_)) {
     for (double c : y_) y_scale_ = std::max(y_scale_, std::abs(c));
   }
 
@@ -203,7 +218,7 @@ class JacobianProducts {
   std::vector<double> times(const std::vector<double>& u) {
     double largest = 0;
     for (double c : u) largest = std::max(largest, std::abs(c));
-    const double eps = std::sqrt(double(std::numeric_limits<T>::epsilon())) * y_scale_ / std::max(largest, 1e-300);
+    const double eps = std::sqrt(double(std::numeric_limits<typename D::value_type>::epsilon())) * y_scale_ / std::max(largest, 1e-300);
     std::vector<double> shifted = y_;
     for (std::size_t i = 0; i < y_.size(); ++i) shifted[i] += eps * u[i];
     std::vector<double> ju = f_(shifted);
@@ -211,17 +226,24 @@ class JacobianProducts {
     return ju;
   }
   std::vector<double> balanced_times(std::vector<double> u) {
-    const std::size_t positions = y_.size() / 2;
-    for (std::size_t i = 0; i < positions; ++i) u[i] /= position_scale;
+    scale_positions(u, 1 / position_scale);
     std::vector<double> w = times(u);
-    for (std::size_t i = 0; i < positions; ++i) w[i] *= position_scale;
+    scale_positions(w, position_scale);
     return w;
   }
 
   double position_scale = 1;
 
  private:
-  Derivative<T>& f_;
+  void scale_positions(std::vector<double>& u, double by) const {
+    const std::size_t n = f_.count();
+    for (int c = 0; c < D::components; ++c) {
+      if (!position_like(D::components, c)) continue;
+      for (std::size_t i = c * n; i < (c + 1) * n; ++i) u[i] *= by;
+    }
+  }
+
+  D& f_;
   std::vector<double> y_, f0_;
   double y_scale_ = 1;
 };
@@ -230,8 +252,8 @@ class JacobianProducts {
 // far from normal ([0 I; -w^2 0]) and Krylov estimates erratic. Scaling positions by a
 // first guess s of |lambda| (a few power steps) balances it: D J D^-1 with D = diag(s, 1)
 // has J's eigenvalues and, for an oscillation, is nearly skew-symmetric.
-template <class T>
-void balance(JacobianProducts<T>& jacobian) {
+template <class D>
+void balance(JacobianProducts<D>& jacobian) {
   std::vector<double> u(jacobian.size());
   for (std::size_t i = 0; i < u.size(); ++i) u[i] = start_component(i);
   for (int k = 0; k < 8; ++k) {
@@ -250,8 +272,8 @@ void balance(JacobianProducts<T>& jacobian) {
 // plain power iteration does where the top of the spectrum is dense (a cloth's modes). `done`
 // counts the products, at most `budget` of them. Returns H's dominant eigenvalue; v becomes
 // the basis combination in H's dominant subspace, the next cycle's start.
-template <class T>
-std::complex<double> arnoldi_cycle(JacobianProducts<T>& jacobian, std::vector<double>& v, int m, int& done,
+template <class D>
+std::complex<double> arnoldi_cycle(JacobianProducts<D>& jacobian, std::vector<double>& v, int m, int& done,
                                    int budget) {
   std::vector<std::vector<double>> basis{v};
   std::vector<double> h(std::size_t(m * m), 0.0);
@@ -286,16 +308,12 @@ std::complex<double> arnoldi_cycle(JacobianProducts<T>& jacobian, std::vector<do
   return root;
 }
 
-}  // namespace
 
-template <class T>
-StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
-                                     const std::type_identity_t<AccelerationFn<T>>& accelerations, int iterations) {
-  if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
-  Derivative<T> f(bodies, accelerations);
+template <class D>
+StiffnessEstimate dominant_mode(D& f, int iterations) {
   StiffnessEstimate e;
   if (f.size() == 0) return e;
-  JacobianProducts<T> jacobian(f);
+  JacobianProducts<D> jacobian(f);
   balance(jacobian);
   // Krylov bases of up to 20 vectors, fewer when they would pass 512 MiB.
   const std::size_t memory_cap = std::size_t(512) << 20;
@@ -306,6 +324,10 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = start_component(i);
   std::complex<double> dominant = 0;
   for (int done = 0; done < iterations;) {
+    // A cycle the budget would cut short is not started once there is an estimate: a basis of
+    // one or two vectors may not hold the dominant pair, and its answer would replace a
+    // better one.
+    if (done > 0 && iterations - done < m) break;
     const double vn = norm(v);
     if (!(vn > 0) || !std::isfinite(vn)) break;
     for (double& c : v) c /= vn;
@@ -318,6 +340,32 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
   // a growing mode bounded, and a method's stability is about the ones that should be.
   e.angle = std::atan2(std::abs(dominant.imag()), std::abs(dominant.real()));
   return e;
+}
+
+}  // namespace
+
+template <class T>
+StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
+                                     const std::type_identity_t<AccelerationFn<T>>& accelerations, int iterations) {
+  if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
+  // The position rates are the velocities.
+  const auto rates = [&](const ParticleSet<T>& set, T* const out[6]) {
+    for (int d = 0; d < 3; ++d) {
+      const T* v = d == 0 ? set.vx() : d == 1 ? set.vy() : set.vz();
+      std::copy(v, v + set.padded_size(), out[d]);
+    }
+    accelerations(set, out + 3);
+  };
+  Derivative<T, ParticleSet<T>, 6> f(bodies, rates);
+  return dominant_mode(f, iterations);
+}
+
+template <class T>
+StiffnessEstimate estimate_stiffness(const RigidBodySet<T>& bodies,
+                                     const std::type_identity_t<RigidRatesFn<T>>& rates, int iterations) {
+  if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
+  Derivative<T, RigidBodySet<T>, 13> f(bodies, rates);
+  return dominant_mode(f, iterations);
 }
 
 double largest_stable_step(const Method& method, const StiffnessEstimate& e) {
@@ -338,5 +386,7 @@ StabilityLimits stability_limits(const Method& method) {
 
 template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const AccelerationFn<float>&, int);
 template StiffnessEstimate estimate_stiffness(const ParticleSet<double>&, const AccelerationFn<double>&, int);
+template StiffnessEstimate estimate_stiffness(const RigidBodySet<float>&, const RigidRatesFn<float>&, int);
+template StiffnessEstimate estimate_stiffness(const RigidBodySet<double>&, const RigidRatesFn<double>&, int);
 
 }  // namespace kinema

@@ -246,6 +246,15 @@ void RigidBlockPath<T>::take_back(const Call& call, const Workers& w) {
 }
 
 template <class T>
+void RigidBlockPath<T>::evaluate_rates(const Call& call, const Workers& w, double t) {
+  prepare(call);
+  const std::size_t n = call.bodies.padded_size();
+  const kernels::RigidBlockJob<T>& j = stage_jobs_[0];  // stage 0 reads the bodies, writes scratch
+  for_each_block(w, n, [&](Block b) { table_.rigid_block_stage(j, b.begin, b.end); });
+  for_each_block(w, n, [&](Block b) { rates(j, b, t); });
+}
+
+template <class T>
 const T* RigidBlockPath<T>::rate(int component, int s) const {
   if (component < 3) return vs_[s][component].data();  // stage velocities: the position rates
   if (component < 6) return kv_[s][component - 3].data();

@@ -65,6 +65,11 @@ class RigidBlockPath {
   double attempt(const Call& call, const Workers& workers, double t0, double rtol, double atol);
   void take_back(const Call& call, const Workers& workers);
 
+  // The rates of every state component (x, v, q, L: 13 arrays, padded) at the bodies' state
+  // and time t: stage 0 alone, the bodies untouched. For the stiffness estimate.
+  void evaluate_rates(const Call& call, const Workers& workers, double t);
+  const T* rate_of(int component) const { return rate(component, 0); }
+
  private:
   kernels::RigidBlockJob<T> job(const Call& call);
   kernels::RigidBlockJob<T> with_terms(const kernels::RigidBlockJob<T>& base, const std::array<double, kMaxStages>& row,

@@ -28,6 +28,7 @@ struct StepPaths {
   std::unique_ptr<StagedPath<T>> probe;       // evaluates accelerations alone (made on demand)
   kernels::RigidFn<T> rigid = nullptr;        // rigid bodies, when the fused path applies
   std::unique_ptr<RigidBlockPath<T>> rigid_block;  // rigid bodies otherwise
+  std::unique_ptr<RigidBlockPath<T>> rigid_probe;  // evaluates rigid rates alone (made on demand)
 
   kernels::FusedFn<T> fused_for(bool applied) const { return applied ? fused_applied : fused; }
   // Bodies the particle paths' scratch holds, and the rigid block path's.

@@ -139,6 +139,19 @@ struct Stepper<T>::Impl {
     for (int d = 0; d < 3; ++d) std::copy(acc[d], acc[d] + bodies.padded_size(), out[d]);
   }
 
+  // The rigid path's stage 0 under Euler at the bodies' state: the rates of x, v, q and L.
+  void rigid_rates(const RigidBodySet<T>& bodies, double t, T* const out[13]) {
+    RigidBlockPath<T>& probe = core.rigid_probe();
+    RigidBodySet<T>& set = const_cast<RigidBodySet<T>&>(bodies);  // read: stage 0 writes scratch only
+    if (probe.coupled()) core.reach(set.centers());
+    probe.reserve(set.padded_size());
+    workers.run(std::uint64_t(StepperCall::accelerations), set.size(), 1, [&](const Workers& w) {
+      probe.evaluate_rates({set, T(1), core.options.renormalize_quaternions}, w, t);
+      return double(set.size());
+    });
+    for (int c = 0; c < 13; ++c) std::copy(probe.rate_of(c), probe.rate_of(c) + set.padded_size(), out[c]);
+  }
+
   StepperCore<T> core;
   MeasuredWorkers workers;
   FixedSteps<T> fixed;
@@ -165,6 +178,11 @@ template <class T>
 void StepperAccess<T>::accelerations(Stepper<T>& s, const ParticleSet<T>& bodies, double t, T* const out[3],
                                      const StopRequest& stop) {
   s.impl_->accelerations(bodies, t, out, &stop);
+}
+
+template <class T>
+void StepperAccess<T>::rigid_rates(Stepper<T>& s, const RigidBodySet<T>& bodies, double t, T* const out[13]) {
+  s.impl_->rigid_rates(bodies, t, out);
 }
 
 template <class T>
@@ -345,8 +363,24 @@ StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies, const ForceMo
   return estimate_stiffness<T>(bodies, accelerations, iterations);
 }
 
+template <class T>
+StiffnessEstimate estimate_stiffness(const RigidBodySet<T>& bodies, const ForceModel<T>& forces, double t,
+                                     int iterations, StepperOptions options, const StopRequest& stop) {
+  if (iterations < 1) throw Error("estimate_stiffness: iterations must be >= 1");
+  Stepper<T> stepper(forces, euler, options);
+  const auto rates = [&](const RigidBodySet<T>& set, T* const out[13]) {
+    if (stop && stop()) throw Stopped();
+    StepperAccess<T>::rigid_rates(stepper, set, t, out);
+  };
+  return estimate_stiffness<T>(bodies, rates, iterations);
+}
+
 template class Stepper<float>;
 template class Stepper<double>;
+template StiffnessEstimate estimate_stiffness(const RigidBodySet<float>&, const ForceModel<float>&, double, int,
+                                              StepperOptions, const StopRequest&);
+template StiffnessEstimate estimate_stiffness(const RigidBodySet<double>&, const ForceModel<double>&, double, int,
+                                              StepperOptions, const StopRequest&);
 template struct StepperAccess<float>;
 template struct StepperAccess<double>;
 template StiffnessEstimate estimate_stiffness(const ParticleSet<float>&, const ForceModel<float>&, double, int,

@@ -17,6 +17,8 @@ struct StepperAccess {
   // Stepper::accelerations, `stop` polled as Stepper::advance polls it (kinema::Stopped).
   static void accelerations(Stepper<T>& s, const ParticleSet<T>& bodies, double t, T* const out[3],
                             const StopRequest& stop);
+  // The rates of rigid bodies' 13 state components at time t (RigidRatesFn).
+  static void rigid_rates(Stepper<T>& s, const RigidBodySet<T>& bodies, double t, T* const out[13]);
 };
 
 extern template struct StepperAccess<float>;

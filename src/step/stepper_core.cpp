@@ -60,6 +60,12 @@ StagedPath<T>& StepperCore<T>::acceleration_probe() {
 }
 
 template <class T>
+RigidBlockPath<T>& StepperCore<T>::rigid_probe() {
+  if (!paths.rigid_probe) paths.rigid_probe = std::make_unique<RigidBlockPath<T>>(*forces_, euler, *table, *paths.lowered);
+  return *paths.rigid_probe;
+}
+
+template <class T>
 void StepperCore<T>::reach(const ParticleSet<T>& bodies) {
   check_reach(paths.lowered->coupled, bodies);
   paths.lowered->coupled.springs.lay_out();

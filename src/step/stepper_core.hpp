@@ -42,6 +42,8 @@ class StepperCore {
   // The staged path that evaluates accelerations alone (Euler's first stage), made at the
   // first call and kept until the model changes.
   StagedPath<T>& acceleration_probe();
+  // The same for rigid bodies: the rigid path under Euler, whose stage 0 gives the rates.
+  RigidBlockPath<T>& rigid_probe();
 
   const ForceModel<T>& forces() const { return *forces_; }
   const LoweredForces<T>& lowered() const { return *paths.lowered; }

@@ -371,3 +371,95 @@ TEST_CASE("rigid error control: the same steps and bits on every thread count", 
   };
   test::check_same_bits_everywhere(hash, 40, 3000);
 }
+
+namespace {
+
+// Four boxes (half extents 0.3, 0.5, 0.2) hanging in a chain from a kinematic anchor, each
+// joint two corner springs (rest 0.1), under gravity: their rest state, found by relaxing them
+// with drag, then at rest.
+struct BoxChain {
+  static constexpr int boxes = 4;
+  static constexpr double hx = 0.3, hy = 0.5, hz = 0.2, gap = 0.1;
+
+  static ForceModel<double> forces(double k) {
+    ForceModel<double> f;
+    f.add(Gravity{});
+    BodySprings s;
+    for (int i = 1; i <= boxes; ++i) {
+      for (double side : {-1.0, 1.0}) {
+        const Vec3<double> above{side * hx, i == 1 ? 0 : -hy, 0};
+        s.springs.push_back({std::uint32_t(i - 1), std::uint32_t(i), above, {side * hx, hy, 0}, gap, k, 0});
+      }
+    }
+    return f.add(s);
+  }
+  static RigidBodySet<double> at_rest(double k) {
+    RigidBodySet<double> b;
+    b.add({});
+    b.set_kinematic(0);
+    for (int i = 1; i <= boxes; ++i) {
+      const double tilt = 0.02 * i;
+      b.add({{0.01 * i, -(gap * i + hy * (2 * i - 1)), 0}, {}, {std::cos(tilt), 0, 0.6 * std::sin(tilt), 0.8 * std::sin(tilt)}, {},
+             1, {(hy * hy + hz * hz) / 3, (hx * hx + hz * hz) / 3, (hx * hx + hy * hy) / 3}});
+    }
+    ForceModel<double> relaxing = forces(k);
+    relaxing.add(LinearDrag{2}).add(AngularDrag{0.5});
+    Stepper<double> s(relaxing, rk4, test::serial_options());
+    s.advance(b, 2e-3, 15000);
+    for (std::size_t i = 0; i < b.size(); ++i) b.set_velocity(i, {}), b.set_angular_momentum(i, {});
+    return b;
+  }
+};
+
+// Whether `steps` steps of h from the rest state, nudged, leave it far behind: the lowest box's
+// speed and angular momentum.
+bool blows_up(const Method& method, const ForceModel<double>& f, const RigidBodySet<double>& rest, double h) {
+  RigidBodySet<double> b = rest;
+  for (std::size_t i = 1; i < b.size(); ++i) b.set_velocity(i, {1e-6 * double(i), -2e-6, 1e-6}), b.set_angular_momentum(i, {1e-7, 2e-7, -1e-7});
+  Stepper<double> s(f, method, test::serial_options());
+  for (int k = 0; k < 2000; ++k) {
+    s.step(b, h);
+    const Vec3<double> v = b.centers().velocity(BoxChain::boxes);
+    const Vec3<double> l = b.angular_momentum(BoxChain::boxes);
+    if (!(std::abs(v[0]) + std::abs(v[1]) + std::abs(v[2]) + std::abs(l[0]) + std::abs(l[1]) + std::abs(l[2]) < 1)) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+TEST_CASE("the predicted stable step of a chain of boxes is where it blows up", "[rigid][springs][stability]") {
+  const RigidBodySet<double> rest = BoxChain::at_rest(2000);
+  const ForceModel<double> f = BoxChain::forces(2000);
+  const StiffnessEstimate e = estimate_stiffness(rest, f);
+  CHECK(e.angle == Approx(std::numbers::pi / 2).margin(1e-3));  // undamped: an oscillation
+  for (const Method* m : {&rk4, &symplectic_euler}) {
+    INFO(m->name);
+    const double predicted = largest_stable_step(*m, e);
+    double stable = predicted / 2, unstable = predicted * 2;
+    REQUIRE_FALSE(blows_up(*m, f, rest, stable));
+    REQUIRE(blows_up(*m, f, rest, unstable));
+    for (int k = 0; k < 20; ++k) {
+      const double mid = std::sqrt(stable * unstable);
+      (blows_up(*m, f, rest, mid) ? unstable : stable) = mid;
+    }
+    CHECK(stable == Approx(predicted).epsilon(0.05));  // measured: within 0.1%
+  }
+}
+
+TEST_CASE("the rigid stiffness estimate finds a point spring's fastest rotational mode", "[rigid][springs][stability]") {
+  // A body (moments 0.1, 0.2, 0.3) held at the point (0.3, 0.5, 0.2) by a spring of k = 1000:
+  // the modes of M^-1 K, K = k A^T A with A = [1, -[p]x], are 31.62, 48.46 and 65.84 rad/s.
+  RigidBodySet<double> b;
+  b.add({{}, {}, {1, 0, 0, 0}, {}, 1, {0.1, 0.2, 0.3}});
+  ForceModel<double> f;
+  f.add(PointSpring{{0.3, 0.5, 0.2}, {0.3, 0.5, 0.2}, 1000, 0});
+  for (int iterations : {20, 40, 120}) {
+    INFO(iterations << " iterations");
+    CHECK(estimate_stiffness(b, f, 0, iterations).magnitude == Approx(65.8408).epsilon(1e-4));
+  }
+  // Translation alone (a spring at the centre) is sqrt(k / m) = 31.62.
+  ForceModel<double> central;
+  central.add(PointSpring{{}, {}, 1000, 0});
+  CHECK(estimate_stiffness(b, central).magnitude == Approx(std::sqrt(1000.0)).epsilon(1e-4));
+}
