@@ -3,8 +3,10 @@
 // a gravity factor and damping rate per body (and angular damping for rigid bodies); with
 // gravity moved into a one-line callback (the block path); with a coupled term that adds
 // nothing (the staged path); and rigid bodies plain, with applied forces and torques, and
-// with their angular drag in a one-line callback (the rigid block path). Each iteration is one advance of kSteps steps, as a frame of a
-// fixed-step loop that catches up, on 1 thread at the best ISA.
+// with their angular drag in a one-line callback (the rigid block path), and both in chains
+// of 64 joined by springs (spring pairs between particles, body springs between points of
+// rigid bodies: the staged paths). Each iteration is one advance of kSteps steps, as a frame
+// of a fixed-step loop that catches up, on 1 thread at the best ISA.
 #include <benchmark/benchmark.h>
 
 #include <string>
@@ -17,7 +19,11 @@ namespace {
 
 constexpr std::uint64_t kSteps = 20;
 
-enum class Variant { fused, applied, parameters, callback, staged };
+enum class Variant { fused, applied, parameters, callback, staged, springs };
+
+// Chains of 64: body i joined to i + 1 within its chain.
+constexpr std::size_t kChain = 64;
+bool joined_to_next(std::size_t i, std::size_t n) { return (i + 1) % kChain != 0 && i + 1 < n; }
 
 const char* variant_name(Variant v) {
   switch (v) {
@@ -26,6 +32,7 @@ const char* variant_name(Variant v) {
     case Variant::parameters: return "parameters";
     case Variant::callback: return "callback";
     case Variant::staged: return "staged";
+    case Variant::springs: return "springs";
   }
   return "";
 }
@@ -61,6 +68,13 @@ ForceModel<T> variant_forces(Variant v, std::size_t n) {
     });
   }
   if (v == Variant::staged) f.add(std::make_shared<const NoCoupling<T>>());
+  if (v == Variant::springs) {
+    Springs chains;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (joined_to_next(i, n)) chains.pairs.push_back({std::uint32_t(i), std::uint32_t(i + 1), 0.5, 10, 0.1});
+    }
+    f.add(std::move(chains));
+  }
   return f;
 }
 
@@ -92,7 +106,15 @@ void particle_forces(benchmark::State& state, Variant v) {
 // The rigid scene's model, its angular drag given by a one-line callback where the variant
 // says so.
 template <class T>
-ForceModel<T> rigid_variant_forces(Variant v, Scene scene) {
+ForceModel<T> rigid_variant_forces(Variant v, Scene scene, std::size_t n) {
+  if (v == Variant::springs) {  // the particle chains' springs, between corners of the bodies
+    ForceModel<T> f = make_forces<T>(scene);
+    BodySprings chains;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (joined_to_next(i, n)) chains.springs.push_back({std::uint32_t(i), std::uint32_t(i + 1), {0.2, 0.1, 0}, {-0.2, 0.1, 0}, 0.5, 10, 0.1});
+    }
+    return f.add(chains);
+  }
   if (v != Variant::callback) return make_forces<T>(scene);
   scene.forces.pop_back();  // the angular drag
   ForceModel<T> f = make_forces<T>(scene);
@@ -110,7 +132,7 @@ void rigid_forces(benchmark::State& state, Variant v) {
   CaseJobs jobs(1);
   StepperOptions o;
   o.jobs = jobs.get();
-  Stepper<T> stepper(rigid_variant_forces<T>(v, scene), rk4, o);
+  Stepper<T> stepper(rigid_variant_forces<T>(v, scene, n), rk4, o);
   if (v == Variant::parameters) {
     set_parameters(bodies);
     for (std::size_t i = 0; i < n; ++i) bodies.set_angular_damping(i, T(0.01) * T(i % 4));
@@ -133,12 +155,12 @@ void rigid_forces(benchmark::State& state, Variant v) {
 
 void register_all() {
   const std::string isa(isa_name(best_isa()));
-  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback, Variant::staged}) {
+  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback, Variant::staged, Variant::springs}) {
     const std::string name = std::string("game/") + variant_name(v) + "/rk4/float/" + isa;
     benchmark::RegisterBenchmark(name.c_str(), particle_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
   }
-  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback}) {
+  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback, Variant::springs}) {
     const std::string name = std::string("game/rigid-") + variant_name(v) + "/rk4/float/" + isa;
     benchmark::RegisterBenchmark(name.c_str(), rigid_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);

@@ -47,10 +47,12 @@ void print_game_table(const Results& results, Noise& noise) {
       {"parameters", "a gravity factor and damping on every body", "fused", 60},
       {"callback", "gravity in a one-line callback (block path)", "fused", 52},
       {"staged", "a coupled term that adds nothing (staged)", "fused", 52},
+      {"springs", "chains of 64 joined by spring pairs (staged)", "fused", 52},
       {"rigid-fused", "rigid bodies, angular drag built in", "rigid-fused", 120},
       {"rigid-applied", "and a force and torque on every body", "rigid-fused", 144},
       {"rigid-parameters", "and gravity factor, damping, angular damping", "rigid-fused", 132},
       {"rigid-callback", "angular drag in a one-line callback", "rigid-fused", 120},
+      {"rigid-springs", "chains of 64 joined by body springs (staged)", "rigid-fused", 120},
   };
   for (const GameRow& row : rows) print_row(results, noise, row, stream);
 }

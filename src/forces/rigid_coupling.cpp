@@ -115,24 +115,27 @@ void RigidCoupling<T>::check_reach(std::size_t bodies) const {
 }
 
 // The spring's force on its end i, computed the same way from either end: F_j = -F_i exactly.
+// Adds the force and its torque on the end's body to `force` and `torque`.
 template <class T>
-void RigidCoupling<T>::add_link(const RigidStage<T>& s, const End& e) const {
+void RigidCoupling<T>::add_link(const RigidStage<T>& s, const End& e, T (&force)[3], T (&torque)[3]) const {
   const Link& l = links_[e.link];
   const BodyPoint<T> a = body_point(s, l.i, l.point_i), b = body_point(s, l.j, l.point_j);
   Vec<T> d, relative;
   for (int c = 0; c < 3; ++c) d.c[c] = a.at.c[c] - b.at.c[c], relative.c[c] = a.velocity.c[c] - b.velocity.c[c];
   const T length = std::sqrt(dot(d, d));
   if (length == 0) return;  // no direction
+  const T inverse = T(1) / length;
   Vec<T> u;
-  for (int c = 0; c < 3; ++c) u.c[c] = d.c[c] / length;
+  for (int c = 0; c < 3; ++c) u.c[c] = d.c[c] * inverse;
   const T magnitude = l.k * (length - l.rest) + l.damping * dot(relative, u);
   const bool at_i = e.body == l.i;
-  Vec<T> force;
+  Vec<T> f;
   for (int c = 0; c < 3; ++c) {
     const T on_i = -(magnitude * u.c[c]);
-    force.c[c] = at_i ? on_i : -on_i;
+    f.c[c] = at_i ? on_i : -on_i;
   }
-  push(s, e.body, at_i ? a.arm : b.arm, force);
+  const Vec<T> turn = cross(at_i ? a.arm : b.arm, f);
+  for (int c = 0; c < 3; ++c) force[c] += f.c[c], torque[c] += turn.c[c];
 }
 
 template <class T>
@@ -146,9 +149,15 @@ void RigidCoupling<T>::add(const RigidStage<T>& s, std::size_t begin, std::size_
     }
   }
   const auto by_body = [](const End& e, std::size_t body) { return e.body < body; };
-  const auto first = std::lower_bound(ends_.begin(), ends_.end(), begin, by_body);
-  const auto last = std::lower_bound(first, ends_.end(), end, by_body);
-  for (auto e = first; e != last; ++e) add_link(s, *e);
+  auto e = std::lower_bound(ends_.begin(), ends_.end(), begin, by_body);
+  const auto last = std::lower_bound(e, ends_.end(), end, by_body);
+  // A body's springs summed apart, then added once: no store for the next spring to wait on.
+  while (e != last) {
+    const std::uint32_t body = e->body;
+    T force[3] = {}, torque[3] = {};
+    for (; e != last && e->body == body; ++e) add_link(s, *e, force, torque);
+    for (int c = 0; c < 3; ++c) s.force[c][body] += force[c], s.torque[c][body] += torque[c];
+  }
 }
 
 namespace {

@@ -52,7 +52,7 @@ class RigidCoupling {
   struct End {
     std::uint32_t body, link;
   };
-  void add_link(const RigidStage<T>& s, const End& e) const;
+  void add_link(const RigidStage<T>& s, const End& e, T (&force)[3], T (&torque)[3]) const;
 
   std::vector<Point> points_;
   std::vector<Link> links_;
