@@ -63,6 +63,7 @@ struct RigidSpec {
   Vec3<double> inertia{1, 1, 1};
   Vec3<double> force{}, torque{};  // applied, constant, for the whole run (world frame)
   std::optional<double> damping, angular_damping, gravity_factor;  // as BodySpec's
+  bool kinematic = false;  // moves on at its velocity, does not turn: an anchor for body springs
 };
 
 struct Scene {
@@ -79,11 +80,14 @@ struct Scene {
   std::vector<RigidSpec> rigid_bodies;
   std::optional<GenerateSpec> generate;
   std::vector<LocalTerm> forces;
-  // Coupled terms (particles only): N-body gravity, and spring networks in scene order.
-  // Pair indices count listed particles, then the bodies of network generators in term
-  // order, then generated particles.
+  // Coupled terms: N-body gravity, and spring networks in scene order, among the particles
+  // or, in a scene of rigid bodies alone, among the rigid bodies' centres. Pair indices
+  // count listed particles, then the bodies of network generators in term order, then
+  // generated particles (or listed rigid bodies, then generated ones). Body springs join
+  // points of rigid bodies, every "body_springs" term's in scene order.
   std::optional<NBody> nbody;
   std::vector<Springs> springs;
+  BodySprings body_springs;
   // The particles a spring network generator (chain, grid) added to `particles`, by the
   // generator's JSON path ("forces[0].chain"): errors about them name what the file says.
   struct Generated {

@@ -34,9 +34,9 @@ class World {
   // Steps of about the same work: 2^22 body-evaluations, where a body costs its springs too
   // and, under N-body gravity, half of every body again (its share of the pairs).
   std::uint64_t steps_per_call() const;
-  // Error-controlled steps to t_end (Stepper::advance_to); particles only (kinema::Error
-  // when the world has rigid bodies).
-  // With `stop` and `interrupt`, as Stepper::advance_to with them.
+  // Error-controlled steps to t_end (Stepper::advance_to), for a world of one kind of body
+  // (kinema::Error when it has both). With `stop` and `interrupt`, as Stepper::advance_to
+  // with them for particles; rigid bodies run to t_end without polling them.
   AdaptiveStats advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop = {},
                            const StopRequest& interrupt = {});
   double time() const;

@@ -142,7 +142,9 @@ std::pair<double, double> linear_motion(double y0, double v0, double gamma, doub
 
 Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
   // Bodies that pull on each other are one system: a sample would be another scene.
-  if (scene.nbody || !scene.springs.empty()) max_bodies = std::numeric_limits<std::size_t>::max();
+  if (scene.nbody || !scene.springs.empty() || !scene.body_springs.springs.empty()) {
+    max_bodies = std::numeric_limits<std::size_t>::max();
+  }
   Scene out = scene;
   out.generate.reset();
   out.particles.clear();
@@ -166,8 +168,9 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
     b.velocity = r.centers().velocity(i);
     b.orientation = r.orientation(i);
     b.angular_momentum = r.angular_momentum(i);
-    b.mass = 1 / r.centers().inv_mass()[i];
-    for (int d = 0; d < 3; ++d) b.inertia[d] = 1 / r.inv_inertia(d)[i];
+    b.kinematic = r.centers().inv_mass()[i] == 0;  // its mass and inertia are gone: any will do
+    b.mass = b.kinematic ? 1 : 1 / r.centers().inv_mass()[i];
+    for (int d = 0; d < 3; ++d) b.inertia[d] = b.kinematic ? 1 : 1 / r.inv_inertia(d)[i];
     b.force = r.applied_force(i);
     b.torque = r.applied_torque(i);
     const BodyParameters<double>& own = r.parameters();

@@ -155,15 +155,43 @@ Springs parse_springs(const Node& n, Scene& scene) {
   return springs;
 }
 
+// {"type": "body_springs", "springs": [{"i": 0, "j": 1, "point_i": [..], "point_j": [..],
+// "rest": .., "k": .., "damping": ..}, ...]}: points default to the centres, rest and damping
+// to 0.
+void parse_body_springs(const Node& n, Scene& scene) {
+  n.expect_object({"type", "springs"});
+  const Node list = n.required("springs");
+  if (!list.value.is_array()) list.fail("expected an array of springs");
+  for (std::size_t k = 0; k < list.value.size(); ++k) {
+    const Node e = list.element(k);
+    e.expect_object({"i", "j", "point_i", "point_j", "rest", "k", "damping"});
+    BodySpring b;
+    b.i = index_in(e.required("i")), b.j = index_in(e.required("j"));
+    if (e.has("point_i")) b.point_i = e.child("point_i").vec3();
+    if (e.has("point_j")) b.point_j = e.child("point_j").vec3();
+    if (e.has("rest")) b.rest = e.child("rest").non_negative();
+    b.k = e.required("k").non_negative();
+    if (e.has("damping")) b.damping = e.child("damping").non_negative();
+    if (b.i == b.j) e.fail("joins body " + std::to_string(b.i) + " to itself");
+    scene.body_springs.springs.push_back(b);
+  }
+  try {  // what is left to check: how many springs a body has, over every term so far
+    check_body_springs(scene.body_springs.springs, list.path);
+  } catch (const Error& e) {
+    throw Error(printable(std::string(n.origin) + ": " + e.what()));
+  }
+}
+
 }  // namespace
 
-bool is_coupled_force(std::string_view type) { return type == "nbody" || type == "springs"; }
+bool is_coupled_force(std::string_view type) { return type == "nbody" || type == "springs" || type == "body_springs"; }
 
 void parse_coupled_force(const Node& n, const std::string& type, Scene& scene) {
   if (type == "springs") {
     scene.springs.push_back(parse_springs(n, scene));
     return;
   }
+  if (type == "body_springs") return parse_body_springs(n, scene);
   n.expect_object({"type", "G", "softening"});
   if (scene.nbody) n.fail("at most one nbody term per scene");
   NBody term;
@@ -206,22 +234,48 @@ void check_repeats_across(const Scene& scene, std::span<const Node> terms) {
 
 }  // namespace
 
-void check_coupled(const Scene& scene, std::span<const Node> terms) {
-  const bool generated_particles = scene.generate && !scene.generate->rigid;
-  const std::size_t particles = scene.particles.size() + (generated_particles ? scene.generate->count : 0);
-  const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
+std::size_t particle_count(const Scene& scene) {
+  const bool generated = scene.generate && !scene.generate->rigid;
+  return scene.particles.size() + (generated ? scene.generate->count : 0);
+}
+
+std::size_t rigid_count(const Scene& scene) {
+  const bool generated = scene.generate && scene.generate->rigid;
+  return scene.rigid_bodies.size() + (generated ? scene.generate->count : 0);
+}
+
+bool mixed_bodies(const Scene& scene) { return particle_count(scene) > 0 && rigid_count(scene) > 0; }
+
+void check_coupled(const Scene& scene, std::span<const Node> terms, std::span<const Node> body_terms) {
+  // Pairs join the bodies of the one kind the scene has.
+  const bool rigid = rigid_count(scene) > 0;
+  const std::size_t bodies = rigid ? rigid_count(scene) : particle_count(scene);
+  const char* kind = rigid ? " rigid bodies" : " particles";
   for (std::size_t t = 0; t < terms.size(); ++t) {
-    if (rigid) terms[t].fail("springs act on particles only; the scene has rigid bodies");
+    if (mixed_bodies(scene)) terms[t].fail("springs join bodies of one kind; the scene has particles and rigid bodies");
     const auto& pairs = scene.springs[t].pairs;
     if (!terms[t].has("pairs")) continue;  // a generator joins its own bodies
     for (std::size_t k = 0; k < pairs.size(); ++k) {
       const std::uint32_t last = std::max(pairs[k].i, pairs[k].j);
-      if (last < particles) continue;
+      if (last < bodies) continue;
       terms[t].child("pairs").element(k).fail("joins body " + std::to_string(last) + ", but the scene has " +
-                                              std::to_string(particles) + " particles");
+                                              std::to_string(bodies) + kind);
     }
   }
   check_repeats_across(scene, terms);
+  const std::size_t rigids = rigid_count(scene);
+  std::size_t k = 0;
+  for (const Node& term : body_terms) {
+    const Node list = term.child("springs");
+    for (std::size_t e = 0; e < list.value.size(); ++e, ++k) {
+      const BodySpring& b = scene.body_springs.springs[k];
+      const std::uint32_t last = std::max(b.i, b.j);
+      if (last >= rigids) {
+        list.element(e).fail("joins body " + std::to_string(last) + ", but the scene has " + std::to_string(rigids) +
+                             " rigid bodies");
+      }
+    }
+  }
 }
 
 }  // namespace kinema

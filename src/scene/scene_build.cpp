@@ -46,6 +46,7 @@ RigidBodySet<T> make_rigid_bodies(const Scene& scene) {
   for (const RigidSpec& b : scene.rigid_bodies) add(b);
   for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
     const RigidSpec& b = scene.rigid_bodies[i];
+    if (b.kinematic) set.set_kinematic(i);
     if (nonzero(b.force)) apply_scene_load("rigid_bodies", i, [&] { set.apply_force(i, converted<T>(b.force)); });
     if (nonzero(b.torque)) apply_scene_load("rigid_bodies", i, [&] { set.apply_torque(i, converted<T>(b.torque)); });
     apply_scene_load("rigid_bodies", i, [&] {
@@ -105,6 +106,7 @@ ForceModel<T> make_forces(const Scene& scene) {
       for (const Springs& network : scene.springs) all.pairs.insert(all.pairs.end(), network.pairs.begin(), network.pairs.end());
       model.add(std::move(all));
     }
+    if (!scene.body_springs.springs.empty()) model.add(scene.body_springs);
   } catch (const Error& e) {
     throw Error(std::string("forces: ") + e.what());
   }

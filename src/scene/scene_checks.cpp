@@ -176,6 +176,8 @@ double evaluation_cost(const Scene& scene) {
                         (scene.generate ? double(scene.generate->count) : 0);
   double springs = 0;
   for (const Springs& network : scene.springs) springs += double(network.pairs.size());
+  // A body spring's two ends each turn both its points: about 8 body-evaluations each.
+  springs += 16 * double(scene.body_springs.springs.size());
   return bodies + springs + (scene.nbody ? bodies * bodies / 2 : 0);
 }
 
@@ -191,14 +193,17 @@ RunBytes run_bytes(const Scene& scene) {
   constexpr double kMargin = 1.2;
   RunBytes r;
   r.state = 3 * state_bytes<T>(scene) + kListedBody * double(scene.particles.size() + scene.rigid_bodies.size());
-  const bool coupled = scene.nbody || !scene.springs.empty();
+  const bool coupled = scene.nbody || !scene.springs.empty() || !scene.body_springs.springs.empty();
   if (coupled) {
-    const double n = double(scene.particles.size()) + (scene.generate && !scene.generate->rigid ? double(scene.generate->count) : 0);
+    // A rigid body's stage state is about twice a particle's.
+    const double n = double(scene.particles.size()) + 2 * double(scene.rigid_bodies.size()) +
+                     (scene.generate ? double(scene.generate->count) * (scene.generate->rigid ? 2 : 1) : 0);
     const Method& method = scene.method == "auto" ? rk6 : method_by_name(scene.method);
     const double stages = double(std::max(method.evaluations(), 1));
     r.scratch = std::min(kEstimateVectors * n, kEstimateCap) + n * (kDoubleProbe + (stages * 9 + 9) * sizeof(T));
     double pairs = 0;
     for (const Springs& network : scene.springs) pairs += double(network.pairs.size());
+    pairs += 2 * double(scene.body_springs.springs.size());
     r.springs = pairs * (kSpringCopies + 2 * 1.5 * (4 + 3 * sizeof(T)) + 2 * 1.5 * (4 + 3 * sizeof(double)));
   }
   r.state *= kMargin, r.scratch *= kMargin, r.springs *= kMargin;

@@ -129,8 +129,12 @@ Quat<double> parse_orientation(const Node& n) {
 RigidSpec parse_rigid(const Node& n) {
   n.expect_object({"position", "velocity", "orientation", "angular_velocity",
                    "angular_momentum", "mass", "inertia", "force", "torque", "damping", "angular_damping",
-                   "gravity_factor"});
+                   "gravity_factor", "kinematic"});
   RigidSpec b;
+  if (n.has("kinematic")) b.kinematic = n.child("kinematic").boolean();
+  for (const char* key : {"force", "torque"}) {
+    if (b.kinematic && n.has(key)) n.child(key).fail("a kinematic body ignores forces: give one or the other");
+  }
   b.position = n.required("position").vec3();
   if (n.has("velocity")) b.velocity = n.child("velocity").vec3();
   if (n.has("mass")) b.mass = n.child("mass").positive();
@@ -257,7 +261,7 @@ void parse_bodies(const Node& root, Scene& s) {
 
 // Local terms, then the coupled ones (N-body, spring networks), checked together at the end.
 void parse_forces(const Node& root, Scene& s) {
-  std::vector<Node> spring_terms;
+  std::vector<Node> spring_terms, body_spring_terms;
   if (root.has("forces")) {
     const Node list = root.child("forces");
     if (!list.value.is_array()) list.fail("expected an array");
@@ -268,14 +272,15 @@ void parse_forces(const Node& root, Scene& s) {
         s.forces.push_back(parse_force(term));
         continue;
       }
-      if (type == "nbody" && (!s.rigid_bodies.empty() || (s.generate && s.generate->rigid))) {
-        term.fail("nbody acts on particles only; the scene has rigid bodies");
+      if (type == "nbody" && mixed_bodies(s)) {
+        term.fail("nbody acts among bodies of one kind; the scene has particles and rigid bodies");
       }
       parse_coupled_force(term, type, s);
       if (type == "springs") spring_terms.push_back(term);
+      if (type == "body_springs") body_spring_terms.push_back(term);
     }
   }
-  check_coupled(s, spring_terms);
+  check_coupled(s, spring_terms, body_spring_terms);
 }
 
 }  // namespace

@@ -213,8 +213,10 @@ TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") 
        "scene: forces[0].chain.direction: expected a nonzero direction"},
       {two + R"({"type": "nbody", "G": -1}]})", "scene: forces[0].G: expected a number >= 0"},
       {two + R"({"type": "nbody"}, {"type": "nbody"}]})", "scene: forces[1]: at most one nbody term"},
-      {R"({"rigid_bodies": [{"position": [0,0,0]}], "forces": [{"type": "nbody"}]})",
-       "scene: forces[0]: nbody acts on particles only"},
+      {R"({"rigid_bodies": [{"position": [0,0,0]}], "particles": [{"position": [0,0,0]}], "forces": [{"type": "nbody"}]})",
+       "scene: forces[0]: nbody acts among bodies of one kind; the scene has particles and rigid bodies"},
+      {two + R"({"type": "body_springs", "springs": [{"i": 0, "j": 1, "k": 1}]}]})",
+       "scene: forces[0].springs[0]: joins body 1, but the scene has 0 rigid bodies"},
       {R"({"generate": {"count": 4, "distribution": "plummer"}})", "scene: generate: missing key 'radius'"},
       {R"({"generate": {"count": 4, "distribution": "plummer", "radius": 1, "position_min": [0,0,0]}})",
        "scene: generate.position_min: only for \"distribution\": \"box\""},
@@ -223,6 +225,44 @@ TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") 
     INFO(text);
     CHECK_THROWS_WITH(parse_scene(text), Catch::StartsWith(message));
   }
+}
+
+TEST_CASE("rigid bodies in scenes: body springs, point springs, kinematic anchors, coupled terms", "[scene][rigid][springs]") {
+  const Scene s = parse_scene(R"({"rigid_bodies": [{"position": [0,0,0], "kinematic": true}, {"position": [0,-1,0]},
+                                                   {"position": [0,-2,0]}],
+    "forces": [{"type": "point_spring", "point": [0, 1, 0], "anchor": [0, 5, 0], "k": 3},
+               {"type": "body_springs", "springs": [{"i": 0, "j": 1, "point_j": [0, 0.5, 0], "rest": 0.5, "k": 100, "damping": 2}]},
+               {"type": "body_springs", "springs": [{"i": 1, "j": 2, "point_i": [0.1, 0, 0], "point_j": [0, 0.5, 0], "k": 50}]},
+               {"type": "springs", "pairs": [[0, 2, 2, 10, 0]]},
+               {"type": "nbody", "G": 0.5}]})");
+  REQUIRE(s.body_springs.springs.size() == 2);
+  const BodySpring& b = s.body_springs.springs[1];
+  CHECK((b.i == 1 && b.j == 2 && b.point_i == Vec3<double>{0.1, 0, 0} && b.point_j == Vec3<double>{0, 0.5, 0}));
+  CHECK((b.rest == 0 && b.k == 50 && b.damping == 0));
+  CHECK(s.body_springs.springs[0].damping == 2);
+  const ForceModel<double> f = make_forces<double>(s);
+  CHECK(f.body_springs().size() == 2);
+  CHECK(f.springs().size() == 1);
+  CHECK(f.nbody());
+  CHECK(std::holds_alternative<PointSpring>(f.local_terms()[0]));
+  const RigidBodySet<double> r = make_rigid_bodies<double>(s);
+  CHECK(r.centers().inv_mass()[0] == 0);
+  CHECK(r.centers().inv_mass()[1] == 1);
+  // Built into a world, they step: the anchor stays where it is.
+  World<double> w(s, rk4, on_calling_thread());
+  w.advance(0.01, 10);
+  CHECK(w.rigid.centers().position(0) == Vec3<double>{0, 0, 0});
+  CHECK(w.rigid.centers().position(1)[1] != -1);
+  CHECK_THROWS_WITH(parse_scene(R"({"rigid_bodies": [{"position": [0,0,0], "kinematic": true, "force": [1,0,0]}]})"),
+                    Catch::Contains("rigid_bodies[0].force: a kinematic body ignores forces"));
+  CHECK_THROWS_WITH(parse_scene(R"({"rigid_bodies": [{"position": [0,0,0]}, {"position": [1,0,0]}],
+    "forces": [{"type": "body_springs", "springs": [{"i": 0, "j": 1, "k": 1}, {"i": 1, "j": 1, "k": 1}]}]})"),
+                    Catch::StartsWith("scene: forces[0].springs[1]: joins body 1 to itself"));
+  CHECK_THROWS_WITH(parse_scene(R"({"rigid_bodies": [{"position": [0,0,0]}, {"position": [1,0,0]}],
+    "forces": [{"type": "springs", "pairs": [[0, 2, 1, 1, 0]]}]})"),
+                    Catch::StartsWith("scene: forces[0].pairs[0]: joins body 2, but the scene has 2 rigid bodies"));
+  CHECK_THROWS_WITH(parse_scene(R"({"rigid_bodies": [{"position": [0,0,0]}], "forces": [{"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1}}]})"),
+                    Catch::StartsWith("scene: forces[0]: springs join bodies of one kind; the scene has particles and rigid bodies"));
 }
 
 TEST_CASE("a Plummer sphere is centred, at rest, and near virial equilibrium", "[scene]") {

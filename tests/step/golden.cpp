@@ -90,6 +90,13 @@ const std::map<std::string, std::uint64_t> kGolden = {
     // A spring with quadratic drag, recorded when it arrived (the kinked-force charts).
     {"drag_oscillator/double", 0x6f0ba12e7caa84ebull},
     {"drag_oscillator/float", 0x9bead68101df99c4ull},
+    // Rigid bodies on point springs and body springs, recorded when they arrived.
+    {"heavy_top/float", 0x04dc053ff11a3e8eull},
+    {"heavy_top/double", 0xf648651197c72a87ull},
+    {"box_chain/float", 0x6179409efb5619e4ull},
+    {"box_chain/double", 0xeb9d17e0c63da338ull},
+    {"double_pendulum/float", 0x0c4fa1ff14d29703ull},
+    {"double_pendulum/double", 0x8e11370a264f2697ull},
 };
 
 }  // namespace
@@ -103,7 +110,8 @@ constexpr unsigned kThreadCounts[] = {1, 2, 3};
 TEST_CASE("shipped scenes hash to their stored values on every ISA, thread count and path", "[golden]") {
   const char* names[] = {"damped_spring", "drag_field",      "kepler_circular", "kepler_eccentric",
                          "projectiles",   "spinning_debris", "tumbling_book",   "binary_orbit",
-                         "hanging_chain", "cloth",           "plummer_cluster", "drag_oscillator"};
+                         "hanging_chain", "cloth",           "plummer_cluster", "drag_oscillator",
+                         "heavy_top",     "box_chain",       "double_pendulum"};
   for (const char* name : names) {
     Scene scene = load_scene(std::string(KINEMA_SCENES) + "/" + name + ".json");
     // A cluster of 64 bodies: 4096^2 interactions per stage take seconds on the scalar path.

@@ -158,18 +158,18 @@ bool advance_adaptive(World<T>& world, double t, Tolerances tolerances, Adaptive
 }
 
 // The stiffness of the scene at its start, in double whatever the run's precision (finite
-// differences in float lose half their digits): on the particles, else the rigid bodies'
-// centres; on 1024 of them spread evenly when only local terms act (each body is then a
-// system of its own, and the stiffest of a sample stands for the rest).
+// differences in float lose half their digits): on the particles, else the rigid bodies
+// (their rotation too); on 1024 of them spread evenly when only local terms act (each body
+// is then a system of its own, and the stiffest of a sample stands for the rest).
 // 40 Jacobian products (57 force evaluations) on the run's threads: a few tenths of a second
 // for the 4096-body cluster.
 StiffnessEstimate stiffness_at_start(const Scene& scene, const StepperOptions& options) {
   const ForceModel<double> forces = make_forces<double>(scene);
-  const bool sampled = forces.fusable();
+  const bool sampled = forces.fusable() && !forces.couples_rigid();
   const Scene source = sampled ? sample_bodies(scene, 1024) : scene;
-  ParticleSet<double> bodies = make_particles<double>(source);
-  if (bodies.size() == 0) bodies = make_rigid_bodies<double>(source).centers();
-  return estimate_stiffness(bodies, forces, 0, 40, options, interrupt_request());
+  const ParticleSet<double> bodies = make_particles<double>(source);
+  if (bodies.size() > 0) return estimate_stiffness(bodies, forces, 0, 40, options, interrupt_request());
+  return estimate_stiffness(make_rigid_bodies<double>(source), forces, 0, 40, options, interrupt_request());
 }
 
 std::string mode_name(const StiffnessEstimate& e) {

@@ -275,9 +275,12 @@ std::string limits_table(const Scene& scene, const std::vector<MethodLimit>& lim
 std::string step_limits(const Scene& scene, const std::vector<const Method*>& methods, double dt, double duration,
                         const fs::path& dir) {
   const ForceModel<double> forces = make_forces<double>(scene);
-  ParticleSet<double> bodies = make_particles<double>(scene);
-  if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
-  const StiffnessEstimate e = estimate_stiffness(bodies, forces, 0, 120, on_calling_thread(), interrupt_request());
+  const ParticleSet<double> bodies = make_particles<double>(scene);
+  // Rigid bodies: over their rotation too.
+  const StiffnessEstimate e =
+      bodies.size() > 0 ? estimate_stiffness(bodies, forces, 0, 120, on_calling_thread(), interrupt_request())
+                        : estimate_stiffness(make_rigid_bodies<double>(scene), forces, 0, 120, on_calling_thread(),
+                                             interrupt_request());
   const std::vector<MethodLimit> limits = measure_limits(scene, methods, e, dt, duration);
   write_limits(limits, e, dt, dir);
   return limits_table(scene, limits, e, duration);
