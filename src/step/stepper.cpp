@@ -278,7 +278,8 @@ std::size_t Stepper<T>::scratch_bytes() const {
   const StepperCore<T>& core = impl_->core;
   const std::size_t staged = core.paths.staged ? core.paths.staged->bytes() : 0;
   const std::size_t probe = core.paths.probe ? core.paths.probe->bytes() : 0;
-  const std::size_t rigid = core.paths.rigid_block ? core.paths.rigid_block->bytes() : 0;
+  const std::size_t rigid = (core.paths.rigid_block ? core.paths.rigid_block->bytes() : 0) +
+                            (core.paths.rigid_probe ? core.paths.rigid_probe->bytes() : 0);
   const std::size_t block = core.paths.block ? core.paths.block->bytes() : 0;
   return staged + probe + rigid + block + core.lowered().coupled.springs.bytes() + impl_->fixed.checkpoint_bytes();
 }

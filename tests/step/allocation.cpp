@@ -153,6 +153,36 @@ TEST_CASE("applied forces and rigid callbacks allocate nothing in steps", "[allo
   }
 }
 
+TEST_CASE("rigid bodies on springs allocate nothing in steps or error-controlled steps", "[allocation]") {
+  for (bool tbb : {false, true}) {
+    TbbJobSystem jobs(2);
+    StepperOptions o = tbb ? StepperOptions{} : test::serial_options();
+    if (tbb) o.jobs = &jobs, o.workers = WorkerChoice::all;
+    RigidBodySet<double> rigid;
+    BodySprings chain;
+    for (std::size_t i = 0; i < 3000; ++i) {
+      rigid.add({{double(i % 50), 0, double(i / 50)}, {}, {1, 0, 0.1, 0}, {0.2, 0, 0}, 1, {1, 2, 3}});
+      if (i > 0) chain.springs.push_back({std::uint32_t(i - 1), std::uint32_t(i), {0.1, 0, 0}, {-0.1, 0, 0}, 1, 5, 0.1});
+    }
+    ForceModel<double> f;
+    f.add(Gravity{}).add(PointSpring{{0, 0.2, 0}, {0, 3, 0}, 0.5, 0}).add(chain);
+    for (const Method* m : {&rk4, &velocity_verlet}) {
+      INFO(m->name << (tbb ? " on tbb" : " serial"));
+      Stepper<double> s(f, *m, o);
+      s.step(rigid, 0.01);
+      const long before = g_allocations.load();
+      s.advance(rigid, 0.01, 3);
+      s.step(rigid, 0.01);
+      CHECK(g_allocations.load() - before == 0);
+    }
+    Stepper<double> adaptive(f, dopri5, o);
+    adaptive.advance_to(rigid, 0.05, {});
+    const long before = g_allocations.load();
+    adaptive.advance_to(rigid, 0.1, {});
+    CHECK(g_allocations.load() - before == 0);
+  }
+}
+
 TEST_CASE("a hostile checkpoint is refused before anything past its own size is allocated", "[allocation][checkpoint]") {
   // A small checkpoint whose body count says 2^40 (its checksums made right again): the reader
   // compares every count with the data's length before it allocates for bodies.

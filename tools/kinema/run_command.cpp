@@ -51,7 +51,10 @@ Scene scene_with_overrides(const RunOptions& o) {
                   scene.method);
     }
     if ((scene.rtol || scene.atol) && (!scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid))) {
-      throw Error("rtol and atol control the steps of particles; the scene has rigid bodies");
+      // The library's rigid error control polls no stop request: a run could not be
+      // interrupted or checkpointed inside it.
+      throw Error("rtol and atol control the steps of particles here (rigid bodies: Stepper::advance_to in the "
+                  "library); the scene has rigid bodies");
     }
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {
