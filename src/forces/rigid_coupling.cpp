@@ -103,6 +103,7 @@ RigidCoupling<T>::RigidCoupling(const ForceModel<T>& forces) {
     ends_.push_back({b.j, std::uint32_t(k)});
     covered_ = std::max<std::size_t>(covered_, std::max(b.i, b.j) + std::size_t(1));
   }
+  pulls_.resize(links_.size());
   std::sort(ends_.begin(), ends_.end(),
             [](const End& a, const End& b) { return a.body != b.body ? a.body < b.body : a.link < b.link; });
 }
@@ -114,28 +115,30 @@ void RigidCoupling<T>::check_reach(std::size_t bodies) const {
               std::to_string(bodies) + " bodies");
 }
 
-// The spring's force on its end i, computed the same way from either end: F_j = -F_i exactly.
-// Adds the force and its torque on the end's body to `force` and `torque`.
+// A body spring's force on end i, F_i = -(k (|d| - rest) + damping (V_i - V_j) . u) u, and
+// the torques (R point_i) x F_i and (R point_j) x (-F_i); zero for coincident points.
 template <class T>
-void RigidCoupling<T>::add_link(const RigidStage<T>& s, const End& e, T (&force)[3], T (&torque)[3]) const {
-  const Link& l = links_[e.link];
+typename RigidCoupling<T>::Pull RigidCoupling<T>::pull(const RigidStage<T>& s, const Link& l) const {
   const BodyPoint<T> a = body_point(s, l.i, l.point_i), b = body_point(s, l.j, l.point_j);
   Vec<T> d, relative;
   for (int c = 0; c < 3; ++c) d.c[c] = a.at.c[c] - b.at.c[c], relative.c[c] = a.velocity.c[c] - b.velocity.c[c];
+  Pull p{};
   const T length = std::sqrt(dot(d, d));
-  if (length == 0) return;  // no direction
+  if (length == 0) return p;  // no direction
   const T inverse = T(1) / length;
   Vec<T> u;
   for (int c = 0; c < 3; ++c) u.c[c] = d.c[c] * inverse;
   const T magnitude = l.k * (length - l.rest) + l.damping * dot(relative, u);
-  const bool at_i = e.body == l.i;
-  Vec<T> f;
-  for (int c = 0; c < 3; ++c) {
-    const T on_i = -(magnitude * u.c[c]);
-    f.c[c] = at_i ? on_i : -on_i;
-  }
-  const Vec<T> turn = cross(at_i ? a.arm : b.arm, f);
-  for (int c = 0; c < 3; ++c) force[c] += f.c[c], torque[c] += turn.c[c];
+  Vec<T> on_i, on_j;
+  for (int c = 0; c < 3; ++c) on_i.c[c] = -(magnitude * u.c[c]), on_j.c[c] = -on_i.c[c];
+  const Vec<T> turn_i = cross(a.arm, on_i), turn_j = cross(b.arm, on_j);
+  for (int c = 0; c < 3; ++c) p.force[c] = on_i.c[c], p.torque_i[c] = turn_i.c[c], p.torque_j[c] = turn_j.c[c];
+  return p;
+}
+
+template <class T>
+void RigidCoupling<T>::evaluate_springs(const RigidStage<T>& s, std::size_t begin, std::size_t end) {
+  for (std::size_t k = begin; k < std::min(end, links_.size()); ++k) pulls_[k] = pull(s, links_[k]);
 }
 
 template <class T>
@@ -151,11 +154,18 @@ void RigidCoupling<T>::add(const RigidStage<T>& s, std::size_t begin, std::size_
   const auto by_body = [](const End& e, std::size_t body) { return e.body < body; };
   auto e = std::lower_bound(ends_.begin(), ends_.end(), begin, by_body);
   const auto last = std::lower_bound(e, ends_.end(), end, by_body);
-  // A body's springs summed apart, then added once: no store for the next spring to wait on.
+  // A body's springs summed apart, then added once.
   while (e != last) {
     const std::uint32_t body = e->body;
     T force[3] = {}, torque[3] = {};
-    for (; e != last && e->body == body; ++e) add_link(s, *e, force, torque);
+    for (; e != last && e->body == body; ++e) {
+      const Pull& p = pulls_[e->link];
+      const bool at_i = links_[e->link].i == body;
+      for (int c = 0; c < 3; ++c) {
+        force[c] += at_i ? p.force[c] : -p.force[c];
+        torque[c] += at_i ? p.torque_i[c] : p.torque_j[c];
+      }
+    }
     for (int c = 0; c < 3; ++c) s.force[c][body] += force[c], s.torque[c][body] += torque[c];
   }
 }

@@ -37,7 +37,12 @@ class RigidCoupling {
   bool coupled() const { return !ends_.empty(); }  // body springs read other bodies' state
   // Throws kinema::Error when a body spring joins a body past `bodies`.
   void check_reach(std::size_t bodies) const;
-  // Adds the forces and torques on bodies [begin, end) at stage state `s`.
+  std::size_t spring_count() const { return links_.size(); }
+  // Body springs [begin, end) at stage state `s`, each once, into their own scratch: before
+  // add() for any body at that stage, once every body's stage state is written.
+  void evaluate_springs(const RigidStage<T>& s, std::size_t begin, std::size_t end);
+  // Adds the forces and torques on bodies [begin, end) at stage state `s`: the point springs',
+  // and each body's body springs from evaluate_springs, in model order.
   void add(const RigidStage<T>& s, std::size_t begin, std::size_t end) const;
 
  private:
@@ -52,10 +57,15 @@ class RigidCoupling {
   struct End {
     std::uint32_t body, link;
   };
-  void add_link(const RigidStage<T>& s, const End& e, T (&force)[3], T (&torque)[3]) const;
+  // A body spring's force on end i and the torques on both ends; on end j the force is -force.
+  struct Pull {
+    T force[3], torque_i[3], torque_j[3];
+  };
+  Pull pull(const RigidStage<T>& s, const Link& l) const;
 
   std::vector<Point> points_;
   std::vector<Link> links_;
+  std::vector<Pull> pulls_;  // each spring's, at the stage evaluate_springs saw last
   std::vector<End> ends_;
   std::size_t covered_ = 0;  // the largest body index a spring joins, plus 1
 };

@@ -158,11 +158,23 @@ void RigidBlockPath<T>::evaluate(const kernels::RigidBlockJob<T>& j, Block b, do
 }
 
 template <class T>
+RigidStage<T> RigidBlockPath<T>::stage_of(const kernels::RigidBlockJob<T>& j) {
+  return {{j.xs[0], j.xs[1], j.xs[2]},     {j.vs[0], j.vs[1], j.vs[2]},
+          {j.qs[0], j.qs[1], j.qs[2], j.qs[3]}, {j.omega[0], j.omega[1], j.omega[2]},
+          {j.force[0], j.force[1], j.force[2]}, {j.torque[0], j.torque[1], j.torque[2]}};
+}
+
+// Each body spring once at the stage, every body's stage state written: a pass of its own.
+template <class T>
+void RigidBlockPath<T>::springs_pass(const kernels::RigidBlockJob<T>& j, const Workers& w) {
+  if (!coupling_.coupled()) return;
+  const RigidStage<T> stage = stage_of(j);
+  for_each_block(w, coupling_.spring_count(), [&](Block b) { coupling_.evaluate_springs(stage, b.begin, b.end); });
+}
+
+template <class T>
 void RigidBlockPath<T>::rates(const kernels::RigidBlockJob<T>& j, Block b, double t) {
-  const RigidStage<T> stage{{j.xs[0], j.xs[1], j.xs[2]},     {j.vs[0], j.vs[1], j.vs[2]},
-                            {j.qs[0], j.qs[1], j.qs[2], j.qs[3]}, {j.omega[0], j.omega[1], j.omega[2]},
-                            {j.force[0], j.force[1], j.force[2]}, {j.torque[0], j.torque[1], j.torque[2]}};
-  if (!coupling_.empty()) coupling_.add(stage, b.begin, b.end);
+  if (!coupling_.empty()) coupling_.add(stage_of(j), b.begin, b.end);
   if (forces_.coupled()) add_coupled(j, b, t);
   const RigidBlock<T> v = view(j, b, t);
   for (const auto& callback : forces_.rigid_callbacks()) callback(v);
@@ -251,6 +263,7 @@ void RigidBlockPath<T>::evaluate_rates(const Call& call, const Workers& w, doubl
   const std::size_t n = call.bodies.padded_size();
   const kernels::RigidBlockJob<T>& j = stage_jobs_[0];  // stage 0 reads the bodies, writes scratch
   for_each_block(w, n, [&](Block b) { table_.rigid_block_stage(j, b.begin, b.end); });
+  springs_pass(j, w);
   for_each_block(w, n, [&](Block b) { rates(j, b, t); });
 }
 
@@ -309,6 +322,7 @@ void RigidBlockPath<T>::run_phases(const Call& call, const Workers& w, double t0
   const Workers rates_on = lowered_.coupled.nbody ? all_workers(*w.jobs) : w;
   const auto state_pass = [&](const kernels::RigidBlockJob<T>& j) {
     for_each_block(w, n, [&](Block b) { table_.rigid_block_stage(j, b.begin, b.end); });
+    springs_pass(j, w);
   };
   const auto rates_pass = [&](const kernels::RigidBlockJob<T>& j, double t, auto&& then) {
     for_each_block(rates_on, n, [&](Block b) {

@@ -81,6 +81,8 @@ class RigidBlockPath {
   // The stage's rates from its state: every term's forces and torques at time t.
   void rates(const kernels::RigidBlockJob<T>& job, Block b, double t);
   void add_coupled(const kernels::RigidBlockJob<T>& job, Block b, double t);
+  static RigidStage<T> stage_of(const kernels::RigidBlockJob<T>& job);
+  void springs_pass(const kernels::RigidBlockJob<T>& job, const Workers& workers);
   void run_phases(const Call& call, const Workers& workers, double t0, const StopRequest* stop);
   bool keeps_state(const Workers& workers, const StopRequest* stop) const;
   double block_error(const Call& call, Block b, double rtol, double atol) const;
