@@ -221,7 +221,7 @@ struct TermInfo<PointSpring> {
   static constexpr int max_count = 0;
   static constexpr ReferenceRule reference = ReferenceRule::none;  // moves rigid bodies only, no closed form
   static void lower(const PointSpring&, LocalSums&) {}  // the rigid path reads the model's own (rigid_coupling)
-  static constexpr bool has_potential = false;  // of the centres alone; rigid_potential_energy counts it
+  static constexpr bool has_potential = false;  // of the centres alone; rigid_coupling_potential counts it
   static double potential(const PointSpring&, const Position&, double) { return 0; }
 };
 

@@ -386,12 +386,13 @@ std::optional<AdaptivePick> adaptive_pick(const Scene& scene, const Method& m, d
   return std::nullopt;
 }
 
-// The scene's stiffness at its start, in double, on its particles (else the rigid bodies'
-// centres).
+// The scene's stiffness at its start, in double, on its particles (else the rigid bodies,
+// their rotation too).
 StiffnessEstimate stiffness_of(const Scene& scene) {
-  ParticleSet<double> bodies = make_particles<double>(scene);
-  if (bodies.size() == 0) bodies = make_rigid_bodies<double>(scene).centers();
-  return estimate_stiffness(bodies, make_forces<double>(scene), 0, 120, on_calling_thread(), current_stop());
+  const ParticleSet<double> bodies = make_particles<double>(scene);
+  const ForceModel<double> forces = make_forces<double>(scene);
+  if (bodies.size() > 0) return estimate_stiffness(bodies, forces, 0, 120, on_calling_thread(), current_stop());
+  return estimate_stiffness(make_rigid_bodies<double>(scene), forces, 0, 120, on_calling_thread(), current_stop());
 }
 
 // Refuses at once a tolerance below the round-off of a single step: a few units in the
@@ -459,8 +460,9 @@ class MethodSearch {
   }
 
   // Fixed steps with every method that may take them, highest order first: it usually sets
-  // the budget the others must beat. Rigid bodies take the fused kernels only: the built-in
-  // methods. Returns whether search budget is left.
+  // the budget the others must beat. Rigid bodies try the built-in methods only: the others
+  // run on the rigid path, at two to three times the fused cost per evaluation. Returns
+  // whether search budget is left.
   bool search_fixed_steps() {
     std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
     if (pilot_scene_.rigid_bodies.empty()) order.insert(order.end(), staged_methods.begin(), staged_methods.end());

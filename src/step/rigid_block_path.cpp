@@ -236,17 +236,17 @@ template <class T>
 double RigidBlockPath<T>::attempt(const Call& call, const Workers& w, double t0, double rtol, double atol) {
   const std::size_t n = call.bodies.padded_size();
   for_each_block(w, n, [&](Block b) { keep_block(call, b); });
-  try {
+  try {  // the error's pass too: a host's enqueue that throws there leaves the step half taken
     if (coupled()) {
       run_phases(call, w, t0, nullptr);
     } else {
       for_each_block(w, n, [&](Block b) { runge_kutta_step(b, t0, call.h); });
     }
+    for_each_block(w, n, [&](Block b) { block_error_[b.begin / kBlockBodies] = block_error(call, b, rtol, atol); });
   } catch (...) {
     for (std::size_t i = 0; i < block_count(n); ++i) restore_block(call, block(i, n));
     throw;
   }
-  for_each_block(w, n, [&](Block b) { block_error_[b.begin / kBlockBodies] = block_error(call, b, rtol, atol); });
   double sum = 0;
   for (std::size_t i = 0; i < block_count(n); ++i) sum += block_error_[i];
   return std::sqrt(sum / (13.0 * double(std::max<std::size_t>(call.bodies.size(), 1))));
@@ -254,7 +254,13 @@ double RigidBlockPath<T>::attempt(const Call& call, const Workers& w, double t0,
 
 template <class T>
 void RigidBlockPath<T>::take_back(const Call& call, const Workers& w) {
-  for_each_block(w, call.bodies.padded_size(), [&](Block b) { restore_block(call, b); });
+  const std::size_t n = call.bodies.padded_size();
+  try {
+    for_each_block(w, n, [&](Block b) { restore_block(call, b); });
+  } catch (...) {  // a host's enqueue that throws: put every block back here
+    for (std::size_t i = 0; i < block_count(n); ++i) restore_block(call, block(i, n));
+    throw;
+  }
 }
 
 template <class T>

@@ -239,7 +239,8 @@ struct StepPlan {
 // (with --strict it is always made: the run must be shown stable).
 bool estimate_pays(const Scene& scene, const RunOptions& o, double bodies) {
   constexpr double kAlwaysWorth = double(1 << 26);
-  if (o.strict || (!scene.nbody && scene.springs.empty())) return true;  // local terms: 1024 bodies at most
+  const bool local = !scene.nbody && scene.springs.empty() && scene.body_springs.springs.empty();
+  if (o.strict || local) return true;  // local terms: 1024 bodies at most
   const double estimate = 57 * evaluation_cost(scene) + 800 * bodies;
   const double run = double(scene.steps) * method_by_name(scene.method).evaluations() * evaluation_cost(scene);
   return estimate <= std::max(run, kAlwaysWorth);

@@ -46,7 +46,8 @@ bool energy_conserved_by(const ForceModel<T>& f, bool rigid) {
         term);
     if (!conservative) return false;
   }
-  return std::all_of(f.springs().begin(), f.springs().end(), [](const SpringPair& p) { return p.damping == 0; });
+  return std::all_of(f.springs().begin(), f.springs().end(), [](const SpringPair& p) { return p.damping == 0; }) &&
+         std::all_of(f.body_springs().begin(), f.body_springs().end(), [](const BodySpring& s) { return s.damping == 0; });
 }
 
 template <class T>
