@@ -225,7 +225,8 @@ TEST_CASE("rigid coupled terms: the same bits on every ISA, thread count and job
     kd.advance(b, 0.01, 5);
     return test::state_hash(b);
   };
-  test::check_same_bits_everywhere(hash, 64, 3000);
+  // 2100 bodies: three blocks, the last short (N-body's n^2 is most of the time under ASan).
+  test::check_same_bits_everywhere(hash, 64, 2100);
 }
 
 TEST_CASE("a throw among coupled rigid terms leaves the set as before the step that threw", "[rigid][springs][embedding]") {
