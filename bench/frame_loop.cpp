@@ -5,9 +5,12 @@
 //   prepared    the same, with Stepper::prepare() called right before each step (timed too)
 //   threads:2   both threads on every step (workers = all)
 //   parallel_for  the peer: a plain tbb::parallel_for over the same blocks, same kernel
-// The steppers step a few frames before the timing, as a game's first frames would. Back to
-// back, each variant is a row of its own; with gaps, the variants take turns frame by frame in
-// one row (a shared machine drifts more between rows than the differences being measured).
+// The steppers step a few frames before the timing, as a game's first frames would. The
+// interleaved rows report the default job system's spinning per frame (spin_us_per_frame):
+// the CPU time its workers spent ready for a job that had not come. Back to
+// back, each variant is a row of its own; with gaps, the variants take turns in runs of 8
+// frames in one row (a shared machine drifts more between rows than the differences being
+// measured).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -39,6 +42,9 @@ class ParallelForJobs final : public JobSystem {
 };
 
 enum class Variant { one_thread, measured, prepared, two_threads, parallel_for };
+
+// The default job system's spinning so far (seconds of one core).
+double spin_seconds() { return dynamic_cast<TbbJobSystem&>(default_job_system()).spin_seconds(); }
 
 StepperOptions options_for(Variant v) {
   static ParallelForJobs peer;
@@ -104,9 +110,13 @@ void back_to_back(benchmark::State& state, Variant variant) {
   state.counters["median_ns_per_body_step"] = median(player.seconds) * 1e9 / double(n);
 }
 
-// With idle gaps: every variant plays one frame per iteration, in turn, so that all of them
-// meet the same moments of a shared machine; the counters are each variant's median and mean
-// step (ns per body-step) over the run's frames.
+// With idle gaps: every variant plays a run of kRun frames per iteration, in turn, so that
+// all of them meet the same moments of a shared machine, and each meets a frame loop's
+// steady cadence (what the default job system's workers anticipate) for most of its frames;
+// the counters are each variant's median and mean step (ns per body-step) over the run's
+// frames, every frame of a run counted.
+constexpr int kRun = 8;
+
 template <class T>
 void interleaved(benchmark::State& state, int gap_us) {
   const auto n = std::size_t(state.range(0));
@@ -116,11 +126,14 @@ void interleaved(benchmark::State& state, int gap_us) {
   for (int k = 0; k < kWarmFrames; ++k) {
     for (auto& p : players) p->frame(gap);
   }
+  const double spun_before = spin_seconds();
   for (auto _ : state) {
     double round = 0;
     for (auto& p : players) {
-      p->seconds.push_back(p->frame(gap));
-      round += p->seconds.back();
+      for (int k = 0; k < kRun; ++k) {
+        p->seconds.push_back(p->frame(gap));
+        round += p->seconds.back();
+      }
     }
     state.SetIterationTime(round);
   }
@@ -137,6 +150,10 @@ void interleaved(benchmark::State& state, int gap_us) {
     require_finite(state, players[v]->bodies);
   }
   state.counters["workers"] = players[1]->stepper.chosen_workers();
+  // What keeping the workers ready cost: their spinning, per frame of the whole row (every
+  // variant's frames: the spinning goes on through the others' gaps).
+  const double frames = double(players.size() * kRun) * double(state.iterations());
+  state.counters["spin_us_per_frame"] = (spin_seconds() - spun_before) * 1e6 / frames;
 }
 
 void register_all() {
@@ -150,7 +167,7 @@ void register_all() {
     }
   }
   // Rounds are counted, not timed to a minimum: the gaps are most of the time.
-  for (const auto& [gap_us, rounds] : {std::pair{1000, 120}, std::pair{8000, 60}}) {
+  for (const auto& [gap_us, rounds] : {std::pair{1000, 30}, std::pair{8000, 12}}) {
     const std::string suffix = "/gap_us:" + std::to_string(gap_us) + "/interleaved";
     for (auto* b : {benchmark::RegisterBenchmark(("frame_loop/float" + suffix).c_str(), interleaved<float>, gap_us),
                     benchmark::RegisterBenchmark(("frame_loop/double" + suffix).c_str(), interleaved<double>, gap_us)}) {

@@ -26,6 +26,7 @@
 //   leaves the set and the stepper's clock as before the step that threw, on every path.
 // - A JobSystem must outlive every stepper that uses it.
 
+#include <chrono>
 #include <cstddef>
 #include <memory>
 
@@ -66,12 +67,35 @@ class SerialJobSystem final : public JobSystem {
   void wait(JobHandle) override {}
 };
 
+// How long a TbbJobSystem's workers stay ready for the next job after one. A worker that
+// sleeps is slow to come back on these virtual machines: tens of microseconds to wake, more
+// than a small step takes, and its core's caches lost to whatever ran there meanwhile. One
+// that spins between the frames of a frame loop takes its share of the next step at once,
+// from its own cache. Only workers that ran a job spin: when a stepper's measured choice
+// keeps its calls on the calling thread, nothing spins after after_job.
+struct WorkerSpin {
+  // After its job a worker spins this long for the next one: back-to-back steps, and frames
+  // up to this long (20 ms: frame loops of 50 Hz and more). What it costs is up to one core
+  // per worker while a frame loop runs (TbbJobSystem::spin_seconds counts it). Zero: a
+  // worker sleeps at once after its job.
+  std::chrono::microseconds after_job{20000};
+  // Then it sleeps (no CPU; a job then waits for it to wake), and after this long without a
+  // job its task ends, giving the thread back to oneTBB (the next job then waits for oneTBB
+  // to hand it out again: up to milliseconds).
+  std::chrono::microseconds linger{1000000};
+};
+
 // oneTBB with its own task_arena of `threads` threads (0: all hardware threads). The
-// calling thread is one of them. The arena is created once, not per step.
+// calling thread runs the first slice of each job; the arena's workers run the others, each
+// in a task that stays to take the next job while `spin` says so: it spins, then sleeps,
+// and ends after spin.linger without a job (until then one oneTBB worker thread is held by
+// it). The tasks start with the job system, whose constructor waits for them (at most
+// 20 ms): a first step does not pay for oneTBB's thread start. The arena is created once,
+// not per step. A host's own job system never spins for kinema.
 class TbbJobSystem final : public JobSystem {
  public:
-  explicit TbbJobSystem(unsigned threads = 0);
-  ~TbbJobSystem() override;
+  explicit TbbJobSystem(unsigned threads = 0, WorkerSpin spin = {});
+  ~TbbJobSystem() override;  // waits for its workers' tasks to end (within about a millisecond)
   TbbJobSystem(const TbbJobSystem&) = delete;
   TbbJobSystem& operator=(const TbbJobSystem&) = delete;
 
@@ -79,7 +103,11 @@ class TbbJobSystem final : public JobSystem {
   JobHandle enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
                     void* context) override;
   void wait(JobHandle) override {}
-  void wake() override;
+  void wake() override;  // starts the workers' tasks, which spin as after a job
+
+  // CPU time the workers have spent waiting for a job while ready (spinning), in seconds,
+  // since the job system was made: what the spin costs.
+  double spin_seconds() const;
 
  private:
   struct Arena;
@@ -92,7 +120,9 @@ unsigned hardware_threads();
 // The process-wide oneTBB job system of `threads` threads (0: all hardware threads), made at
 // first use and kept for the life of the process: every stepper given no job system of its
 // own shares it, so steppers never multiply arenas. Safe to call from any thread; the
-// system it returns may be used from several host threads at once.
+// system it returns may be used from several host threads at once. Its workers spin as
+// WorkerSpin says, or, where the environment variable KINEMA_WORKER_SPIN_US is set, that
+// many microseconds after a job (0 to 10^7; kinema::Error otherwise).
 JobSystem& default_job_system(unsigned threads = 0);
 
 // A job system that runs everything on the calling thread, for any number of users.

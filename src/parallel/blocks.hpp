@@ -48,7 +48,7 @@ struct BlockTask {
 }  // namespace detail
 
 // Where a call's blocks run: as jobs on `jobs` that at most `count` workers can share (each
-// range at least blocks / count long), or, for a count of 0, on the calling thread alone.
+// range at least blocks / count long, or any length for all of its workers), or, for a count of 0, on the calling thread alone.
 struct Workers {
   JobSystem* jobs = nullptr;
   unsigned count = 0;
@@ -74,7 +74,9 @@ void for_each_block(const Workers& workers, std::size_t bodies, F&& fn) {
     for (std::size_t b = 0; b < blocks; ++b) fn(block(b, bodies));
     return;
   }
-  const std::size_t min_range = (blocks + workers.count - 1) / workers.count;
+  // All of the job system's workers: any split (so a late worker leaves blocks to the rest).
+  const bool all = workers.count >= workers.jobs->worker_count();
+  const std::size_t min_range = all ? 1 : (blocks + workers.count - 1) / workers.count;
   detail::BlockTask<F> task{fn, bodies, {false}, nullptr};
   workers.jobs->wait(workers.jobs->enqueue(&detail::BlockTask<F>::run, blocks, min_range, &task));
   if (task.error) std::rethrow_exception(task.error);

@@ -1,17 +1,28 @@
 #include "kinema/job_system.hpp"
 
+#include "kinema/error.hpp"
+
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <charconv>
+#include <condition_variable>
 #include <cstdint>
+#include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <string>
+#include <thread>
+
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
-#include <tbb/task_group.h>
 
 // ThreadSanitizer cannot see the synchronisation inside an uninstrumented libtbb (Debian's),
 // so the hand-offs below are annotated: without that every parallel step would be reported
@@ -47,6 +58,28 @@ unsigned hardware_threads() {
   return unsigned(std::max(1, tbb::info::default_concurrency()));
 }
 
+namespace {
+
+// The default job systems' spin: WorkerSpin's own, or KINEMA_WORKER_SPIN_US microseconds
+// after a job (a machine shared with other work, a test run).
+WorkerSpin default_spin() {
+  WorkerSpin spin;
+  const char* text = std::getenv("KINEMA_WORKER_SPIN_US");
+  if (text == nullptr) return spin;
+  constexpr long kMost = 10'000'000;
+  long us = -1;
+  const char* end = text + std::strlen(text);
+  const auto [stop, error] = std::from_chars(text, end, us);
+  if (error != std::errc() || stop != end || us < 0 || us > kMost) {
+    throw Error("KINEMA_WORKER_SPIN_US: '" + std::string(text) + "' is not a whole number of microseconds from 0 to " +
+                std::to_string(kMost));
+  }
+  spin.after_job = std::chrono::microseconds(us);
+  return spin;
+}
+
+}  // namespace
+
 JobSystem& default_job_system(unsigned threads) {
   static std::mutex guard;
   // Never destroyed: arenas torn down during static destruction can outlive oneTBB's own
@@ -55,7 +88,7 @@ JobSystem& default_job_system(unsigned threads) {
   const unsigned n = threads == 0 ? hardware_threads() : threads;
   const std::lock_guard lock(guard);
   auto& system = (*systems)[n];
-  if (!system) system = std::make_unique<TbbJobSystem>(n);
+  if (!system) system = std::make_unique<TbbJobSystem>(n, default_spin());
   return *system;
 }
 
@@ -144,87 +177,209 @@ class SliceSchedule {
   std::array<Slice, kMaxSlices> slice_;
 };
 
-// Slots kept for host threads. One: a worker looking for work picks victims at random among
-// the arena's slots, so empty reserved slots slow every hand-off (bench/README.md has the
-// figures). A host thread that finds no free slot has its call run by a thread of the arena
-// while it waits. That hand-off happens inside
-// uninstrumented libtbb, out of reach of the annotations, so under TSan each host thread of
-// the tests keeps a slot of its own.
-#if defined(KINEMA_TSAN)
-constexpr int kHostSlots = 8;
-#else
-constexpr int kHostSlots = 1;
+// The mailbox of one worker's task (see TbbJobSystem): whether the task runs, and the job
+// posted to it. A caller posts only to a task that waits or is gone, takes back a job no
+// task took, and waits only for a task running its job, so no call waits for a sleeping
+// thread and calls from several host threads never wait in a cycle.
+struct alignas(64) Mailbox {
+  static constexpr std::uintptr_t kGone = 0;    // no task: posting starts one
+  static constexpr std::uintptr_t kReady = 1;   // the task spins for a job
+  static constexpr std::uintptr_t kAsleep = 2;  // the task sleeps until notified
+  static constexpr std::uintptr_t kBusy = 3;    // the task runs a job
+  std::atomic<std::uintptr_t> word{kGone};      // or the SliceSchedule* posted
+  std::mutex mutex;                             // for the sleep only
+  std::condition_variable posted;
+};
+
+bool is_job(std::uintptr_t word) { return word > Mailbox::kBusy; }
+
+using Clock = std::chrono::steady_clock;
+
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+}
+
+std::int64_t ns(std::chrono::microseconds t) { return std::chrono::nanoseconds(t).count(); }
+
+void pause_cpu() {
+#if defined(__x86_64__)
+  _mm_pause();
 #endif
+}
 
-// Runs the slices of the calling worker. The copy TBB keeps in its task publishes the
-// caller's writes (the bodies, the schedule, the task itself) to the worker that runs it.
-class Helper {
- public:
-  explicit Helper(SliceSchedule& schedule) : schedule_(&schedule) {}
-  Helper(const Helper& other) : schedule_(other.schedule_) { tsan_release(this); }
+// What the workers' tasks share with the job system. The tasks hold it too: a task that
+// oneTBB starts only after the job system is gone (a host that capped oneTBB's threads)
+// finds it closing and ends.
+struct Workforce {
+  Workforce(unsigned threads, WorkerSpin spin) : helpers(std::min(threads, kMaxSlices)), spin(spin) {}
 
-  // The arena's slots: host threads in [0, kHostSlots), its workers after them. Here: the
-  // calling thread 0, the workers 1 .. threads - 1, as the JobSystem contract says.
-  static unsigned worker_index() {
-    const int slot = std::max(0, tbb::this_task_arena::current_thread_index());
-    return slot < kHostSlots ? 0 : unsigned(slot - kHostSlots + 1);
-  }
-  Helper& operator=(const Helper&) = delete;
+  unsigned helpers;  // workers with a task of their own (a job has at most kMaxSlices slices)
+  WorkerSpin spin;
+  std::array<Mailbox, kMaxSlices> box{};
+  std::array<std::atomic<bool>, kMaxSlices> running{};  // a task runs for the box
+  std::atomic<bool> closing{false};
+  std::atomic<unsigned> started{0};  // tasks that have begun, ever
+  std::atomic<std::int64_t> spun_ns{0};
 
-  void operator()() const {
-    tsan_acquire(this);
-    schedule_->run(worker_index());
-    tsan_release(schedule_);
-  }
-
- private:
-  SliceSchedule* schedule_;
+  void serve(unsigned worker);
+  std::uintptr_t spin_until(const Mailbox& m, std::int64_t until);
+  std::uintptr_t sleep(Mailbox& m);
+  void take_back(unsigned worker, SliceSchedule* job);
+  void notify(Mailbox& m);
 };
 
 }  // namespace
 
 struct TbbJobSystem::Arena {
-  explicit Arena(unsigned threads)
-      : arena(int(threads) - 1 + kHostSlots, kHostSlots), threads(threads) {}
+  Arena(unsigned threads, WorkerSpin spin)
+      : arena(int(threads), 1), threads(threads), work(std::make_shared<Workforce>(threads, spin)) {}
+  void start(unsigned worker);
+  bool post(unsigned worker, SliceSchedule* job);
+
   tbb::task_arena arena;
   unsigned threads;
+  std::shared_ptr<Workforce> work;
 };
 
-TbbJobSystem::TbbJobSystem(unsigned threads)
-    : arena_(std::make_unique<Arena>(threads == 0 ? hardware_threads() : threads)) {}
+// The task of worker `worker` (1 .. threads - 1): jobs as they are posted, until none came
+// for spin.linger. The copy oneTBB keeps of it publishes the set-up (annotated: the hand-off
+// is inside an uninstrumented libtbb).
+void TbbJobSystem::Arena::start(unsigned worker) {
+  std::shared_ptr<Workforce> shared = work;
+  tsan_release(shared.get());
+  arena.enqueue([shared, worker] {
+    tsan_acquire(shared.get());
+    shared->running[worker].store(true);
+    shared->started.fetch_add(1, std::memory_order_relaxed);
+    shared->serve(worker);
+    shared->running[worker].store(false);
+  });
+}
 
-TbbJobSystem::~TbbJobSystem() = default;
+// Posts a job to a worker whose task waits or is gone (starting a task then, waking it if it
+// sleeps); false when the worker is busy with another caller's job.
+bool TbbJobSystem::Arena::post(unsigned worker, SliceSchedule* job) {
+  Mailbox& m = work->box[worker];
+  const auto posted = reinterpret_cast<std::uintptr_t>(job);
+  std::uintptr_t seen = m.word.load(std::memory_order_relaxed);
+  while (seen <= Mailbox::kAsleep) {
+    const std::uintptr_t was = seen;
+    if (!m.word.compare_exchange_weak(seen, posted, std::memory_order_acq_rel)) continue;
+    if (was == Mailbox::kGone) start(worker);
+    if (was == Mailbox::kAsleep) work->notify(m);
+    return true;
+  }
+  return false;
+}
+
+void Workforce::serve(unsigned worker) {
+  Mailbox& m = box[worker];
+  std::int64_t idle_since = now_ns();
+  for (;;) {
+    std::uintptr_t job = spin_until(m, idle_since + ns(spin.after_job));
+    if (!is_job(job)) {
+      job = sleep(m);
+      if (job == Mailbox::kAsleep) {  // lingered long enough, or the job system closes
+        if (m.word.compare_exchange_strong(job, Mailbox::kGone, std::memory_order_acq_rel)) return;
+      }
+      idle_since = now_ns();  // woken: ready as after a job
+      if (!is_job(job)) continue;
+    }
+    if (!m.word.compare_exchange_strong(job, Mailbox::kBusy, std::memory_order_acq_rel)) continue;  // taken back
+    reinterpret_cast<SliceSchedule*>(job)->run(worker);
+    m.word.store(Mailbox::kReady, std::memory_order_release);
+    idle_since = now_ns();
+  }
+}
+
+// Spins until a job is posted, the time `until` or the job system closes; counts the spin.
+std::uintptr_t Workforce::spin_until(const Mailbox& m, std::int64_t until) {
+  const std::int64_t begin = now_ns();
+  std::int64_t t = begin;
+  std::uintptr_t word = m.word.load(std::memory_order_acquire);
+  if (t >= until) return word;
+  for (unsigned k = 1; !is_job(word) && t < until && !closing.load(std::memory_order_relaxed); ++k) {
+    pause_cpu();
+    if (k % 64 == 0) t = now_ns();
+    word = m.word.load(std::memory_order_acquire);
+  }
+  spun_ns.fetch_add(now_ns() - begin, std::memory_order_relaxed);
+  return word;
+}
+
+// Sleeps until a job is posted (notified), for at most spin.linger; kAsleep if none came.
+std::uintptr_t Workforce::sleep(Mailbox& m) {
+  std::uintptr_t ready = Mailbox::kReady;
+  if (!m.word.compare_exchange_strong(ready, Mailbox::kAsleep, std::memory_order_acq_rel)) return ready;
+  std::unique_lock lock(m.mutex);
+  m.posted.wait_for(lock, spin.linger, [&] {
+    return closing.load(std::memory_order_relaxed) || m.word.load(std::memory_order_acquire) != Mailbox::kAsleep;
+  });
+  return m.word.load(std::memory_order_acquire);
+}
+
+void Workforce::notify(Mailbox& m) {
+  { const std::lock_guard lock(m.mutex); }  // not between the sleeper's test and its wait
+  m.posted.notify_one();
+}
+
+// Takes back a job its worker did not take, or waits until the worker has run it.
+void Workforce::take_back(unsigned worker, SliceSchedule* job) {
+  std::atomic<std::uintptr_t>& word = box[worker].word;
+  auto posted = reinterpret_cast<std::uintptr_t>(job);
+  // A task that had gone asleep and was woken for the job finds it gone: it spins again.
+  if (word.compare_exchange_strong(posted, Mailbox::kReady, std::memory_order_acq_rel)) return;
+  while (word.load(std::memory_order_acquire) == Mailbox::kBusy) pause_cpu();
+}
+
+// The workers' tasks start at once, and the constructor waits (at most 20 ms) until they
+// have: oneTBB takes 1 to 7 ms to start its threads on these machines, which would
+// otherwise fall on the first steps.
+TbbJobSystem::TbbJobSystem(unsigned threads, WorkerSpin spin)
+    : arena_(std::make_unique<Arena>(threads == 0 ? hardware_threads() : threads, spin)) {
+  wake();
+  const std::int64_t until = now_ns() + 20'000'000;
+  const Workforce& work = *arena_->work;
+  while (work.started.load() + 1 < work.helpers && now_ns() < until) std::this_thread::yield();
+}
+
+// Waits for the tasks that run to end; one that oneTBB has not started yet ends when it does.
+TbbJobSystem::~TbbJobSystem() {
+  Workforce& work = *arena_->work;
+  work.closing.store(true);
+  for (unsigned w = 1; w < work.helpers; ++w) {
+    work.notify(work.box[w]);
+    while (work.running[w].load()) std::this_thread::yield();
+  }
+}
 
 unsigned TbbJobSystem::worker_count() const { return arena_->threads; }
 
-// An empty task per worker: a sleeping worker wakes to take it, then looks for more work for
-// a while before it sleeps again, which is when the job should come.
+double TbbJobSystem::spin_seconds() const { return double(arena_->work->spun_ns.load()) * 1e-9; }
+
+// Starts the tasks that are gone and wakes those asleep: they spin as after a job.
 void TbbJobSystem::wake() {
-  for (unsigned w = 1; w < arena_->threads; ++w) arena_->arena.enqueue([] {});
+  Workforce& work = *arena_->work;
+  for (unsigned w = 1; w < work.helpers; ++w) {
+    Mailbox& m = work.box[w];
+    std::uintptr_t seen = m.word.load(std::memory_order_relaxed);
+    if (seen == Mailbox::kGone && m.word.compare_exchange_strong(seen, Mailbox::kReady)) arena_->start(w);
+    if (seen == Mailbox::kAsleep && m.word.compare_exchange_strong(seen, Mailbox::kReady)) work.notify(m);
+  }
 }
 
+// The calling thread runs the first slice, then takes what is left of the others; the
+// workers' tasks take theirs as they come. Returns when every item has run.
 JobHandle TbbJobSystem::enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
                                 void* context) {
   if (item_count == 0) return nullptr;
-  // Runs to completion here: the calling thread starts on its own slice at once; the arena's
-  // workers pick up one task each. A task that no worker took before the caller got to it
-  // finds its slice already taken and returns.
   SliceSchedule schedule(task, item_count, min_range, arena_->threads, context);
-  arena_->arena.execute([&] {
-    tbb::task_group helpers;
-    for (unsigned s = 1; s < schedule.slices(); ++s) {
-#if defined(KINEMA_TSAN)
-      // defer builds the whole task (the Helper copy last, so its release covers the task's
-      // other fields) before run hands it to a worker.
-      helpers.run(helpers.defer(Helper{schedule}));
-#else
-      helpers.run(Helper{schedule});
-#endif
-    }
-    Helper{schedule}();
-    helpers.wait();
-    tsan_acquire(&schedule);  // the helpers' writes
-  });
+  std::array<bool, kMaxSlices> posted{};
+  for (unsigned w = 1; w < schedule.slices(); ++w) posted[w] = arena_->post(w, &schedule);
+  schedule.run(0);
+  for (unsigned w = 1; w < schedule.slices(); ++w) {
+    if (posted[w]) arena_->work->take_back(w, &schedule);
+  }
   return nullptr;
 }
 

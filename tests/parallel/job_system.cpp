@@ -2,7 +2,13 @@
 #include <catch2/catch.hpp>
 
 #include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <string>
+#include <thread>
 #include <vector>
+
+#include "kinema/error.hpp"
 
 #include "kinema/job_system.hpp"
 #include "thread_pool.hpp"
@@ -73,4 +79,81 @@ TEST_CASE("the default TBB job system uses every hardware thread", "[job_system]
   TbbJobSystem tbb;
   CHECK(tbb.worker_count() == hardware_threads());
   CHECK(hardware_threads() >= 1);
+}
+
+// A TbbJobSystem's workers spin after a job (WorkerSpin::after_job), then sleep, and their
+// tasks end after spin.linger; jobs posted in each of those states, from several host threads
+// at once and from inside a job, still run every item once.
+TEST_CASE("the TBB job system's workers spin after a job for after_job, then sleep", "[job_system]") {
+  WorkerSpin spin;
+  spin.after_job = std::chrono::milliseconds(5);
+  TbbJobSystem jobs(2, spin);
+  check_each_item_once(jobs, 1000, 1);
+  // The worker's task spins after its start and after a job it took, 5 ms each, then sleeps.
+  for (int k = 0; k < 200 && jobs.spin_seconds() == 0; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  REQUIRE(jobs.spin_seconds() > 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(60));
+  const double spun = jobs.spin_seconds();
+  std::this_thread::sleep_for(std::chrono::milliseconds(60));
+  CHECK(jobs.spin_seconds() == spun);  // asleep: no more spinning
+  check_each_item_once(jobs, 1000, 1);  // a sleeping worker is woken (or left out)
+}
+
+TEST_CASE("the TBB job system with no spin never spins, and runs jobs after its tasks ended", "[job_system]") {
+  WorkerSpin spin;
+  spin.after_job = std::chrono::microseconds(0);
+  spin.linger = std::chrono::microseconds(2000);
+  TbbJobSystem jobs(2, spin);
+  for (int round = 0; round < 3; ++round) {
+    check_each_item_once(jobs, 5000, 1);
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the task ends meanwhile
+  }
+  CHECK(jobs.spin_seconds() == 0);
+}
+
+TEST_CASE("the TBB job system serves several host threads at once and jobs made inside a job", "[job_system]") {
+  TbbJobSystem jobs(3);
+  std::vector<std::thread> hosts;
+  std::atomic<int> bad{0};
+  for (int h = 0; h < 3; ++h) {
+    hosts.emplace_back([&] {
+      for (int k = 0; k < 200; ++k) {
+        Tally tally(300, 1);
+        jobs.wait(jobs.enqueue(&count_range, 300, 1, &tally));
+        for (auto& hit : tally.hits) bad += hit != 1;
+      }
+    });
+  }
+  for (auto& t : hosts) t.join();
+  CHECK(bad == 0);
+  // A job whose items each run a job of their own on the same system.
+  struct Nested {
+    TbbJobSystem* jobs;
+    std::atomic<int> bad{0};
+  } nested{&jobs};
+  const RangeTask outer = [](std::size_t begin, std::size_t end, unsigned, void* context) {
+    auto& n = *static_cast<Nested*>(context);
+    for (std::size_t i = begin; i < end; ++i) {
+      Tally tally(64, 1);
+      n.jobs->wait(n.jobs->enqueue(&count_range, 64, 1, &tally));
+      for (auto& hit : tally.hits) n.bad += hit != 1;
+    }
+  };
+  jobs.wait(jobs.enqueue(outer, 40, 1, &nested));
+  CHECK(nested.bad == 0);
+}
+
+TEST_CASE("KINEMA_WORKER_SPIN_US must be a whole number of microseconds", "[job_system]") {
+  // default_job_system reads it when it makes a system; a number of threads no other test
+  // uses makes a new one.
+  const char* outer = std::getenv("KINEMA_WORKER_SPIN_US");  // the test run's own
+  const std::string kept = outer != nullptr ? outer : "";
+  setenv("KINEMA_WORKER_SPIN_US", "20ms", 1);
+  CHECK_THROWS_WITH(default_job_system(7), Catch::Contains("KINEMA_WORKER_SPIN_US") && Catch::Contains("20ms"));
+  setenv("KINEMA_WORKER_SPIN_US", "-5", 1);
+  CHECK_THROWS_AS(default_job_system(7), Error);
+  setenv("KINEMA_WORKER_SPIN_US", "0", 1);
+  CHECK(default_job_system(7).worker_count() == 7);
+  if (outer != nullptr) setenv("KINEMA_WORKER_SPIN_US", kept.c_str(), 1);
+  else unsetenv("KINEMA_WORKER_SPIN_US");
 }
