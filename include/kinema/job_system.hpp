@@ -81,8 +81,10 @@ struct WorkerSpin {
   std::chrono::microseconds after_job{20000};
   // Then it sleeps (no CPU; a job then waits for it to wake), and after this long without a
   // job its task ends, giving the thread back to oneTBB (the next job then waits for oneTBB
-  // to hand it out again: up to milliseconds).
-  std::chrono::microseconds linger{1000000};
+  // to hand it out again: up to milliseconds). Until then the thread is kinema's: oneTBB
+  // work of the host's own gets the process's other oneTBB threads only (on a machine of
+  // two hardware threads oneTBB has one worker thread in all).
+  std::chrono::microseconds linger{100000};
 };
 
 // oneTBB with its own task_arena of `threads` threads (0: all hardware threads). The

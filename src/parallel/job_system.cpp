@@ -16,6 +16,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -208,15 +209,14 @@ void pause_cpu() {
 }
 
 // What the workers' tasks share with the job system. The tasks hold it too: a task that
-// oneTBB starts only after the job system is gone (a host that capped oneTBB's threads)
-// finds it closing and ends.
+// oneTBB starts only after the job system is gone finds it closing and ends.
 struct Workforce {
   Workforce(unsigned threads, WorkerSpin spin) : helpers(std::min(threads, kMaxSlices)), spin(spin) {}
 
   unsigned helpers;  // workers with a task of their own (a job has at most kMaxSlices slices)
   WorkerSpin spin;
   std::array<Mailbox, kMaxSlices> box{};
-  std::array<std::atomic<bool>, kMaxSlices> running{};  // a task runs for the box
+  std::atomic<unsigned> pending{0};  // tasks started and not yet ended (queued or running)
   std::atomic<bool> closing{false};
   std::atomic<unsigned> started{0};  // tasks that have begun, ever
   std::atomic<std::int64_t> spun_ns{0};
@@ -241,19 +241,37 @@ struct TbbJobSystem::Arena {
   std::shared_ptr<Workforce> work;
 };
 
+namespace {
+
 // The task of worker `worker` (1 .. threads - 1): jobs as they are posted, until none came
 // for spin.linger. The copy oneTBB keeps of it publishes the set-up (annotated: the hand-off
 // is inside an uninstrumented libtbb).
+class WorkerTask {
+ public:
+  WorkerTask(std::shared_ptr<Workforce> work, unsigned worker) : work_(std::move(work)), worker_(worker) {}
+  WorkerTask(const WorkerTask& other) : work_(other.work_), worker_(other.worker_) { tsan_release(this); }
+  WorkerTask(WorkerTask&& other) noexcept : work_(std::move(other.work_)), worker_(other.worker_) {
+    tsan_release(this);
+  }
+  WorkerTask& operator=(const WorkerTask&) = delete;
+
+  void operator()() const {
+    tsan_acquire(this);
+    work_->started.fetch_add(1, std::memory_order_relaxed);
+    work_->serve(worker_);
+    work_->pending.fetch_sub(1);
+  }
+
+ private:
+  std::shared_ptr<Workforce> work_;
+  unsigned worker_;
+};
+
+}  // namespace
+
 void TbbJobSystem::Arena::start(unsigned worker) {
-  std::shared_ptr<Workforce> shared = work;
-  tsan_release(shared.get());
-  arena.enqueue([shared, worker] {
-    tsan_acquire(shared.get());
-    shared->running[worker].store(true);
-    shared->started.fetch_add(1, std::memory_order_relaxed);
-    shared->serve(worker);
-    shared->running[worker].store(false);
-  });
+  work->pending.fetch_add(1);
+  arena.enqueue(WorkerTask(work, worker));
 }
 
 // Posts a job to a worker whose task waits or is gone (starting a task then, waking it if it
@@ -343,14 +361,15 @@ TbbJobSystem::TbbJobSystem(unsigned threads, WorkerSpin spin)
   while (work.started.load() + 1 < work.helpers && now_ns() < until) std::this_thread::yield();
 }
 
-// Waits for the tasks that run to end; one that oneTBB has not started yet ends when it does.
+// Waits for the workers' tasks to end, those oneTBB has not started yet too (they end as
+// they start), for at most 5 s: a task that oneTBB never starts (a host that capped its
+// threads) keeps the shared state alive, and ends whenever it does start.
 TbbJobSystem::~TbbJobSystem() {
   Workforce& work = *arena_->work;
   work.closing.store(true);
-  for (unsigned w = 1; w < work.helpers; ++w) {
-    work.notify(work.box[w]);
-    while (work.running[w].load()) std::this_thread::yield();
-  }
+  for (unsigned w = 1; w < work.helpers; ++w) work.notify(work.box[w]);
+  const std::int64_t until = now_ns() + 5'000'000'000;
+  while (work.pending.load() > 0 && now_ns() < until) std::this_thread::yield();
 }
 
 unsigned TbbJobSystem::worker_count() const { return arena_->threads; }
