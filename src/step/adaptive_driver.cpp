@@ -12,6 +12,36 @@
 namespace kinema {
 namespace {
 
+// The size of the next attempt from t toward t_end: h, capped at max_step (h keeps the cap);
+// no sliver of a last step: one within 1% of the end takes the rest, if max_step allows.
+template <class T>
+struct NextAttempt {
+  T size;
+  bool last;
+};
+template <class T>
+NextAttempt<T> next_attempt(double t, double t_end, double& h, double max_step) {
+  h = std::min(h, max_step);
+  const bool last = t + 1.01 * h >= t_end && t_end - t <= max_step;
+  return {T(last ? t_end - t : h), last};
+}
+
+// A step size that no longer moves the clock.
+template <class T>
+bool underflows(double t, T size) {
+  return !(size > 0) || t + double(size) == t;
+}
+
+std::string underflow_message(double t, const std::string& type) {
+  return "advance_to: the step size underflows at t = " + shortest_text(t) + "; the tolerances cannot be met in " + type;
+}
+
+void count_accepted(AdaptiveStats& stats, double size) {
+  ++stats.accepted;
+  stats.smallest_step = stats.accepted == 1 ? size : std::min(stats.smallest_step, size);
+  stats.largest_step = std::max(stats.largest_step, size);
+}
+
 template <class T>
 class AdaptiveRun {
  public:
@@ -42,11 +72,8 @@ class AdaptiveRun {
       }
     }
     while (t < t_end) {
-      h = std::min(h, max_step);
-      // No sliver of a last step: one within 1% of the end takes it, if max_step allows.
-      const bool last = t + 1.01 * h >= t_end && t_end - t <= max_step;
-      const T size = T(last ? t_end - t : h);
-      if (!(size > 0) || t + double(size) == t) underflow(t);
+      const auto [size, last] = next_attempt<T>(t, t_end, h, max_step);
+      if (underflows(t, size)) underflow(t);
       const StepContext<T> c = start_attempt(size);
       last_size_ = size;
       double err = 0;
@@ -105,9 +132,7 @@ class AdaptiveRun {
   void accept(T size, bool last, double t_end, const StepContext<T>& c) {
     ++core_.clock.steps;
     if (last) core_.clock.set(t_end);
-    ++stats_.accepted;
-    stats_.smallest_step = stats_.accepted == 1 ? double(size) : std::min(stats_.smallest_step, double(size));
-    stats_.largest_step = std::max(stats_.largest_step, double(size));
+    count_accepted(stats_, double(size));
     const bool fsal = core_.method.tableau.first_same_as_last();
     if (fsal) staged_.keep_last_stage();
     kept_scale_ = fsal ? c.accel_scale : T(0);
@@ -129,8 +154,7 @@ class AdaptiveRun {
                 shortest_text(double(last_size_)) + ")";
     } catch (const std::exception&) {  // user code threw: the underflow is still the error
     }
-    throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
-                "; the tolerances cannot be met in " + type_name<T>() + culprit);
+    throw Error(underflow_message(t, type_name<T>()) + culprit);
   }
 
   void reject(const StepContext<T>& c) {
@@ -198,13 +222,8 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
   double t = core.clock.time();
   double h = tol.initial_step > 0 ? tol.initial_step : 0.01 * (t_end - t);
   while (t < t_end) {
-    h = std::min(h, tol.max_step);
-    const bool last = t + 1.01 * h >= t_end && t_end - t <= tol.max_step;
-    const T size = T(last ? t_end - t : h);
-    if (!(size > 0) || t + double(size) == t) {
-      throw Error("advance_to: the step size underflows at t = " + shortest_text(t) +
-                  "; the tolerances cannot be met in " + type_name<T>());
-    }
+    const auto [size, last] = next_attempt<T>(t, t_end, h, tol.max_step);
+    if (underflows(t, size)) throw Error(underflow_message(t, type_name<T>()));
     core.begin(size, core.lowered().rigid, bodies.parameters());
     const typename RigidBlockPath<T>::Call call{bodies, size, core.options.renormalize_quaternions};
     path.prepare(call);
@@ -214,9 +233,7 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
     if (accepted) {
       ++core.clock.steps;
       if (last) core.clock.set(t_end);
-      ++stats.accepted;
-      stats.smallest_step = stats.accepted == 1 ? double(size) : std::min(stats.smallest_step, double(size));
-      stats.largest_step = std::max(stats.largest_step, double(size));
+      count_accepted(stats, double(size));
       t = core.clock.time();
     } else {
       path.take_back(call, workers);
