@@ -88,11 +88,12 @@ void print_frame_loop_row(const Results& results, const FrameRow& r, Noise& nois
     return cell(f ? f->median * us : NAN, "%.2f");
   };
   const auto speed_of = [&](const char* v) { return cell(speed(results, r, v), "%.2fx"); };
-  std::printf("%-6s %6d %8ld | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", r.p.c_str(), r.gap, r.n,
+  const auto spin = results.count(frame_loop_run(r.p, r.gap, "default", r.n), "spin_us_per_frame");
+  std::printf("%-6s %6d %8ld | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s | %6s\n", r.p.c_str(), r.gap, r.n,
               in_us("threads:1").c_str(), in_us("default").c_str(), frame_workers(results, r).c_str(),
               speed_of("default").c_str(), in_us("prepared").c_str(), speed_of("prepared").c_str(),
               in_us("threads:2").c_str(), speed_of("threads:2").c_str(), in_us("parallel_for").c_str(),
-              speed_of("parallel_for").c_str());
+              speed_of("parallel_for").c_str(), cell(spin, "%.0f").c_str());
 }
 
 // At N = 1024 every variant runs the same code: their spread is the run's own noise.
@@ -107,16 +108,18 @@ void see_same_code(const Results& results, const FrameRow& r, Summary& summary) 
 void print_frame_loop_header(const std::string& isa) {
   std::printf("\nOne rk4 step per frame after an idle gap (0: back to back), %s: the median step over the run's "
               "frames, us (median of the runs); speed against 1 thread (the calling thread alone): back to back the ratio of the "
-              "rows' medians, with gaps the median of the frame-by-frame ratios\n", isa.c_str());
-  std::printf("%-6s %6s %8s | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s\n", "prec", "gap us", "N",
-              "1 thread", "default", "wkrs", "speed", "prepared", "speed", "2 threads", "speed", "parallel_for", "speed");
+              "rows' medians, with gaps the median of the paired frame ratios; spin: the default job system's workers spinning, "
+              "us of CPU per frame\n", isa.c_str());
+  std::printf("%-6s %6s %8s | %9s | %9s %4s %6s | %9s %6s | %9s %6s | %12s %6s | %6s\n", "prec", "gap us", "N",
+              "1 thread", "default", "wkrs", "speed", "prepared", "speed", "2 threads", "speed", "parallel_for", "speed",
+              "spin");
 }
 
 void print_frame_loop_notes(const Summary& s) {
   std::printf("default: every hardware thread, the worker count measured by the stepper (wkrs: the count it "
               "favoured at the end, 0 = the calling thread alone); prepared: default with Stepper::prepare() "
               "right before each step, timed with it; 2 threads: both on every step. Back to back each variant "
-              "is a row of its own; with gaps the variants take turns frame by frame in one row.\n"
+              "is a row of its own; with gaps the variants take turns in runs of 8 frames in one row.\n"
               "worst default against 1 thread: %s; by mean step (every frame, pre-empted ones and retries "
               "of the other worker count too): %s; worst default against parallel_for at N >= 16384: %s\n",
               s.by_median.text().c_str(), s.by_mean.text().c_str(), s.against_peer.text().c_str());

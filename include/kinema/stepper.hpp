@@ -59,8 +59,9 @@ struct StepperOptions {
   // of the time once settled). `all` hands every call to all workers (a host that wants its
   // own policy). A job system of one worker (a host's physics thread) gets every call either
   // way. In its first frames a host sees the options take turns, two calls at a time, until
-  // each has three judged calls (the first after a switch is not judged: it pays the switch,
-  // and at a job system's first use its thread start, about 5 ms), then the fastest; an
+  // each has three judged calls (the first after a switch is not judged: it pays the switch),
+  // then the fastest (the default job system's threads have started when its constructor,
+  // in the first stepper's, returns: see TbbJobSystem); an
   // option that lost is tried again after 8 calls, then 16, 32 ... as more samples confirm
   // it (at most every 4096), and a lower cost seen in two calls in a row is believed at
   // once, so a choice misjudged on a cold start is undone within tens of calls.
@@ -172,7 +173,8 @@ class Stepper {
   // A hint for a frame loop, called before step() or advance(): when the stepper's next call
   // of the kind it last made is to use workers, the job system is asked to wake them now
   // (JobSystem::wake), so that they may be awake when the call comes. Otherwise nothing
-  // happens. Whether it pays depends on how long the job system keeps woken workers awake.
+  // happens. TbbJobSystem's workers spin for 20 ms after each job (WorkerSpin), so in a
+  // frame loop of 50 Hz and more they are ready anyway.
   void prepare();
   // Allocates the scratch of the stepper's paths (staged, block, rigid block) for up to
   // `bodies` bodies ahead of time.
