@@ -54,7 +54,7 @@ inline std::string scaling_run(const std::string& p, const std::string& isa) {
 inline std::string frame_loop_run(const std::string& p, int gap, const char* variant, long n) {
   const std::string size = std::to_string(n);
   if (gap == 0) return "frame_loop/" + p + "/gap_us:0/" + variant + "/" + size + "/manual_time";
-  const std::string rounds = gap >= 8000 ? "60" : "120";
+  const std::string rounds = gap >= 8000 ? "12" : "30";  // bench/frame_loop.cpp
   return "frame_loop/" + p + "/gap_us:" + std::to_string(gap) + "/interleaved/" + size + "/iterations:" + rounds +
          "/manual_time";
 }
