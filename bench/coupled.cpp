@@ -98,7 +98,7 @@ const Cloth& cloth(std::uint32_t side) {
     for (std::size_t r = 0; r < s; ++r) {
       for (std::size_t c = 0; c < s; ++c) {
         const double jitter = 1e-3 * double((r * 7 + c * 13) % 5);
-        scene.particles.push_back({{double(c) * 0.01 + jitter, 0, double(r) * 0.01}, {}, 0.001});
+        scene.particles.push_back({{double(c) * 0.01 + jitter, 0, double(r) * 0.01}, {}, 0.001, false, {}, {}, {}});
         auto spring = [&](std::size_t a, std::size_t b, double rest) {
           scene.springs[0].pairs.push_back({std::uint32_t(a), std::uint32_t(b), rest, 100, 0.01});
         };

@@ -154,7 +154,7 @@ Scene sample_bodies(const Scene& scene, std::size_t max_bodies) {
   for (std::size_t j = 0; j < np; ++j) {
     const std::size_t i = std::size_t((unsigned __int128)j * p.size() / np);  // no overflow
     const double inv = p.inv_mass()[i];
-    out.particles.push_back({p.position(i), p.velocity(i), inv == 0 ? 1 : 1 / inv, inv == 0, p.applied_force(i)});
+    out.particles.push_back({p.position(i), p.velocity(i), inv == 0 ? 1 : 1 / inv, inv == 0, p.applied_force(i), {}, {}});
     const BodyParameters<double>& own = p.parameters();
     if (own.used(BodyParameter::linear_damping)) out.particles.back().damping = p.linear_damping(i);
     if (own.used(BodyParameter::gravity_factor)) out.particles.back().gravity_factor = p.gravity_factor(i);

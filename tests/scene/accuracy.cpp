@@ -14,7 +14,7 @@ namespace {
 Scene one_body_scene(std::vector<LocalTerm> forces, Vec3<double> x, Vec3<double> v, double mass = 1) {
   Scene s;
   s.precision = Precision::dual;
-  s.particles.push_back({x, v, mass, false});
+  s.particles.push_back({x, v, mass, false, {}, {}, {}});
   s.forces = std::move(forces);
   return s;
 }
