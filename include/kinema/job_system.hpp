@@ -69,10 +69,10 @@ class SerialJobSystem final : public JobSystem {
 
 // How long a TbbJobSystem's workers stay ready for the next job after one. A worker that
 // sleeps is slow to come back on these virtual machines: tens of microseconds to wake, more
-// than a small step takes, and its core's caches lost to whatever ran there meanwhile. One
-// that spins between the frames of a frame loop takes its share of the next step at once,
-// from its own cache. Only workers that ran a job spin: when a stepper's measured choice
-// keeps its calls on the calling thread, nothing spins after after_job.
+// than a small step takes. One that spins between the frames of a frame loop takes its
+// share of the next step at once. Only workers that were posted a job (or woken by wake())
+// spin: when a stepper's measured choice keeps its calls on the calling thread, nothing
+// spins after after_job.
 struct WorkerSpin {
   // After its job a worker spins this long for the next one: back-to-back steps, and frames
   // up to this long (20 ms: frame loops of 50 Hz and more). What it costs is up to one core
@@ -83,7 +83,9 @@ struct WorkerSpin {
   // job its task ends, giving the thread back to oneTBB (the next job then waits for oneTBB
   // to hand it out again: up to milliseconds). Until then the thread is kinema's: oneTBB
   // work of the host's own gets the process's other oneTBB threads only (on a machine of
-  // two hardware threads oneTBB has one worker thread in all).
+  // two hardware threads oneTBB has one worker thread in all), and so does another
+  // TbbJobSystem in the process (a default_job_system of another thread count): its jobs run
+  // on their callers alone, and its destructor waits for its tasks behind this one's.
   std::chrono::microseconds linger{100000};
 };
 
@@ -91,13 +93,16 @@ struct WorkerSpin {
 // calling thread runs the first slice of each job; the arena's workers run the others, each
 // in a task that stays to take the next job while `spin` says so: it spins, then sleeps,
 // and ends after spin.linger without a job (until then one oneTBB worker thread is held by
-// it). The tasks start with the job system, whose constructor waits for them (at most
-// 20 ms): a first step does not pay for oneTBB's thread start. The arena is created once,
-// not per step. A host's own job system never spins for kinema.
+// it). The tasks start with the job system, asleep, and its constructor waits for them (at
+// most 20 ms): a first step does not pay for oneTBB's thread start. The arena is created
+// once, not per step. A host's own job system never spins for kinema. enqueue returns once
+// every worker that took its job is done with it, never waiting for another caller's job.
 class TbbJobSystem final : public JobSystem {
  public:
   explicit TbbJobSystem(unsigned threads = 0, WorkerSpin spin = {});
-  ~TbbJobSystem() override;  // waits for its workers' tasks to end (within about a millisecond)
+  // Waits for its workers' tasks to end, at most 5 s (a task oneTBB has not started yet,
+  // because another system's task holds its thread, ends whenever it starts)
+  ~TbbJobSystem() override;
   TbbJobSystem(const TbbJobSystem&) = delete;
   TbbJobSystem& operator=(const TbbJobSystem&) = delete;
 
@@ -105,7 +110,7 @@ class TbbJobSystem final : public JobSystem {
   JobHandle enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
                     void* context) override;
   void wait(JobHandle) override {}
-  void wake() override;  // starts the workers' tasks, which spin as after a job
+  void wake() override;  // wakes the workers (starting ended tasks): they spin as after a job
 
   // CPU time the workers have spent waiting for a job while ready (spinning), in seconds,
   // since the job system was made: what the spin costs.

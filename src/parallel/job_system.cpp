@@ -22,6 +22,7 @@
 #include <immintrin.h>
 #endif
 
+#include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
@@ -155,6 +156,10 @@ class SliceSchedule {
 
   unsigned slices() const { return slices_; }
 
+  // Workers that took the job and have finished with it (their last access to it).
+  void finished() { done_.fetch_add(1, std::memory_order_release); }
+  unsigned done() const { return done_.load(std::memory_order_acquire); }
+
   void run(unsigned worker) {
     const unsigned home = worker % slices_;
     drain(slice_[home], true, worker);
@@ -176,6 +181,7 @@ class SliceSchedule {
   std::size_t grain_;
   unsigned slices_;
   std::array<Slice, kMaxSlices> slice_;
+  std::atomic<unsigned> done_{0};
 };
 
 // The mailbox of one worker's task (see TbbJobSystem): whether the task runs, and the job
@@ -221,10 +227,10 @@ struct Workforce {
   std::atomic<unsigned> started{0};  // tasks that have begun, ever
   std::atomic<std::int64_t> spun_ns{0};
 
-  void serve(unsigned worker);
+  void serve(unsigned worker, bool spin_first);
   std::uintptr_t spin_until(const Mailbox& m, std::int64_t until);
   std::uintptr_t sleep(Mailbox& m);
-  void take_back(unsigned worker, SliceSchedule* job);
+  bool take_back(unsigned worker, SliceSchedule* job);
   void notify(Mailbox& m);
 };
 
@@ -233,7 +239,7 @@ struct Workforce {
 struct TbbJobSystem::Arena {
   Arena(unsigned threads, WorkerSpin spin)
       : arena(int(threads), 1), threads(threads), work(std::make_shared<Workforce>(threads, spin)) {}
-  void start(unsigned worker);
+  void start(unsigned worker, bool spin_first);
   bool post(unsigned worker, SliceSchedule* job);
 
   tbb::task_arena arena;
@@ -248,9 +254,13 @@ namespace {
 // is inside an uninstrumented libtbb).
 class WorkerTask {
  public:
-  WorkerTask(std::shared_ptr<Workforce> work, unsigned worker) : work_(std::move(work)), worker_(worker) {}
-  WorkerTask(const WorkerTask& other) : work_(other.work_), worker_(other.worker_) { tsan_release(this); }
-  WorkerTask(WorkerTask&& other) noexcept : work_(std::move(other.work_)), worker_(other.worker_) {
+  WorkerTask(std::shared_ptr<Workforce> work, unsigned worker, bool spin_first)
+      : work_(std::move(work)), worker_(worker), spin_first_(spin_first) {}
+  WorkerTask(const WorkerTask& other) : work_(other.work_), worker_(other.worker_), spin_first_(other.spin_first_) {
+    tsan_release(this);
+  }
+  WorkerTask(WorkerTask&& other) noexcept
+      : work_(std::move(other.work_)), worker_(other.worker_), spin_first_(other.spin_first_) {
     tsan_release(this);
   }
   WorkerTask& operator=(const WorkerTask&) = delete;
@@ -258,20 +268,26 @@ class WorkerTask {
   void operator()() const {
     tsan_acquire(this);
     work_->started.fetch_add(1, std::memory_order_relaxed);
-    work_->serve(worker_);
+    work_->serve(worker_, spin_first_);
     work_->pending.fetch_sub(1);
   }
 
  private:
   std::shared_ptr<Workforce> work_;
   unsigned worker_;
+  bool spin_first_;  // as after a job (woken); else straight to sleep (started ahead)
 };
 
 }  // namespace
 
-void TbbJobSystem::Arena::start(unsigned worker) {
+void TbbJobSystem::Arena::start(unsigned worker, bool spin_first) {
   work->pending.fetch_add(1);
-  arena.enqueue(WorkerTask(work, worker));
+  try {
+    arena.enqueue(WorkerTask(work, worker, spin_first));
+  } catch (...) {
+    work->pending.fetch_sub(1);
+    throw;
+  }
 }
 
 // Posts a job to a worker whose task waits or is gone (starting a task then, waking it if it
@@ -283,16 +299,23 @@ bool TbbJobSystem::Arena::post(unsigned worker, SliceSchedule* job) {
   while (seen <= Mailbox::kAsleep) {
     const std::uintptr_t was = seen;
     if (!m.word.compare_exchange_weak(seen, posted, std::memory_order_acq_rel)) continue;
-    if (was == Mailbox::kGone) start(worker);
+    if (was == Mailbox::kGone) {
+      try {
+        start(worker, true);
+      } catch (...) {  // no task will take the job: the mailbox is as it was
+        m.word.store(Mailbox::kGone, std::memory_order_release);
+        throw;
+      }
+    }
     if (was == Mailbox::kAsleep) work->notify(m);
     return true;
   }
   return false;
 }
 
-void Workforce::serve(unsigned worker) {
+void Workforce::serve(unsigned worker, bool spin_first) {
   Mailbox& m = box[worker];
-  std::int64_t idle_since = now_ns();
+  std::int64_t idle_since = now_ns() - (spin_first ? 0 : ns(spin.after_job));
   for (;;) {
     std::uintptr_t job = spin_until(m, idle_since + ns(spin.after_job));
     if (!is_job(job)) {
@@ -304,7 +327,9 @@ void Workforce::serve(unsigned worker) {
       if (!is_job(job)) continue;
     }
     if (!m.word.compare_exchange_strong(job, Mailbox::kBusy, std::memory_order_acq_rel)) continue;  // taken back
-    reinterpret_cast<SliceSchedule*>(job)->run(worker);
+    auto* schedule = reinterpret_cast<SliceSchedule*>(job);
+    schedule->run(worker);
+    schedule->finished();  // the caller may return from here on
     m.word.store(Mailbox::kReady, std::memory_order_release);
     idle_since = now_ns();
   }
@@ -341,13 +366,12 @@ void Workforce::notify(Mailbox& m) {
   m.posted.notify_one();
 }
 
-// Takes back a job its worker did not take, or waits until the worker has run it.
-void Workforce::take_back(unsigned worker, SliceSchedule* job) {
-  std::atomic<std::uintptr_t>& word = box[worker].word;
+// Takes back a job its worker did not take; false when the worker took it (the caller then
+// waits for the job's own count of finished workers, never for another caller's job).
+bool Workforce::take_back(unsigned worker, SliceSchedule* job) {
   auto posted = reinterpret_cast<std::uintptr_t>(job);
   // A task that had gone asleep and was woken for the job finds it gone: it spins again.
-  if (word.compare_exchange_strong(posted, Mailbox::kReady, std::memory_order_acq_rel)) return;
-  while (word.load(std::memory_order_acquire) == Mailbox::kBusy) pause_cpu();
+  return box[worker].word.compare_exchange_strong(posted, Mailbox::kReady, std::memory_order_acq_rel);
 }
 
 // The workers' tasks start at once, and the constructor waits (at most 20 ms) until they
@@ -355,10 +379,16 @@ void Workforce::take_back(unsigned worker, SliceSchedule* job) {
 // otherwise fall on the first steps.
 TbbJobSystem::TbbJobSystem(unsigned threads, WorkerSpin spin)
     : arena_(std::make_unique<Arena>(threads == 0 ? hardware_threads() : threads, spin)) {
-  wake();
+  Workforce& work = *arena_->work;
+  for (unsigned w = 1; w < work.helpers; ++w) {
+    work.box[w].word.store(Mailbox::kReady);
+    arena_->start(w, false);  // asleep until the first job: nothing spins ahead of it
+  }
+  // No more tasks start at once than oneTBB has worker threads.
+  const auto threads_of_tbb = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+  const unsigned expected = unsigned(std::min<std::size_t>(work.helpers - 1, threads_of_tbb - 1));
   const std::int64_t until = now_ns() + 20'000'000;
-  const Workforce& work = *arena_->work;
-  while (work.started.load() + 1 < work.helpers && now_ns() < until) std::this_thread::yield();
+  while (work.started.load() < expected && now_ns() < until) std::this_thread::yield();
 }
 
 // Waits for the workers' tasks to end, those oneTBB has not started yet too (they end as
@@ -382,23 +412,30 @@ void TbbJobSystem::wake() {
   for (unsigned w = 1; w < work.helpers; ++w) {
     Mailbox& m = work.box[w];
     std::uintptr_t seen = m.word.load(std::memory_order_relaxed);
-    if (seen == Mailbox::kGone && m.word.compare_exchange_strong(seen, Mailbox::kReady)) arena_->start(w);
+    if (seen == Mailbox::kGone && m.word.compare_exchange_strong(seen, Mailbox::kReady)) arena_->start(w, true);
     if (seen == Mailbox::kAsleep && m.word.compare_exchange_strong(seen, Mailbox::kReady)) work.notify(m);
   }
 }
 
 // The calling thread runs the first slice, then takes what is left of the others; the
-// workers' tasks take theirs as they come. Returns when every item has run.
+// workers' tasks take theirs as they come. Returns when every worker that took the job is
+// done with it, also when posting to a later worker throws.
 JobHandle TbbJobSystem::enqueue(RangeTask task, std::size_t item_count, std::size_t min_range,
                                 void* context) {
   if (item_count == 0) return nullptr;
   SliceSchedule schedule(task, item_count, min_range, arena_->threads, context);
-  std::array<bool, kMaxSlices> posted{};
-  for (unsigned w = 1; w < schedule.slices(); ++w) posted[w] = arena_->post(w, &schedule);
+  struct Posts {
+    Workforce& work;
+    SliceSchedule& schedule;
+    std::array<bool, kMaxSlices> posted{};
+    ~Posts() {
+      unsigned taken = 0;
+      for (unsigned w = 1; w < schedule.slices(); ++w) taken += posted[w] && !work.take_back(w, &schedule);
+      for (unsigned k = 1; schedule.done() < taken; ++k) k % 64 == 0 ? std::this_thread::yield() : pause_cpu();
+    }
+  } posts{*arena_->work, schedule};
+  for (unsigned w = 1; w < schedule.slices(); ++w) posts.posted[w] = arena_->post(w, &schedule);
   schedule.run(0);
-  for (unsigned w = 1; w < schedule.slices(); ++w) {
-    if (posted[w]) arena_->work->take_back(w, &schedule);
-  }
   return nullptr;
 }
 
