@@ -13,9 +13,11 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
+#include "kinema/events.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/isa.hpp"
 #include "kinema/job_system.hpp"
@@ -187,6 +189,19 @@ class Stepper {
   // here, before anything changes (kinema::Error, the stepper as it was), with no new job
   // system. A model of local terms keeps the fused path. The clock goes on.
   void set_forces(ForceModel<T> forces);
+
+  // Events (kinema/events.hpp) watched by every later step() and advance() on a particle
+  // set, on the fused path (built-in local terms and method): the sign test runs per slice
+  // of bodies while it is in cache, only the bodies that crossed are located. A call that
+  // cannot watch them (rigid bodies, a model on another path, advance_to) throws
+  // kinema::Error before any body moves. An empty list watches nothing. Throws
+  // kinema::Error for an invalid event (its index and field named).
+  void set_events(EventOptions<T> events);
+  // The hits of the last step() or advance() call, ordered by time, body and event (the list
+  // grows as hits are found: a call with hits may allocate).
+  const std::vector<EventHit<T>>& event_hits() const;
+  // Whether the last call ended at a stop event: the set and time() are at its time.
+  bool stopped_at_event() const;
 
   // Simulated time: origin + steps_since_origin * h. Changing h moves the origin.
   double time() const;

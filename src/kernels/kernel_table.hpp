@@ -3,6 +3,7 @@
 
 #include "kernels/block_kernels.hpp"
 #include "kernels/coupled_kernels.hpp"
+#include "kernels/event_kernels.hpp"
 #include "kernels/kernel_impl.hpp"
 #include "kernels/rigid_kernels.hpp"
 
@@ -51,6 +52,9 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.rigid_block_rates[1][1] = &rigid_block_rates<true, true, V>;
   t.rigid_block_finish = &rigid_block_finish<V>;
   t.rigid_block_turn = &rigid_block_turn<V>;
+  t.event_scan[int(EventValue::plane)] = &event_scan<EventValue::plane, V>;
+  t.event_scan[int(EventValue::distance)] = &event_scan<EventValue::distance, V>;
+  t.event_scan[int(EventValue::speed)] = &event_scan<EventValue::speed, V>;
   return t;
 }
 

@@ -369,6 +369,23 @@ constexpr int fused_variant(const LocalForces<T>& f, bool applied) {
   return f.has_central() ? kCentralVariant : applied ? kAppliedVariant : kPlainVariant;
 }
 
+// Events (kinema/events.hpp): which bodies' event values changed sign over one step.
+enum class EventValue { plane, distance, speed };
+inline constexpr int kEventValues = 3;
+template <class T>
+struct EventScanJob {
+  const T* before[6];  // px .. vz at the step's start, from the first body scanned
+  const T* after[6];   // and at its end
+  // plane: a . x - b; distance: |x - a|^2 - b (b the radius squared); speed: |v|^2 - b
+  T a[3];
+  T b;
+  bool down, up;  // the sign changes that count: > 0 to <= 0, < 0 to >= 0
+};
+// Writes the indices (from 0) of the bodies among `count` (a multiple of the width) whose
+// value crossed into `found`, in order; returns how many.
+template <class T>
+using EventScanFn = std::size_t (*)(const EventScanJob<T>& job, std::size_t count, std::uint32_t* found);
+
 template <class T>
 struct KernelTable {
   Isa isa;
@@ -394,6 +411,7 @@ struct KernelTable {
   RigidBlockFn<T> rigid_block_rates[2][2];
   RigidBlockFn<T> rigid_block_finish;
   RigidBlockFn<T> rigid_block_turn;
+  EventScanFn<T> event_scan[kEventValues];  // [EventValue]
 };
 
 // The table of an available instruction set (`isa` resolved, not automatic). `relaxed`

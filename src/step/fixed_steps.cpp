@@ -2,9 +2,17 @@
 
 #include "step/step_checks.hpp"
 
+#include <string>
 #include <type_traits>
 
 namespace kinema {
+
+template <class T>
+std::size_t FixedSteps<T>::checkpoint_bytes() const {
+  std::size_t previous = 0;
+  for (const auto& a : previous_) previous += a.size() * sizeof(T);
+  return checkpoint_.bytes() + buffer_.bytes() + previous;
+}
 
 template <class T>
 template <class Set>
@@ -14,6 +22,62 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
     CallStop(const StopRequest*& s, const StopRequest* stop) : slot(s) { slot = stop; }
     ~CallStop() { slot = nullptr; }
   } call_stop(stop_, stop);
+  if (!events_.active()) return advance_checked(w, b, h, steps);
+  check_events(b);
+  events_.clear();
+  struct Ordered {  // whatever ends the call, its hits are in order
+    EventWatch<T>& events;
+    ~Ordered() { events.finish(events.stop_time()); }
+  } ordered{events_};
+  if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
+    if (events_.stops()) return advance_to_stop(w, b, h, steps);
+  }
+  advance_checked(w, b, h, steps);
+}
+
+template <class T>
+template <class Set>
+void FixedSteps<T>::check_events(const Set& b) const {
+  if constexpr (!std::is_same_v<Set, ParticleSet<T>>) {
+    throw Error("events are watched on particle sets only: step rigid bodies with a stepper without events");
+  } else if (core_.paths.block || core_.paths.fused_for(reads_per_body(b)) == nullptr) {
+    throw Error("events are watched on the fused path only (built-in local terms and a built-in method): "
+                "this model takes the " + std::string(core_.paths.block ? "block" : "staged") + " path");
+  }
+}
+
+template <class T>
+void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps) {
+  for (auto& a : previous_) {
+    if (a.size() != b.capacity()) a = AlignedArray<T>(b.capacity());
+  }
+  for (std::uint64_t k = 0; k < steps; ++k) {
+    const double t0 = core_.clock.time();
+    try {
+      advance_checked(w, b, h, 1);
+    } catch (const NonFiniteError& e) {
+      throw NonFiniteError(k + 1, e.time, e.body, e.field);
+    }
+    const std::optional<double> stop = events_.stop_time();
+    if (!stop) continue;
+    const double theta = std::clamp((*stop - t0) / double(h), 0.0, 1.0);
+    if (theta == 1) return;
+    const T* const before[6] = {previous_[0].data(), previous_[1].data(), previous_[2].data(),
+                                previous_[3].data(), previous_[4].data(), previous_[5].data()};
+    events_.settle(w, b, event_call(b), before, theta, double(h));
+    core_.clock.set(*stop);
+    return;
+  }
+}
+
+template <class T>
+EventCall<T> FixedSteps<T>::event_call(ParticleSet<T>& b) const {
+  return {core_.table, core_.lowered().particle, b.inv_mass(), per_body(b), b.size()};
+}
+
+template <class T>
+template <class Set>
+void FixedSteps<T>::advance_checked(const Workers& w, Set& b, T h, std::uint64_t steps) {
   if (core_.options.guard == FiniteGuard::off) return run(w, b, h, steps, nullptr);
   if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
     if (buffers(b)) return advance_buffered(w, b, h, steps);
@@ -21,31 +85,37 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
   const StateArrays<T> state = state_arrays(b);
   checkpoint_.reserve(state);
   const std::uint64_t start = core_.clock.steps;
+  const std::size_t hits = events_.hits().size();
   std::optional<NonFinite> bad;
   try {
     bad = guarded_run(w, b, h, steps, state);
   } catch (const Stopped&) {
     checkpoint_.restore(w, state);
     core_.clock.steps = start;
+    events_.rollback(hits);
     throw;
   }
   if (!bad) return;
   // Back to the start, then step by step to the step that made the value.
   checkpoint_.restore(w, state);
   core_.clock.steps -= steps;
+  events_.rollback(hits);
   stop_ = nullptr;  // the steps were taken once: the search finishes
+  std::size_t kept = hits;
   for (std::uint64_t k = 1; k <= steps; ++k) {
     if (const auto found = guarded_run(w, b, h, 1, state)) {
       checkpoint_.restore(w, state);
       --core_.clock.steps;
+      events_.rollback(kept);  // the hits of the steps before it stay
       throw NonFiniteError(k, core_.clock.time(), found->body, found->field);
     }
+    kept = events_.hits().size();
   }
 }
 
 template <class T>
 bool FixedSteps<T>::buffers(const ParticleSet<T>& b) const {
-  return !core_.paths.block && core_.paths.fused_for(reads_per_body(b)) != nullptr;
+  return !events_.active() && !core_.paths.block && core_.paths.fused_for(reads_per_body(b)) != nullptr;
 }
 
 // A call whose steps leave a value that is not finite leaves the set as it was; then one
@@ -174,11 +244,45 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
     return run_blocks(w, b, blocks, steps, guard);
   }
   if (fused_fn == nullptr) return run_staged(c, steps, guard);
+  if (events_.active()) return run_watched(w, b, fused_fn, {arrays(b), lowered.particle, c.h}, steps, guard);
   // Local, time-independent forces: each block can take all its steps while it sits in
   // cache. Every body sees the same operations as step by step, so the bits agree.
   const kernels::FusedJob<T> job{arrays(b), lowered.particle, c.h};
   for_each_block(w, b.padded_size(), [&](Block block) {
     run_block(b, block, steps, guard, [&](Block k) { fused_fn(job, k.begin, k.end); });
+  });
+  core_.clock.steps += steps;
+}
+
+template <class T>
+void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
+                                const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard) {
+  const EventCall<T> call = event_call(b);
+  const Clock<T> start = core_.clock;
+  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  const bool keeps_previous = events_.stops();
+  // Step k of one slice: its state copied to `before`, stepped, clamped, tested.
+  const auto step_slice = [&](Block slice, T* const before[6], std::uint64_t k) {
+    for (int a = 0; a < 6; ++a) std::copy(state[a] + slice.begin, state[a] + slice.end, before[a]);
+    fused_fn(job, slice.begin, slice.end);
+    if (guard && guard->clamp) clamp(b, slice);
+    SliceEnds<T> ends{{before[0], before[1], before[2], before[3], before[4], before[5]}, {}, slice.begin,
+                      slice.end - slice.begin};
+    for (int a = 0; a < 6; ++a) ends.after[a] = state[a] + slice.begin;
+    Clock<T> now = start;
+    now.steps += k;
+    events_.scan(call, ends, now.time(), double(job.h));
+  };
+  for_each_block(w, b.padded_size(), [&](Block block) {
+    if (guard) guard->checkpoint.save(guard->state, block);
+    alignas(64) T copy[6][kEventSliceBodies];
+    for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies) {
+      const Block slice{s, std::min(s + kEventSliceBodies, block.end)};
+      T* before[6];
+      for (int a = 0; a < 6; ++a) before[a] = keeps_previous ? previous_[a].data() + s : copy[a];
+      for (std::uint64_t k = 0; k < steps; ++k) step_slice(slice, before, k);
+    }
+    if (guard) guard->scan.scan(block);
   });
   core_.clock.steps += steps;
 }

@@ -4,12 +4,14 @@
 
 #include <cstdint>
 #include <algorithm>
+#include <array>
 #include <optional>
 #include <vector>
 
 #include "kinema/bodies.hpp"
 #include "kinema/error.hpp"
 #include "parallel/blocks.hpp"
+#include "step/event_watch.hpp"
 #include "step/finite_guard.hpp"
 #include "step/stepper_core.hpp"
 
@@ -30,7 +32,10 @@ class FixedSteps {
   template <class Set>
   void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps, const StopRequest* stop = nullptr);
 
-  std::size_t checkpoint_bytes() const { return checkpoint_.bytes() + buffer_.bytes(); }
+  std::size_t checkpoint_bytes() const;
+  // The events watched by particle steps (kinema/events.hpp), and the hits of the last call.
+  EventWatch<T>& events() { return events_; }
+  const EventWatch<T>& events() const { return events_; }
   // What the block paths keep per block for `padded` bodies (allocates only to grow).
   void reserve_blocks(std::size_t padded) { completed_.resize(std::max(completed_.size(), block_count(padded))); }
 
@@ -44,6 +49,18 @@ class FixedSteps {
     bool clamp;
   };
 
+  // advance without events' stop: the guard's work around the steps.
+  template <class Set>
+  void advance_checked(const Workers& w, Set& b, T h, std::uint64_t steps);
+  // Stop events: one step at a time, each watched; the first stop settles the set there.
+  void advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
+  template <class Set>
+  void check_events(const Set& b) const;
+  // The fused particle path with events: each slice of a block takes its steps in L1, its
+  // state copied before each step (to `previous_` when an event stops) and tested after it.
+  void run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
+                   const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard);
+  EventCall<T> event_call(ParticleSet<T>& b) const;
   template <class Set>
   std::optional<NonFinite> guarded_run(const Workers& w, Set& b, T h, std::uint64_t steps,
                                        const StateArrays<T>& state);
@@ -101,6 +118,8 @@ class FixedSteps {
   const StopRequest* stop_ = nullptr;  // the call's, while it runs
   Checkpoint<T> checkpoint_;  // the state a guarded call starts from
   StateBuffer<T> buffer_;     // or, on the fused particle path, where it steps to
+  EventWatch<T> events_;
+  std::array<AlignedArray<T>, 6> previous_;  // stop events: the state a step started from
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for
   // a block the call never started).
   static constexpr std::uint64_t kNotRun = ~std::uint64_t(0);

@@ -63,6 +63,10 @@ struct Stepper<T>::Impl {
     return steps;
   }
 
+  void refuse_events() const {
+    if (fixed.events().active()) throw Error("advance_to does not watch events: step() and advance() do");
+  }
+
   // Applied forces last one call, unless the set keeps them.
   template <class Set>
   static void forces_used(Set& bodies) {
@@ -71,6 +75,7 @@ struct Stepper<T>::Impl {
 
   AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const CallStops& stops) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
+    refuse_events();
     core.reach(bodies);
     // A call that goes on from one stopped early keeps its cap (the bodies have moved since)
     // and was checked when it began.
@@ -97,6 +102,7 @@ struct Stepper<T>::Impl {
 
   AdaptiveStats advance_to(RigidBodySet<T>& bodies, double t_end, const Tolerances& tolerances) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
+    refuse_events();
     if (tolerances.limit_to_stable_step) throw Error("advance_to: limit_to_stable_step takes particles only");
     check_tolerance_floor(bodies.centers(), tolerances);
     continuation.active = false;
@@ -288,6 +294,21 @@ template <class T>
 void Stepper<T>::set_forces(ForceModel<T> forces) {
   impl_->core.use(std::make_shared<const ForceModel<T>>(std::move(forces)));
   impl_->continuation.active = false;
+}
+
+template <class T>
+void Stepper<T>::set_events(EventOptions<T> events) {
+  impl_->fixed.events().set(std::move(events));
+}
+
+template <class T>
+const std::vector<EventHit<T>>& Stepper<T>::event_hits() const {
+  return impl_->fixed.events().hits();
+}
+
+template <class T>
+bool Stepper<T>::stopped_at_event() const {
+  return impl_->fixed.events().stop_time().has_value();
 }
 
 template <class T>

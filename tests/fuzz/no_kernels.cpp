@@ -16,6 +16,12 @@ void no_kernel(const Job&, std::size_t, std::size_t) {
 }
 
 template <class T>
+std::size_t no_event_scan(const EventScanJob<T>& job, std::size_t count, std::uint32_t*) {
+  no_kernel(job, count, count);
+  return 0;
+}
+
+template <class T>
 KernelTable<T> make_table(Isa isa, std::size_t bytes) {
   KernelTable<T> t{};
   t.isa = isa;
@@ -28,6 +34,7 @@ KernelTable<T> make_table(Isa isa, std::size_t bytes) {
   t.nbody = &no_kernel<NBodyJob<T>>;
   t.springs = &no_kernel<SpringJob<T>>;
   t.interpolate = &no_kernel<InterpolateJob<T>>;
+  for (auto& f : t.event_scan) f = &no_event_scan<T>;
   return t;
 }
 

@@ -1,0 +1,282 @@
+#include "step/event_watch.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <type_traits>
+
+#include "kinema/dense_output.hpp"
+#include "kinema/error.hpp"
+#include "parallel/blocks.hpp"
+
+namespace kinema {
+
+namespace {
+
+using Vec = std::array<double, 3>;
+
+double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+bool finite(const Vec& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+[[noreturn]] void refuse(std::size_t e, const std::string& what) {
+  throw Error("events[" + std::to_string(e) + "]: " + what);
+}
+
+// The fraction of the step at which g changes sign, g(0) and g(1) on either side (or g(1)
+// zero): regula falsi with the Illinois halving, a bisection whenever two steps did not
+// halve the bracket. Returns the bracket's end past the crossing once the bracket is at most
+// `tolerance` wide or cannot shrink.
+template <class G>
+double crossing_fraction(G&& g, double tolerance) {
+  double lo = 0, hi = 1, g_lo = g(0.0), g_hi = g(1.0);
+  if (g_lo == 0) return 0;
+  if ((g_lo > 0) == (g_hi > 0) && g_hi != 0) return std::abs(g_hi) <= std::abs(g_lo) ? 1 : 0;  // round-off
+  int kept = 0;  // which end stayed: -1 lo, +1 hi
+  double width_before = 2;
+  for (int iteration = 0; iteration < 300 && hi - lo > tolerance; ++iteration) {
+    const bool bisect = iteration % 2 == 0 && hi - lo > 0.5 * width_before;
+    if (iteration % 2 == 0) width_before = hi - lo;
+    double m = bisect ? 0.5 * (lo + hi) : (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+    if (!(m > lo && m < hi)) m = 0.5 * (lo + hi);
+    if (!(m > lo && m < hi)) break;  // lo and hi are neighbours
+    const double g_m = g(m);
+    if (g_m == 0) return m;
+    if ((g_m > 0) == (g_lo > 0)) {
+      lo = m, g_lo = g_m;
+      if (kept == +1) g_hi *= 0.5;
+      kept = +1;
+    } else {
+      hi = m, g_hi = g_m;
+      if (kept == -1) g_lo *= 0.5;
+      kept = -1;
+    }
+  }
+  return hi;
+}
+
+template <class T>
+bool counts(const kernels::EventScanJob<T>& job, T g0, T g1) {
+  return (job.down && g0 > 0 && g1 <= 0) || (job.up && g0 < 0 && g1 >= 0);
+}
+
+}  // namespace
+
+template <class T>
+void EventWatch<T>::set(EventOptions<T> options) {
+  if (!(std::isfinite(options.time_tolerance) && options.time_tolerance >= 0)) {
+    throw Error("events: time_tolerance must be finite and >= 0");
+  }
+  std::vector<kernels::EventScanJob<T>> jobs;
+  bool stops = false;
+  for (std::size_t e = 0; e < options.events.size(); ++e) {
+    const Event<T>& event = options.events[e];
+    kernels::EventScanJob<T> job{};
+    job.down = event.direction != Crossing::up;
+    job.up = event.direction != Crossing::down;
+    stops = stops || event.action == EventAction::stop;
+    if (const auto* plane = std::get_if<PlaneEvent>(&event.kind)) {
+      if (!finite(plane->normal) || !std::isfinite(plane->offset)) refuse(e, "plane normal and offset must be finite");
+      if (dot(plane->normal, plane->normal) == 0) refuse(e, "plane normal must not be zero");
+      for (int d = 0; d < 3; ++d) job.a[d] = T(plane->normal[d]);
+      job.b = T(plane->offset);
+    } else if (const auto* distance = std::get_if<DistanceEvent>(&event.kind)) {
+      if (!finite(distance->point)) refuse(e, "distance point must be finite");
+      if (!(std::isfinite(distance->radius) && distance->radius > 0)) refuse(e, "distance radius must be finite and > 0");
+      for (int d = 0; d < 3; ++d) job.a[d] = T(distance->point[d]);
+      job.b = T(distance->radius * distance->radius);
+    } else if (const auto* speed = std::get_if<SpeedEvent>(&event.kind)) {
+      if (!(std::isfinite(speed->speed) && speed->speed >= 0)) refuse(e, "speed must be finite and >= 0");
+      job.b = T(speed->speed * speed->speed);
+    } else if (!std::get<EventFunction<T>>(event.kind)) {
+      refuse(e, "the event function is empty");
+    }
+    if (!std::isfinite(double(job.b))) refuse(e, "the radius or speed overflows the precision");
+    jobs.push_back(job);
+  }
+  events_ = std::move(options.events);
+  jobs_ = std::move(jobs);
+  tolerance_ = options.time_tolerance;
+  stops_ = stops;
+  clear();
+}
+
+template <class T>
+void EventWatch<T>::clear() {
+  hits_.clear();
+  stop_.reset();
+}
+
+template <class T>
+void EventWatch<T>::rollback(std::size_t kept) {
+  hits_.resize(std::min(kept, hits_.size()));
+  stop_.reset();
+  for (const EventHit<T>& hit : hits_) {
+    if (events_[hit.event].action == EventAction::stop && (!stop_ || hit.time < *stop_)) stop_ = hit.time;
+  }
+}
+
+template <class T>
+std::optional<double> EventWatch<T>::stop_time() const {
+  std::lock_guard lock(mutex_);
+  return stop_;
+}
+
+template <class T>
+void EventWatch<T>::finish(std::optional<double> until) {
+  if (until) std::erase_if(hits_, [&](const EventHit<T>& hit) { return hit.time > *until; });
+  std::sort(hits_.begin(), hits_.end(), [](const EventHit<T>& a, const EventHit<T>& b) {
+    if (a.time != b.time) return a.time < b.time;
+    if (a.body != b.body) return a.body < b.body;
+    return a.event < b.event;
+  });
+}
+
+template <class T>
+void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
+  if (slice.first >= call.size) return;
+  const std::size_t real = std::min(slice.count, call.size - slice.first);
+  std::uint32_t found[kEventSliceBodies];
+  for (std::size_t e = 0; e < events_.size(); ++e) {
+    const std::size_t n = candidates(int(e), call, slice, real, t0, h, found);
+    for (std::size_t k = 0; k < n && found[k] < real; ++k) locate(int(e), call, slice, found[k], t0, h);
+  }
+}
+
+// The bodies of the slice whose value changed sign as the event asks: the kernel's test for
+// the built-in values, the user's function at both ends otherwise.
+template <class T>
+std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real,
+                                      double t0, double h, std::uint32_t* found) const {
+  const kernels::EventScanJob<T>& test = jobs_[e];
+  const auto* fn = std::get_if<EventFunction<T>>(&events_[e].kind);
+  if (fn == nullptr) {
+    kernels::EventScanJob<T> job = test;
+    std::copy(slice.before, slice.before + 6, job.before);
+    std::copy(slice.after, slice.after + 6, job.after);
+    // PlaneEvent, DistanceEvent, SpeedEvent are EventValue's plane, distance, speed
+    return call.table->event_scan[events_[e].kind.index()](job, slice.count, found);
+  }
+  const auto view = [&](const T* const s[6], double t) {
+    return EventBlock<T>{slice.first, real, t, s[0], s[1], s[2], s[3], s[4], s[5]};
+  };
+  T g0[kEventSliceBodies], g1[kEventSliceBodies];
+  (*fn)(view(slice.before, t0), g0);
+  (*fn)(view(slice.after, t0 + h), g1);
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < real; ++i) {
+    if (counts(test, g0[i], g1[i])) found[n++] = std::uint32_t(i);
+  }
+  return n;
+}
+
+namespace {
+
+// The accelerations of the SIMD group holding `local` of the arrays `state` (body `body`),
+// through the stage kernel (the staged path's stage 0: the same terms the steps use).
+template <class T>
+Vec acceleration(const EventCall<T>& call, const T* const state[6], std::size_t local, std::size_t body) {
+  const std::size_t width = call.table->width, lane = local % width, group = body - lane;
+  alignas(64) T acc[3][16];
+  kernels::StageJob<T> job{};
+  for (int d = 0; d < 3; ++d) {
+    job.x.in[d] = state[d] + (local - lane);
+    job.v.in[d] = state[3 + d] + (local - lane);
+    job.acc[d] = acc[d];
+  }
+  job.accel_scale = 1;
+  job.inv_mass = call.inv_mass + group;
+  job.per_body = call.per_body.from(group);
+  job.forces = call.forces;
+  call.table->stage[call.forces.has_quadratic()][call.forces.has_central()](job, 0, width);
+  return {double(acc[0][lane]), double(acc[1][lane]), double(acc[2][lane])};
+}
+
+template <class T>
+StepEnds ends_of(const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double h) {
+  StepEnds e;
+  e.h = h;
+  for (int d = 0; d < 3; ++d) {
+    e.x0[d] = double(slice.before[d][local]), e.v0[d] = double(slice.before[3 + d][local]);
+    e.x1[d] = double(slice.after[d][local]), e.v1[d] = double(slice.after[3 + d][local]);
+  }
+  e.a0 = acceleration(call, slice.before, local, slice.first + local);
+  e.a1 = acceleration(call, slice.after, local, slice.first + local);
+  return e;
+}
+
+template <class T>
+Vec3<T> narrow(const Vec& v) {
+  return {T(v[0]), T(v[1]), T(v[2])};
+}
+
+}  // namespace
+
+template <class T>
+double EventWatch<T>::value(int e, const Vec& x, const Vec& v, std::size_t body, double t) const {
+  const auto& kind = events_[e].kind;
+  if (const auto* plane = std::get_if<PlaneEvent>(&kind)) return dot(plane->normal, x) - plane->offset;
+  if (const auto* distance = std::get_if<DistanceEvent>(&kind)) {
+    const Vec d{x[0] - distance->point[0], x[1] - distance->point[1], x[2] - distance->point[2]};
+    return dot(d, d) - distance->radius * distance->radius;
+  }
+  if (const auto* speed = std::get_if<SpeedEvent>(&kind)) return dot(v, v) - speed->speed * speed->speed;
+  const Vec3<T> xt = narrow<T>(x), vt = narrow<T>(v);
+  const EventBlock<T> one{body, 1, t, &xt[0], &xt[1], &xt[2], &vt[0], &vt[1], &vt[2]};
+  T g = 0;
+  std::get<EventFunction<T>>(kind)(one, &g);
+  return double(g);
+}
+
+template <class T>
+void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0,
+                           double h) {
+  const StepEnds ends = ends_of(call, slice, local, h);
+  const std::size_t body = slice.first + local;
+  const double theta = crossing_fraction(
+      [&](double f) { return value(e, dense_position(ends, f), dense_velocity(ends, f), body, t0 + f * h); },
+      tolerance_ / h);
+  EventHit<T> hit{t0 + theta * h, body, e, narrow<T>(dense_position(ends, theta)),
+                  narrow<T>(dense_velocity(ends, theta))};
+  std::lock_guard lock(mutex_);
+  hits_.push_back(hit);
+  if (events_[e].action == EventAction::stop && (!stop_ || hit.time < *stop_)) stop_ = hit.time;
+}
+
+template <class T>
+void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const EventCall<T>& call,
+                           const T* const before[6], double theta, double h) {
+  const std::size_t n = b.padded_size();
+  for (auto& a : acc_) {
+    if (a.size() < n) a = AlignedArray<T>(b.capacity());
+  }
+  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  const HermiteWeights w = HermiteWeights::at(theta);
+  for_each_block(workers, n, [&](Block block) {
+    for (int end = 0; end < 2; ++end) {
+      kernels::StageJob<T> job{};
+      for (int d = 0; d < 3; ++d) {
+        job.x.in[d] = end == 0 ? before[d] : state[d];
+        job.v.in[d] = end == 0 ? before[3 + d] : state[3 + d];
+        job.acc[d] = acc_[3 * end + d].data();
+      }
+      job.accel_scale = 1;
+      job.inv_mass = call.inv_mass;
+      job.per_body = call.per_body;
+      job.forces = call.forces;
+      call.table->stage[call.forces.has_quadratic()][call.forces.has_central()](job, block.begin, block.end);
+    }
+    for (std::size_t i = block.begin; i < std::min(block.end, call.size); ++i) {
+      for (int d = 0; d < 3; ++d) {
+        const double x = w.of(before[d][i], before[3 + d][i], state[d][i], state[3 + d][i], h);
+        const double v = w.of(before[3 + d][i], acc_[d][i], state[3 + d][i], acc_[3 + d][i], h);
+        state[d][i] = T(x), state[3 + d][i] = T(v);
+      }
+    }
+  });
+}
+
+template class EventWatch<float>;
+template class EventWatch<double>;
+
+}  // namespace kinema

@@ -1,0 +1,91 @@
+#pragma once
+// Events inside a step (kinema/events.hpp): the sign test over a slice of bodies at both ends
+// of a step, the root finder on the dense output for the bodies that crossed, the hits of a
+// call, and a set brought to a stop event's time.
+
+#include <cstddef>
+#include <cstdint>
+#include <array>
+#include <mutex>
+#include <optional>
+#include <vector>
+
+#include "kernels/kernels.hpp"
+#include "kinema/bodies.hpp"
+#include "kinema/events.hpp"
+#include "parallel/blocks.hpp"
+
+namespace kinema {
+
+// Bodies per slice of the sign test: a slice's state at the step's start (a copy) and end
+// stay in L1 from the kernel's stores to the test's loads.
+inline constexpr std::size_t kEventSliceBodies = 256;
+
+// What the events of a call read besides the bodies' states: the model's local terms, for
+// the accelerations at a crossing body's two ends.
+template <class T>
+struct EventCall {
+  const kernels::KernelTable<T>* table = nullptr;
+  kernels::LocalForces<T> forces;
+  const T* inv_mass = nullptr;
+  kernels::PerBody<T> per_body{};
+  std::size_t size = 0;  // real bodies
+};
+
+// One slice of bodies at both ends of a step, every array from the slice's first body.
+template <class T>
+struct SliceEnds {
+  const T* before[6];  // px .. vz at the step's start
+  const T* after[6];   // and at its end
+  std::size_t first;   // the slice's first body
+  std::size_t count;   // bodies, padding included (a multiple of the SIMD width)
+};
+
+template <class T>
+class EventWatch {
+ public:
+  // Checks the events (kinema::Error naming the event and its field) and keeps them.
+  void set(EventOptions<T> options);
+  bool active() const { return !events_.empty(); }
+  // Whether an event stops the call: then steps run one pass each over the whole set.
+  bool stops() const { return stops_; }
+
+  // Forgets the hits (a call starts, or steps are taken again).
+  void clear();
+  // The slice's bodies that crossed over the step [t0, t0 + h]: located and recorded. May be
+  // called for different slices concurrently.
+  void scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h);
+  // Forgets the hits recorded after the first `kept` (steps taken back).
+  void rollback(std::size_t kept);
+  // The time of the earliest stop hit recorded, if any.
+  std::optional<double> stop_time() const;
+  // Orders the hits (time, body, event) and drops those after `until`.
+  void finish(std::optional<double> until);
+  const std::vector<EventHit<T>>& hits() const { return hits_; }
+
+  // Puts every body of the set (at the step's end now, `before` its start) on the dense
+  // output at theta of the step of size h: where a stop event ended the call.
+  void settle(const Workers& workers, ParticleSet<T>& bodies, const EventCall<T>& call,
+              const T* const before[6], double theta, double h);
+
+ private:
+  std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
+                         double h, std::uint32_t* found) const;
+  void locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0, double h);
+  double value(int e, const std::array<double, 3>& x, const std::array<double, 3>& v, std::size_t body,
+               double t) const;
+
+  std::vector<Event<T>> events_;
+  std::vector<kernels::EventScanJob<T>> jobs_;  // the built-in events' sign tests
+  double tolerance_ = 0;
+  bool stops_ = false;
+  mutable std::mutex mutex_;  // hits_ and stop_
+  std::vector<EventHit<T>> hits_;
+  std::optional<double> stop_;
+  AlignedArray<T> acc_[6];  // settle: the accelerations at both ends
+};
+
+extern template class EventWatch<float>;
+extern template class EventWatch<double>;
+
+}  // namespace kinema

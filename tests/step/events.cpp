@@ -1,0 +1,177 @@
+// Events located inside a step on the dense output: crossing times against closed forms,
+// their order of accuracy, each crossing found once, the stop action, the same list
+// everywhere, and the events refused.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <numbers>
+
+#include "support.hpp"
+
+using namespace kinema;
+
+namespace {
+
+constexpr double kG = 9.81;
+
+Event<double> floor_event(EventAction action = EventAction::record) {
+  return {PlaneEvent{{0, 1, 0}, 0}, Crossing::down, action};
+}
+
+// y0 + v0 t - g t^2 / 2 = 0, the later root.
+double landing_time(double y0, double v0) { return (v0 + std::sqrt(v0 * v0 + 2 * kG * y0)) / kG; }
+
+ForceModel<double> falling() {
+  ForceModel<double> f;
+  f.add(Gravity{{0, -kG, 0}});
+  return f;
+}
+
+// Linear drag k under gravity: y(t) = y0 + u t + (v0 - u)(1 - e^-kt) / k, u = -g / k.
+double drag_height(double y0, double v0, double k, double t) {
+  const double u = -kG / k;
+  return y0 + u * t + (v0 - u) * (1 - std::exp(-k * t)) / k;
+}
+double drag_landing(double y0, double v0, double k) {
+  double t = landing_time(y0, v0);
+  for (int i = 0; i < 50; ++i) {
+    const double u = -kG / k, rate = u + (v0 - u) * std::exp(-k * t);
+    t -= drag_height(y0, v0, k, t) / rate;
+  }
+  return t;
+}
+
+double drag_crossing_error(double h) {
+  const double y0 = 10, v0 = 3, k = 0.8;
+  ForceModel<double> f = falling();
+  f.add(LinearDrag{k});
+  Stepper<double> s(f, rk4, test::serial_options());
+  s.set_events({{floor_event()}});
+  ParticleSet<double> b;
+  b.add({0, y0, 0}, {0, v0, 0}, 1);
+  s.advance(b, h, std::uint64_t(std::ceil(4 / h)));
+  REQUIRE(s.event_hits().size() == 1);
+  return std::abs(s.event_hits()[0].time - drag_landing(y0, v0, k));
+}
+
+// Kepler's equation M = E - e sin E for an orbit of a = 1, mu = 1 starting at periapsis:
+// the times at which r = a (E = pi / 2 outward, 3 pi / 2 inward) in each period 2 pi.
+std::vector<double> kepler_radius_times(double e, int orbits) {
+  std::vector<double> times;
+  for (int k = 0; k < orbits; ++k) {
+    for (double E : {std::numbers::pi / 2, 3 * std::numbers::pi / 2}) {
+      times.push_back(2 * std::numbers::pi * k + E - e * std::sin(E));
+    }
+  }
+  return times;
+}
+
+struct KeplerRun {
+  double radius_error = 0, periapsis_error = 0;
+  std::size_t radius_hits = 0, periapsis_hits = 0;
+};
+
+KeplerRun kepler_events(double e, double h, int orbits) {
+  ForceModel<double> f;
+  f.add(Central{{0, 0, 0}, 1});
+  Stepper<double> s(f, rk4, test::serial_options());
+  // Periapsis: the radial velocity x . v turns from negative to positive.
+  const EventFunction<double> radial = [](const EventBlock<double>& b, double* value) {
+    for (std::size_t i = 0; i < b.count; ++i) value[i] = b.px[i] * b.vx[i] + b.py[i] * b.vy[i] + b.pz[i] * b.vz[i];
+  };
+  s.set_events({{{DistanceEvent{{0, 0, 0}, 1}, Crossing::either}, {radial, Crossing::up}}});
+  ParticleSet<double> b;
+  b.add({1 - e, 0, 0}, {0, std::sqrt((1 + e) / (1 - e)), 0}, 1);
+  const auto steps = std::uint64_t(std::llround((orbits + 0.1) * 2 * std::numbers::pi / h));  // past the last passage
+  s.advance(b, h, steps);
+  const std::vector<double> radius_times = kepler_radius_times(e, orbits);
+  KeplerRun run;
+  for (const EventHit<double>& hit : s.event_hits()) {
+    if (hit.event == 0) {
+      if (run.radius_hits < radius_times.size()) {
+        run.radius_error = std::max(run.radius_error, std::abs(hit.time - radius_times[run.radius_hits]));
+      }
+      ++run.radius_hits;
+    } else {
+      const double passage = 2 * std::numbers::pi * double(run.periapsis_hits + 1);
+      run.periapsis_error = std::max(run.periapsis_error, std::abs(hit.time - passage));
+      ++run.periapsis_hits;
+    }
+  }
+  return run;
+}
+
+}  // namespace
+
+TEST_CASE("a projectile's floor crossing is found to round-off under rk4 with a coarse step", "[events]") {
+  const double y0 = 10, v0 = 3, h = 0.1;
+  Stepper<double> s(falling(), rk4, test::serial_options());
+  s.set_events({{floor_event()}});
+  ParticleSet<double> b;
+  b.add({1, y0, -2}, {0.5, v0, 0}, 2);
+  s.advance(b, h, 30);
+  REQUIRE(s.event_hits().size() == 1);
+  const EventHit<double>& hit = s.event_hits()[0];
+  const double t = landing_time(y0, v0);
+  CHECK(hit.body == 0);
+  CHECK(hit.event == 0);
+  CHECK(std::abs(hit.time - t) <= 1e-12 * t);
+  CHECK(std::abs(hit.position[1]) <= 1e-12 * y0);
+  CHECK(hit.position[0] == Approx(1 + 0.5 * t).epsilon(1e-13));
+  CHECK(hit.velocity[1] == Approx(v0 - kG * t).epsilon(1e-12));
+  CHECK(s.time() == Approx(30 * h));  // record: the call goes on
+}
+
+TEST_CASE("a crossing under drag is located to rk4's fourth order", "[events]") {
+  std::vector<double> hs{0.1, 0.05, 0.025}, errors;
+  for (double h : hs) errors.push_back(drag_crossing_error(h));
+  INFO("errors " << errors[0] << " " << errors[1] << " " << errors[2]);
+  CHECK(test::fitted_order(hs, errors) == Approx(4).margin(0.5));
+  CHECK(errors[2] < 1e-7);
+}
+
+TEST_CASE("Kepler e = 0.6: radius crossings match Kepler's equation, periapsis passages the period",
+          "[events]") {
+  const double e = 0.6;
+  const int orbits = 3;
+  const KeplerRun coarse = kepler_events(e, 2 * std::numbers::pi / 800, orbits);
+  const KeplerRun fine = kepler_events(e, 2 * std::numbers::pi / 1600, orbits);
+  CHECK(coarse.radius_hits == 2 * orbits);
+  CHECK(coarse.periapsis_hits == std::size_t(orbits));  // the start is a periapsis, not a crossing
+  CHECK(fine.radius_hits == 2 * orbits);
+  INFO("radius errors " << coarse.radius_error << " " << fine.radius_error << ", periapsis "
+                        << coarse.periapsis_error << " " << fine.periapsis_error);
+  CHECK(coarse.radius_error < 1e-6);
+  CHECK(coarse.periapsis_error < 1e-5);
+  // The error is rk4's own: halving h divides it by about 16.
+  CHECK(coarse.radius_error / fine.radius_error == Approx(16).epsilon(0.35));
+  CHECK(coarse.periapsis_error / fine.periapsis_error == Approx(16).epsilon(0.35));
+}
+
+TEST_CASE("every body falling through a plane is found once, at its analytic time", "[events]") {
+  const std::size_t n = 5000;
+  ParticleSet<float> b;
+  for (std::size_t i = 0; i < n; ++i) {
+    b.add({float(i % 13), 1 + float(i % 97) * 0.1f, 0}, {0, float(i % 11) - 5, 0.5f}, 1);
+  }
+  ForceModel<float> f;
+  f.add(Gravity{{0, -kG, 0}});
+  Stepper<float> s(f, rk4, test::serial_options());
+  s.set_events({{{PlaneEvent{{0, 1, 0}, 0}, Crossing::either}}});
+  std::vector<int> found(n, 0);
+  double worst = 0;
+  for (int call = 0; call < 22; ++call) {  // calls of 6 steps of 1/60 s: 2.2 s in all
+    s.advance(b, 1.0f / 60, 6);
+    double last = -1;
+    for (const EventHit<float>& hit : s.event_hits()) {
+      CHECK(hit.time >= last);  // in order
+      last = hit.time;
+      ++found[hit.body];
+      const double y0 = double(1 + float(hit.body % 97) * 0.1f), v0 = double(hit.body % 11) - 5;
+      worst = std::max(worst, std::abs(hit.time - landing_time(y0, v0)));
+    }
+  }
+  CHECK(std::count(found.begin(), found.end(), 1) == std::ptrdiff_t(n));  // none missed, none twice
+  INFO("worst time error " << worst);
+  CHECK(worst < 2e-5);
+}
