@@ -175,3 +175,104 @@ TEST_CASE("every body falling through a plane is found once, at its analytic tim
   INFO("worst time error " << worst);
   CHECK(worst < 2e-5);
 }
+
+TEST_CASE("a stop event ends the call at its time, every body on the dense output there", "[events]") {
+  const double h = 0.1;
+  Stepper<double> s(falling(), rk4, test::serial_options());
+  s.set_events({{floor_event(EventAction::stop), {SpeedEvent{100}, Crossing::up}}});
+  ParticleSet<double> b;
+  b.add({0, 10, 0}, {0, 3, 0}, 1);   // lands first
+  b.add({4, 30, 1}, {1, -2, 0}, 1);  // still in the air then
+  s.advance(b, h, 50);
+  const double t = landing_time(10, 3);
+  REQUIRE(s.stopped_at_event());
+  REQUIRE(s.event_hits().size() == 1);
+  CHECK(s.event_hits()[0].body == 0);
+  CHECK(s.time() == s.event_hits()[0].time);
+  CHECK(std::abs(s.time() - t) <= 1e-12 * t);
+  CHECK(std::abs(b.position(0)[1]) <= 1e-12);
+  // The other body, interpolated to the same time, is where the parabola puts it.
+  CHECK(b.position(1)[0] == Approx(4 + t).epsilon(1e-13));
+  CHECK(b.position(1)[1] == Approx(30 - 2 * t - kG * t * t / 2).epsilon(1e-12));
+  CHECK(b.velocity(1)[1] == Approx(-2 - kG * t).epsilon(1e-12));
+  // The next call goes on from there: body 1 lands at its own time.
+  s.advance(b, h, 50);
+  REQUIRE(s.stopped_at_event());
+  CHECK(s.event_hits().back().body == 1);
+  CHECK(s.time() == Approx(landing_time(30, -2)).epsilon(1e-12));
+  s.advance(b, h, 5);  // nothing left to cross
+  CHECK_FALSE(s.stopped_at_event());
+  CHECK(s.event_hits().empty());
+}
+
+TEST_CASE("events give the same hits on every ISA, thread count and job system", "[events]") {
+  const EventFunction<float> above_diagonal = [](const EventBlock<float>& b, float* value) {
+    for (std::size_t i = 0; i < b.count; ++i) value[i] = b.px[i] - b.py[i];
+  };
+  const auto hash = [&](StepperOptions o, std::size_t count) {
+    ParticleSet<float> b = test::cloud<float>(count);
+    Stepper<float> s(test::all_local_terms<float>(), rk4, o);
+    s.set_events({{{PlaneEvent{{0.2, 1, -0.1}, -0.5}, Crossing::either},
+                   {DistanceEvent{{0.5, 0, 0}, 1.5}, Crossing::up},
+                   {SpeedEvent{2}, Crossing::down},
+                   {above_diagonal, Crossing::either}}});
+    std::uint64_t h = 1469598103934665603ull;
+    std::size_t hits = 0;
+    for (int call = 0; call < 4; ++call) {
+      s.advance(b, 0.01f, 5);
+      for (const EventHit<float>& hit : s.event_hits()) {
+        const double values[] = {hit.time, double(hit.body), double(hit.event), hit.position[0], hit.position[1],
+                                 hit.position[2], hit.velocity[0], hit.velocity[1], hit.velocity[2]};
+        for (double v : values) h = (h ^ std::hash<double>{}(v)) * 1099511628211ull;
+        ++hits;
+      }
+    }
+    CHECK(hits > count / 20);  // the test sees many hits
+    return h ^ test::state_hash(b);
+  };
+  test::check_same_bits_everywhere(hash, 512, 5000);
+}
+
+TEST_CASE("events are refused where they cannot be watched, and checked when set", "[events]") {
+  Stepper<double> s(falling(), rk4, test::serial_options());
+  CHECK_THROWS_WITH(s.set_events({{{PlaneEvent{{0, 0, 0}, 0}}}}), Catch::Contains("events[0]") &&
+                                                                      Catch::Contains("normal must not be zero"));
+  CHECK_THROWS_WITH(s.set_events({{floor_event(), {DistanceEvent{{0, 0, 0}, 0}}}}),
+                    Catch::Contains("events[1]") && Catch::Contains("radius"));
+  CHECK_THROWS_WITH(s.set_events({{{SpeedEvent{-1}}}}), Catch::Contains("speed"));
+  CHECK_THROWS_WITH(s.set_events({{{EventFunction<double>{}}}}), Catch::Contains("empty"));
+  CHECK_THROWS_WITH(s.set_events({{floor_event()}, -1}), Catch::Contains("time_tolerance"));
+  s.set_events({{floor_event()}});
+  ParticleSet<double> b;
+  b.add({0, 1, 0}, {0, 0, 0}, 1);
+  Stepper<double> pair(falling(), dopri5, test::serial_options());
+  pair.set_events({{floor_event()}});
+  CHECK_THROWS_WITH(pair.advance_to(b, 1, Tolerances{}), Catch::Contains("advance_to"));
+  RigidBodySet<double> rigid;
+  rigid.add({{0, 1, 0}, {}, {1, 0, 0, 0}, {}, 1, {1, 1, 1}});
+  CHECK_THROWS_WITH(s.step(rigid, 0.1), Catch::Contains("particle sets"));
+  ForceModel<double> callback = falling();
+  callback.add(ForceCallback<double>([](const ParticleBlock<double>&) {}));
+  Stepper<double> block_path(callback, rk4, test::serial_options());
+  block_path.set_events({{floor_event()}});
+  CHECK_THROWS_WITH(block_path.step(b, 0.1), Catch::Contains("fused path"));
+  CHECK(b.position(0)[1] == 1);  // nothing moved
+  pair.set_events({});
+  pair.advance_to(b, 0.1, Tolerances{});  // an empty list watches nothing
+  CHECK(b.position(0)[1] < 1);
+}
+
+TEST_CASE("under the finiteness guard a call taken again records its hits once", "[events][guard]") {
+  StepperOptions o = test::serial_options();
+  o.guard = FiniteGuard::check;
+  ForceModel<double> f = falling();
+  f.add(Central{{0, -50, 0}, 1e30});  // body 1 starts on the centre: its first step is not finite
+  Stepper<double> s(f, rk4, o);
+  s.set_events({{floor_event()}});
+  ParticleSet<double> b;
+  b.add({0, 0.05, 0}, {0, -1, 0}, 1);
+  b.add({0, -50, 0}, {0, 0, 0}, 1);
+  CHECK_THROWS_AS(s.advance(b, 0.1, 3), NonFiniteError);
+  CHECK(s.event_hits().empty());  // the first step threw: nothing of it is kept
+  CHECK(b.position(0)[1] == 0.05);
+}
