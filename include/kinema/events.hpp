@@ -85,7 +85,7 @@ template <class T>
 struct EventOptions {
   std::vector<Event<T>> events;
   // The located time is within this many seconds of the crossing of the dense output (the
-  // root finder's bracket); 0 brackets it to round-off.
+  // root finder's bracket); 0: to round-off (4 ulps of the fraction of the step).
   double time_tolerance = 0;
 };
 

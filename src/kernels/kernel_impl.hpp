@@ -286,15 +286,24 @@ template <class T>
 struct StateSource {
   const T* x[3];
   const T* v[3];
+  T* const* before = nullptr;  // FusedJob::before
 };
 template <class T>
-StateSource<T> in_place(const BodyArrays<T>& b) {
-  return {{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}};
+StateSource<T> in_place(const BodyArrays<T>& b, T* const* before = nullptr) {
+  return {{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}, before};
 }
 template <class T>
 StateSource<T> source_of(const FusedJob<T>& job) {
   const T* const* s = job.source;
-  return {{s[0], s[1], s[2]}, {s[3], s[4], s[5]}};
+  return {{s[0], s[1], s[2]}, {s[3], s[4], s[5]}, job.before};
+}
+
+// The state a batch starts from, where the job asks for it (a branch the batches all take
+// the same way).
+template <class V>
+KINEMA_INLINE void keep_before(const StateSource<value_t<V>>& in, std::size_t i, const Vec<V>& x, const Vec<V>& v) {
+  if (in.before == nullptr) return;
+  for (int d = 0; d < 3; ++d) store(in.before[d] + i, x.c[d]), store(in.before[3 + d] + i, v.c[d]);
 }
 
 // Asks for the state 1 KiB ahead, once per cache line, and for the source where it is not
@@ -336,6 +345,7 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Stat
     kx[s] = vs;
     kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
   });
+  keep_before<V>(in, i, x, v);
   store3(b.x, i, advanced<tab.b>(h, kx, x));
   store3(b.v, i, advanced<tab.b, sigma>(h, kv, v));
 }
@@ -362,7 +372,9 @@ void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::
   const value_t<V> h = job.h;
   const Forces<V> f(job.forces, value_t<V>(acceleration_scale(M.tableau)) * h);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
-  if (job.source == nullptr) return runge_kutta_loop<M, Quadratic, Variant>(b, in_place(b), f, h, begin, end);
+  if (job.source == nullptr) {
+    return runge_kutta_loop<M, Quadratic, Variant>(b, in_place(b, job.before), f, h, begin, end);
+  }
   runge_kutta_loop<M, Quadratic, Variant>(b, source_of(job), f, h, begin, end);
 }
 
@@ -376,6 +388,7 @@ KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateS
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     Vec<V> x = load3<V>(in.x, i), v = load3<V>(in.v, i);
+    keep_before<V>(in, i, x, v);
     const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.per_body, i);
     static_for<scheme.count>([&](auto k) {
       if constexpr (scheme.ops[k].kind == OpKind::kick) {
@@ -393,7 +406,9 @@ template <const Method& M, bool Quadratic, int Variant, class V>
 void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   const Forces<V> f(job.forces);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
-  if (job.source == nullptr) return kick_drift_loop<M, Quadratic, Variant>(b, in_place(b), f, job.h, begin, end);
+  if (job.source == nullptr) {
+    return kick_drift_loop<M, Quadratic, Variant>(b, in_place(b, job.before), f, job.h, begin, end);
+  }
   kick_drift_loop<M, Quadratic, Variant>(b, source_of(job), f, job.h, begin, end);
 }
 

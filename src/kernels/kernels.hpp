@@ -164,6 +164,9 @@ struct FusedJob {
   // them: the finiteness guard steps the set's state into a second buffer in the same pass.
   // Null: in place.
   const T* const* source = nullptr;
+  // Where the kernel also writes each body's px .. vz as the step found them (six arrays, the
+  // events' test reads both ends of the step from there and the set). Null: nowhere.
+  T* const* before = nullptr;
 };
 template <class T>
 using FusedFn = void (*)(const FusedJob<T>& job, std::size_t begin, std::size_t end);
@@ -370,15 +373,18 @@ constexpr int fused_variant(const LocalForces<T>& f, bool applied) {
 }
 
 // Events (kinema/events.hpp): which bodies' event values changed sign over one step.
-enum class EventValue { plane, distance, speed };
-inline constexpr int kEventValues = 3;
+enum class EventValue { plane, distance, speed, axis_plane };
+inline constexpr int kEventValues = 4;
 template <class T>
 struct EventScanJob {
   const T* before[6];  // px .. vz at the step's start, from the first body scanned
   const T* after[6];   // and at its end
-  // plane: a . x - b; distance: |x - a|^2 - b (b the radius squared); speed: |v|^2 - b
+  // plane: a . x - b; distance: |x - a|^2 - b (b the radius squared); speed: |v|^2 - b;
+  // axis_plane (a plane whose normal is along an axis): a[axis] x[axis] - b, one array read
+  EventValue value = EventValue::plane;
   T a[3];
   T b;
+  int axis = 0;
   bool down, up;  // the sign changes that count: > 0 to <= 0, < 0 to >= 0
 };
 // Writes the indices (from 0) of the bodies among `count` (a multiple of the width) whose

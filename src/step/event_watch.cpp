@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <type_traits>
 
@@ -24,32 +25,30 @@ bool finite(const Vec& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) &&
 }
 
 // The fraction of the step at which g changes sign, g(0) and g(1) on either side (or g(1)
-// zero): regula falsi with the Illinois halving, a bisection whenever two steps did not
-// halve the bracket. Returns the bracket's end past the crossing once the bracket is at most
-// `tolerance` wide or cannot shrink.
+// zero): regula falsi with the Anderson-Bjorck scaling of an end kept twice (6 to 9 values on
+// a step's cubic), a bisection past 40 iterations. Returns the bracket's end past the crossing
+// once the bracket is at most `tolerance` wide (at least a few ulps of the fraction).
 template <class G>
 double crossing_fraction(G&& g, double tolerance) {
+  tolerance = std::max(tolerance, 4 * std::numeric_limits<double>::epsilon());
   double lo = 0, hi = 1, g_lo = g(0.0), g_hi = g(1.0);
   if (g_lo == 0) return 0;
   if ((g_lo > 0) == (g_hi > 0) && g_hi != 0) return std::abs(g_hi) <= std::abs(g_lo) ? 1 : 0;  // round-off
-  int kept = 0;  // which end stayed: -1 lo, +1 hi
-  double width_before = 2;
-  for (int iteration = 0; iteration < 300 && hi - lo > tolerance; ++iteration) {
-    const bool bisect = iteration % 2 == 0 && hi - lo > 0.5 * width_before;
-    if (iteration % 2 == 0) width_before = hi - lo;
-    double m = bisect ? 0.5 * (lo + hi) : (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+  int kept = 0;  // the end the last value did not replace: +1 hi, -1 lo
+  for (int iteration = 0; iteration < 200 && hi - lo > tolerance; ++iteration) {
+    double m = iteration < 40 ? (lo * g_hi - hi * g_lo) / (g_hi - g_lo) : 0.5 * (lo + hi);
     if (!(m > lo && m < hi)) m = 0.5 * (lo + hi);
     if (!(m > lo && m < hi)) break;  // lo and hi are neighbours
     const double g_m = g(m);
     if (g_m == 0) return m;
     if ((g_m > 0) == (g_lo > 0)) {
-      lo = m, g_lo = g_m;
-      if (kept == +1) g_hi *= 0.5;
-      kept = +1;
+      const double scale = 1 - g_m / g_lo;
+      if (kept == +1) g_hi *= scale > 0 ? scale : 0.5;
+      lo = m, g_lo = g_m, kept = +1;
     } else {
-      hi = m, g_hi = g_m;
-      if (kept == -1) g_lo *= 0.5;
-      kept = -1;
+      const double scale = 1 - g_m / g_hi;
+      if (kept == -1) g_lo *= scale > 0 ? scale : 0.5;
+      hi = m, g_hi = g_m, kept = -1;
     }
   }
   return hi;
@@ -80,13 +79,21 @@ void EventWatch<T>::set(EventOptions<T> options) {
       if (dot(plane->normal, plane->normal) == 0) refuse(e, "plane normal must not be zero");
       for (int d = 0; d < 3; ++d) job.a[d] = T(plane->normal[d]);
       job.b = T(plane->offset);
+      const int zeros = int(job.a[0] == 0) + int(job.a[1] == 0) + int(job.a[2] == 0);
+      if (zeros == 2) {  // along an axis: one array read instead of three, the same values
+        job.value = kernels::EventValue::axis_plane;
+        job.axis = job.a[0] != 0 ? 0 : job.a[1] != 0 ? 1 : 2;
+      }
+      if (zeros == 3) refuse(e, "plane normal is zero in this precision");
     } else if (const auto* distance = std::get_if<DistanceEvent>(&event.kind)) {
       if (!finite(distance->point)) refuse(e, "distance point must be finite");
       if (!(std::isfinite(distance->radius) && distance->radius > 0)) refuse(e, "distance radius must be finite and > 0");
+      job.value = kernels::EventValue::distance;
       for (int d = 0; d < 3; ++d) job.a[d] = T(distance->point[d]);
       job.b = T(distance->radius * distance->radius);
     } else if (const auto* speed = std::get_if<SpeedEvent>(&event.kind)) {
       if (!(std::isfinite(speed->speed) && speed->speed >= 0)) refuse(e, "speed must be finite and >= 0");
+      job.value = kernels::EventValue::speed;
       job.b = T(speed->speed * speed->speed);
     } else if (!std::get<EventFunction<T>>(event.kind)) {
       refuse(e, "the event function is empty");
@@ -136,7 +143,7 @@ template <class T>
 void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
   if (slice.first >= call.size) return;
   const std::size_t real = std::min(slice.count, call.size - slice.first);
-  std::uint32_t found[kEventSliceBodies];
+  std::uint32_t found[kEventSliceBodies<T>];
   for (std::size_t e = 0; e < events_.size(); ++e) {
     const std::size_t n = candidates(int(e), call, slice, real, t0, h, found);
     for (std::size_t k = 0; k < n && found[k] < real; ++k) locate(int(e), call, slice, found[k], t0, h);
@@ -154,13 +161,12 @@ std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const Sli
     kernels::EventScanJob<T> job = test;
     std::copy(slice.before, slice.before + 6, job.before);
     std::copy(slice.after, slice.after + 6, job.after);
-    // PlaneEvent, DistanceEvent, SpeedEvent are EventValue's plane, distance, speed
-    return call.table->event_scan[events_[e].kind.index()](job, slice.count, found);
+    return call.table->event_scan[int(job.value)](job, slice.count, found);
   }
   const auto view = [&](const T* const s[6], double t) {
     return EventBlock<T>{slice.first, real, t, s[0], s[1], s[2], s[3], s[4], s[5]};
   };
-  T g0[kEventSliceBodies], g1[kEventSliceBodies];
+  T g0[kEventSliceBodies<T>], g1[kEventSliceBodies<T>];
   (*fn)(view(slice.before, t0), g0);
   (*fn)(view(slice.after, t0 + h), g1);
   std::size_t n = 0;
@@ -233,8 +239,12 @@ void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& 
                            double h) {
   const StepEnds ends = ends_of(call, slice, local, h);
   const std::size_t body = slice.first + local;
+  const bool reads_velocity = !std::holds_alternative<PlaneEvent>(events_[e].kind) &&
+                              !std::holds_alternative<DistanceEvent>(events_[e].kind);
   const double theta = crossing_fraction(
-      [&](double f) { return value(e, dense_position(ends, f), dense_velocity(ends, f), body, t0 + f * h); },
+      [&](double f) {
+        return value(e, dense_position(ends, f), reads_velocity ? dense_velocity(ends, f) : Vec{}, body, t0 + f * h);
+      },
       tolerance_ / h);
   EventHit<T> hit{t0 + theta * h, body, e, narrow<T>(dense_position(ends, theta)),
                   narrow<T>(dense_velocity(ends, theta))};

@@ -19,7 +19,8 @@ namespace kinema {
 
 // Bodies per slice of the sign test: a slice's state at the step's start (a copy) and end
 // stay in L1 from the kernel's stores to the test's loads.
-inline constexpr std::size_t kEventSliceBodies = 256;
+template <class T>
+inline constexpr std::size_t kEventSliceBodies = 2048 / sizeof(T);
 
 // What the events of a call read besides the bodies' states: the model's local terms, for
 // the accelerations at a crossing body's two ends.

@@ -254,33 +254,39 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   core_.clock.steps += steps;
 }
 
+// The kernel steps each slice in place and writes the state each body started from as it
+// goes (stores of values in registers, no extra loads): to scratch in L1, or to previous_
+// when an event stops (a settle reads where every body started). The test then reads both
+// ends of the step while the slice is in cache.
 template <class T>
 void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
                                 const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard) {
   const EventCall<T> call = event_call(b);
   const Clock<T> start = core_.clock;
-  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
   const bool keeps_previous = events_.stops();
-  // Step k of one slice: its state copied to `before`, stepped, clamped, tested.
-  const auto step_slice = [&](Block slice, T* const before[6], std::uint64_t k) {
-    for (int a = 0; a < 6; ++a) std::copy(state[a] + slice.begin, state[a] + slice.end, before[a]);
-    fused_fn(job, slice.begin, slice.end);
-    if (guard && guard->clamp) clamp(b, slice);
-    SliceEnds<T> ends{{before[0], before[1], before[2], before[3], before[4], before[5]}, {}, slice.begin,
-                      slice.end - slice.begin};
-    for (int a = 0; a < 6; ++a) ends.after[a] = state[a] + slice.begin;
-    Clock<T> now = start;
-    now.steps += k;
-    events_.scan(call, ends, now.time(), double(job.h));
-  };
+  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
   for_each_block(w, b.padded_size(), [&](Block block) {
     if (guard) guard->checkpoint.save(guard->state, block);
-    alignas(64) T copy[6][kEventSliceBodies];
-    for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies) {
-      const Block slice{s, std::min(s + kEventSliceBodies, block.end)};
+    alignas(64) T kept[6][kEventSliceBodies<T>];
+    for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
+      const std::size_t count = std::min(kEventSliceBodies<T>, block.end - s);
       T* before[6];
-      for (int a = 0; a < 6; ++a) before[a] = keeps_previous ? previous_[a].data() + s : copy[a];
-      for (std::uint64_t k = 0; k < steps; ++k) step_slice(slice, before, k);
+      for (int a = 0; a < 6; ++a) before[a] = keeps_previous ? previous_[a].data() + s : kept[a];
+      // The slice as a job of its own: every array from its first body.
+      kernels::FusedJob<T> slice_job = job;
+      for (int d = 0; d < 3; ++d) slice_job.bodies.x[d] = state[d] + s, slice_job.bodies.v[d] = state[3 + d] + s;
+      slice_job.bodies.inv_mass = job.bodies.inv_mass + s;
+      slice_job.bodies.per_body = job.bodies.per_body.from(s);
+      slice_job.before = before;
+      SliceEnds<T> ends{{before[0], before[1], before[2], before[3], before[4], before[5]}, {}, s, count};
+      for (int a = 0; a < 6; ++a) ends.after[a] = state[a] + s;
+      for (std::uint64_t k = 0; k < steps; ++k) {
+        fused_fn(slice_job, 0, count);
+        if (guard && guard->clamp) clamp(b, {s, s + count});
+        Clock<T> now = start;
+        now.steps += k;
+        events_.scan(call, ends, now.time(), double(job.h));
+      }
     }
     if (guard) guard->scan.scan(block);
   });

@@ -56,8 +56,8 @@ class FixedSteps {
   void advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
   template <class Set>
   void check_events(const Set& b) const;
-  // The fused particle path with events: each slice of a block takes its steps in L1, its
-  // state copied before each step (to `previous_` when an event stops) and tested after it.
+  // The fused particle path with events: each slice of a block takes its steps in L1 and is
+  // tested after each, both ends of the step at hand.
   void run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
                    const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard);
   EventCall<T> event_call(ParticleSet<T>& b) const;
@@ -119,7 +119,7 @@ class FixedSteps {
   Checkpoint<T> checkpoint_;  // the state a guarded call starts from
   StateBuffer<T> buffer_;     // or, on the fused particle path, where it steps to
   EventWatch<T> events_;
-  std::array<AlignedArray<T>, 6> previous_;  // stop events: the state a step started from
+  std::array<AlignedArray<T>, 6> previous_;  // stop events: where each body's last step started
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for
   // a block the call never started).
   static constexpr std::uint64_t kNotRun = ~std::uint64_t(0);

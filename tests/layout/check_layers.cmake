@@ -10,7 +10,7 @@ set(public_core bodies error files isa methods version)
 set(public_parallel job_system)
 set(public_forces forces)
 set(public_analysis diagnostics stability)
-set(public_step adaptive checkpoint frame_loop stepper)
+set(public_step adaptive checkpoint dense_output events frame_loop stepper)
 set(public_scene accuracy scene world)
 set(umbrellas kinema scenes)
 
