@@ -6,9 +6,11 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <variant>
 #include <vector>
 
 #include "kinema/bodies.hpp"
+#include "kinema/events.hpp"
 #include "kinema/forces.hpp"
 
 namespace kinema {
@@ -66,6 +68,17 @@ struct RigidSpec {
   bool kinematic = false;  // moves on at its velocity, does not turn: an anchor for body springs
 };
 
+// An event a scene watches (kinema/events.hpp): the built-in kinds, on its particles.
+// JSON: {"type": "plane", "normal": [0, 1, 0], "offset": 0, "direction": "down",
+// "action": "record"}; {"type": "distance", "point": [..], "radius": r, "direction":
+// "inward" | "outward"}; {"type": "speed", "speed": s, "direction": "up" | "down"};
+// direction "either" (the default) for any of them, action "record" (default) or "stop".
+struct EventSpec {
+  std::variant<PlaneEvent, DistanceEvent, SpeedEvent> kind;
+  Crossing direction = Crossing::either;
+  EventAction action = EventAction::record;
+};
+
 struct Scene {
   std::string name = "scene";
   Precision precision = Precision::single;
@@ -88,6 +101,7 @@ struct Scene {
   std::optional<NBody> nbody;
   std::vector<Springs> springs;
   BodySprings body_springs;
+  std::vector<EventSpec> events;
   // The particles a spring network generator (chain, grid) added to `particles`, by the
   // generator's JSON path ("forces[0].chain"): errors about them name what the file says.
   struct Generated {
@@ -146,5 +160,8 @@ template <class T>
 RigidBodySet<T> make_rigid_bodies(const Scene& scene);
 template <class T>
 ForceModel<T> make_forces(const Scene& scene);
+// The scene's events, for Stepper::set_events.
+template <class T>
+EventOptions<T> make_events(const Scene& scene);
 
 }  // namespace kinema

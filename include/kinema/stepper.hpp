@@ -126,7 +126,8 @@ class Stepper {
   // The same, polling `stop` before each block of every pass of coupled terms (one N-body
   // step takes seconds at 32768 bodies): once it returns true, the step under way is
   // abandoned, the set and time() as before it (under a guard: as before the call), and the
-  // steps completed are returned; the call's applied forces are kept for the rest. `stop` may
+  // steps completed are returned (a stop event: the steps to it, the last cut at the event);
+  // the call's applied forces are kept for the rest. `stop` may
   // be called from every worker at once. Without coupled terms a step costs a few
   // nanoseconds a body and nothing is polled: World::advance polls between short calls.
   std::uint64_t advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps, const StopRequest& stop);

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
@@ -31,6 +32,10 @@ class World {
   // does (a step abandoned is not taken); returns the steps taken, fewer than asked once
   // `stop` returned true. The bits are those of one call.
   std::uint64_t advance(T h, std::uint64_t steps, const StopRequest& stop);
+  // The scene's events (Scene::events) found by the last advance call, in order, and whether
+  // one of them stopped it (the world then at its time; the steps returned count the cut one).
+  const std::vector<EventHit<T>>& event_hits() const { return event_hits_; }
+  bool stopped_at_event() const { return particle_stepper_.stopped_at_event(); }
   // Steps of about the same work: 2^22 body-evaluations, where a body costs its springs too
   // and, under N-body gravity, half of every body again (its share of the pairs).
   std::uint64_t steps_per_call() const;
@@ -69,6 +74,7 @@ class World {
   void advance_rigid(T h, std::uint64_t steps, bool cut_short);
 
   Stepper<T> particle_stepper_, rigid_stepper_;
+  std::vector<EventHit<T>> event_hits_;
 };
 
 extern template class World<float>;

@@ -117,6 +117,21 @@ template RigidBodySet<float> make_rigid_bodies<float>(const Scene&);
 template RigidBodySet<double> make_rigid_bodies<double>(const Scene&);
 template ParticleSet<float> make_particles<float>(const Scene&);
 template ParticleSet<double> make_particles<double>(const Scene&);
+template <class T>
+EventOptions<T> make_events(const Scene& scene) {
+  EventOptions<T> options;
+  for (const EventSpec& e : scene.events) {
+    Event<T> event;
+    std::visit([&](const auto& kind) { event.kind = kind; }, e.kind);
+    event.direction = e.direction;
+    event.action = e.action;
+    options.events.push_back(std::move(event));
+  }
+  return options;
+}
+
+template EventOptions<float> make_events<float>(const Scene&);
+template EventOptions<double> make_events<double>(const Scene&);
 template ForceModel<float> make_forces<float>(const Scene&);
 template ForceModel<double> make_forces<double>(const Scene&);
 

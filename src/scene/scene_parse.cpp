@@ -283,17 +283,65 @@ void parse_forces(const Node& root, Scene& s) {
   check_coupled(s, spring_terms, body_spring_terms);
 }
 
+// One direction word: "either", or the two the kind names its crossings by.
+Crossing parse_direction(const Node& n, const char* down, const char* up) {
+  const std::string word = n.string();
+  if (word == down) return Crossing::down;
+  if (word == up) return Crossing::up;
+  if (word == "either") return Crossing::either;
+  n.fail(std::string("expected \"") + down + "\", \"" + up + "\" or \"either\"");
+}
+
+EventSpec parse_event(const Node& n) {
+  const std::string type = n.required("type").string();
+  EventSpec e;
+  const char* down = "down";
+  const char* up = "up";
+  if (type == "plane") {
+    n.expect_object({"type", "normal", "offset", "direction", "action"});
+    PlaneEvent plane;
+    if (n.has("normal")) plane.normal = n.child("normal").vec3();
+    if (plane.normal == Vec3<double>{0, 0, 0}) n.child("normal").fail("expected a normal that is not zero");
+    if (n.has("offset")) plane.offset = n.child("offset").number();
+    e.kind = plane;
+  } else if (type == "distance") {
+    n.expect_object({"type", "point", "radius", "direction", "action"});
+    DistanceEvent distance;
+    if (n.has("point")) distance.point = n.child("point").vec3();
+    distance.radius = n.required("radius").positive();
+    e.kind = distance;
+    down = "inward", up = "outward";
+  } else if (type == "speed") {
+    n.expect_object({"type", "speed", "direction", "action"});
+    e.kind = SpeedEvent{n.required("speed").non_negative()};
+  } else {
+    n.child("type").fail("expected \"plane\", \"distance\" or \"speed\"");
+  }
+  if (n.has("direction")) e.direction = parse_direction(n.child("direction"), down, up);
+  if (n.has("action")) {
+    const Node action = n.child("action");
+    const std::string word = action.string();
+    if (word != "record" && word != "stop") action.fail("expected \"record\" or \"stop\"");
+    e.action = word == "stop" ? EventAction::stop : EventAction::record;
+  }
+  return e;
+}
+
 }  // namespace
 
 Scene parse_scene(std::string_view text, std::string_view origin) {
   const json doc = scene_json::parse_json(text, origin);
   const Node root{doc, "", origin};
   root.expect_object({"name", "precision", "method", "tolerance", "rtol", "atol", "dt", "steps", "particles",
-                      "rigid_bodies", "generate", "forces"});
+                      "rigid_bodies", "generate", "forces", "events"});
   Scene s;
   parse_settings(root, s);
   parse_bodies(root, s);
   parse_forces(root, s);
+  parse_list(root, "events", s.events, parse_event);
+  if (!s.events.empty() && (!s.rigid_bodies.empty() || (s.generate && s.generate->rigid))) {
+    root.child("events").fail("events watch particles; this scene has rigid bodies");
+  }
   if (s.particles.empty() && s.rigid_bodies.empty() && (!s.generate || s.generate->count == 0)) {
     root.fail("the scene has no bodies (give 'particles', 'rigid_bodies' or 'generate')");
   }

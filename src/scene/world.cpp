@@ -13,25 +13,31 @@ World<T>::World(const Scene& scene, const Method& method, StepperOptions options
       particles(make_particles<T>(scene)),
       rigid(make_rigid_bodies<T>(scene)),
       particle_stepper_(forces_, method, options),
-      rigid_stepper_(forces_, method, options) {}
+      rigid_stepper_(forces_, method, options) {
+  if (!scene.events.empty()) particle_stepper_.set_events(make_events<T>(scene));
+}
 
 template <class T>
 void World<T>::advance(T h, std::uint64_t steps) {
   if (particles.size() > 0) particle_stepper_.advance(particles, h, steps);
   if (rigid.size() > 0) rigid_stepper_.advance(rigid, h, steps);
+  event_hits_ = particle_stepper_.event_hits();
 }
 
 template <class T>
 std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& stop) {
   const std::uint64_t chunk = steps_per_call();
   std::uint64_t done = 0;
+  event_hits_.clear();
   while (done < steps && !(stop && stop())) {
     const std::uint64_t n = std::min(chunk, steps - done);
     // A coupled step can outlast a call's budget: the particles poll inside it too.
     const std::uint64_t taken = particles.size() > 0 ? particle_stepper_.advance(particles, h, n, stop) : n;
+    const auto& hits = particle_stepper_.event_hits();
+    event_hits_.insert(event_hits_.end(), hits.begin(), hits.end());
     if (rigid.size() > 0) advance_rigid(h, taken, taken < n);
     done += taken;
-    if (taken < n) break;
+    if (taken < n || particle_stepper_.stopped_at_event()) break;
   }
   return done;
 }

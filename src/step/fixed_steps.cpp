@@ -60,6 +60,7 @@ void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, st
     }
     const std::optional<double> stop = events_.stop_time();
     if (!stop) continue;
+    steps_to_stop_ = k + 1;
     const double theta = std::clamp((*stop - t0) / double(h), 0.0, 1.0);
     if (theta == 1) return;
     const T* const before[6] = {previous_[0].data(), previous_[1].data(), previous_[2].data(),

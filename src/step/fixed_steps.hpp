@@ -36,6 +36,8 @@ class FixedSteps {
   // The events watched by particle steps (kinema/events.hpp), and the hits of the last call.
   EventWatch<T>& events() { return events_; }
   const EventWatch<T>& events() const { return events_; }
+  // The steps the last call took when a stop event ended it (its last one cut at the event).
+  std::uint64_t steps_to_stop() const { return steps_to_stop_; }
   // What the block paths keep per block for `padded` bodies (allocates only to grow).
   void reserve_blocks(std::size_t padded) { completed_.resize(std::max(completed_.size(), block_count(padded))); }
 
@@ -120,6 +122,7 @@ class FixedSteps {
   StateBuffer<T> buffer_;     // or, on the fused particle path, where it steps to
   EventWatch<T> events_;
   std::array<AlignedArray<T>, 6> previous_;  // stop events: where each body's last step started
+  std::uint64_t steps_to_stop_ = 0;
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for
   // a block the call never started).
   static constexpr std::uint64_t kNotRun = ~std::uint64_t(0);

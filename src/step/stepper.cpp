@@ -60,7 +60,7 @@ struct Stepper<T>::Impl {
       return core.clock.steps - start;
     }
     if (steps > 0) forces_used(bodies);
-    return steps;
+    return fixed.events().stop_time() ? fixed.steps_to_stop() : steps;
   }
 
   void refuse_events() const {

@@ -6,8 +6,11 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <functional>
 #include <optional>
+#include <span>
+#include <variant>
 
 #include <nlohmann/json.hpp>
 
@@ -293,7 +296,40 @@ struct Stepped {
   std::optional<std::string> error;         // what ended the run early
   std::string fingerprint;                  // of the scene and options, with checkpoints
   std::optional<double> final_energy;       // none when a signal came while it was summed
+  std::string event_rows;                   // events.csv, past its header
+  std::uint64_t events = 0;
+  std::optional<std::string> stop_event;    // the event that ended the run
 };
+
+const char* event_type(const EventSpec& e) {
+  return std::holds_alternative<PlaneEvent>(e.kind) ? "plane" : std::holds_alternative<DistanceEvent>(e.kind) ? "distance" : "speed";
+}
+
+// The hits of the last advance call as rows of events.csv.
+template <class T>
+void record_events(const World<T>& world, const Scene& scene, Stepped& s) {
+  for (const EventHit<T>& hit : world.event_hits()) {
+    char row[400];
+    std::snprintf(row, sizeof row, "%.17g,%zu,%d,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", hit.time, hit.body, hit.event,
+                  event_type(scene.events[std::size_t(hit.event)]), double(hit.position[0]), double(hit.position[1]),
+                  double(hit.position[2]), double(hit.velocity[0]), double(hit.velocity[1]), double(hit.velocity[2]));
+    s.event_rows += row;
+    ++s.events;
+  }
+  if (world.stopped_at_event() && !world.event_hits().empty()) {
+    const EventHit<T>& last = world.event_hits().back();
+    s.stop_event = "events[" + std::to_string(last.event) + "] (" + event_type(scene.events[std::size_t(last.event)]) +
+                   "), body " + std::to_string(last.body);
+  }
+}
+
+// events.csv beside the trajectory: every hit of the run (of a resumed run: since the resume).
+void write_events(const RunOptions& o, const Scene& scene, const Stepped& s) {
+  if (scene.events.empty() || o.trajectory_path.empty()) return;
+  const std::string text = "time,body,event,type,px,py,pz,vx,vy,vz\n" + s.event_rows;
+  const auto path = std::filesystem::path(o.trajectory_path).parent_path() / "events.csv";
+  write_whole_file(path, std::as_bytes(std::span(text.data(), text.size())), "events");
+}
 
 // A span a signal cut short is not searched for the step that stopped being finite: the
 // steps it completed are the range reported.
@@ -397,7 +433,8 @@ bool advance_timed(World<T>& world, const Scene& scene, const std::optional<Tole
     whole = advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive, checkpoints, timed_save);
   } else {
     const std::uint64_t taken = world.advance(T(scene.dt), n, interrupt_request());
-    if (taken < n) s.done += taken, whole = false;
+    record_events(world, scene, s);
+    if (taken < n || s.stop_event) s.done += taken, whole = false;
   }
   s.wall_seconds += seconds_since(segment);
   if (whole) ++s.calls;
@@ -438,7 +475,8 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
     // Short of the span's end only on a signal: the checkpoint below keeps the rest to do.
     const std::uint64_t from = s.done;
     if (!advance_timed(world, scene, tolerances, n, s, checkpoints, save)) {
-      note_non_finite(world, from, s);
+      if (s.stop_event && trajectory) trajectory->write(s.done, world.time(), world.particles, world.rigid);
+      if (!s.stop_event) note_non_finite(world, from, s);
       break;
     }
     const bool finite = world.finite();
@@ -454,6 +492,7 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
   // The end, or where a signal stopped it: what a resume goes on from.
   if (checkpoints.enabled() && !s.blow_up) save_checkpoint(world, o, s, initial_energy, trajectory);
   if (trajectory) trajectory->close();
+  write_events(o, scene, s);
   progress.finish();
 }
 
@@ -566,7 +605,9 @@ void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const Ste
 template <class T>
 void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene, const RunOptions& o,
                       const Stepped& s) {
-  summary["complete"] = !s.error && !s.blow_up && s.done == scene.steps;
+  summary["complete"] = !s.error && !s.blow_up && (s.done == scene.steps || s.stop_event);
+  if (!scene.events.empty()) summary["events"] = s.events;
+  if (s.stop_event) summary["stopped_by_event"] = *s.stop_event;
   if (s.error) summary["error"] = *s.error;
   if (!s.error && interrupting_signal() != 0 && s.done < scene.steps) {
     summary["error"] = "stopped by " + signal_name(interrupting_signal());
