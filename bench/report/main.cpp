@@ -43,6 +43,7 @@ void print_sections(const report::Results& results, report::Rk4Csv* csv) {
   report::print_coupled_table(results, noise);
   report::print_frame_table(results, noise);
   report::print_guard_table(results, noise);
+  report::print_events_table(results, noise);
   report::print_adaptive_table(results, noise);
   report::print_checkpoint_table(results, noise);
   report::print_limits(results);

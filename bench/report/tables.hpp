@@ -19,6 +19,7 @@ void print_paired_scaling(const Results& results);
 void print_coupled_table(const Results& results, Noise& noise);
 void print_frame_table(const Results& results, Noise& noise);
 void print_guard_table(const Results& results, Noise& noise);
+void print_events_table(const Results& results, Noise& noise);
 void print_adaptive_table(const Results& results, Noise& noise);
 void print_checkpoint_table(const Results& results, Noise& noise);
 void print_limits(const Results& results);

@@ -276,3 +276,39 @@ TEST_CASE("under the finiteness guard a call taken again records its hits once",
   CHECK(s.event_hits().empty());  // the first step threw: nothing of it is kept
   CHECK(b.position(0)[1] == 0.05);
 }
+
+TEST_CASE("dense output is exact inside a projectile's step and of rk4's order under drag", "[events][dense]") {
+  const auto run = [](double k, double h) {
+    ForceModel<double> f = falling();
+    if (k > 0) f.add(LinearDrag{k});
+    Stepper<double> s(f, rk4, test::serial_options());
+    ParticleSet<double> b;
+    b.add({0, 10, 0}, {0, 3, 0}, 1);
+    DenseOutput<double> dense;
+    double worst = 0;
+    for (int step = 0; step < int(std::llround(1 / h)); ++step) {
+      dense.begin(s, b);
+      s.step(b, h);
+      dense.end(s, b);
+      for (double theta : {0.25, 0.5, 0.8}) {
+        const double t = dense.start_time() + theta * h;
+        double x[3], v[3];
+        double* xp[3] = {&x[0], &x[1], &x[2]};
+        double* vp[3] = {&v[0], &v[1], &v[2]};
+        dense.state_at(t, xp, vp);
+        const double y = k > 0 ? drag_height(10, 3, k, t) : 10 + 3 * t - kG * t * t / 2;
+        worst = std::max(worst, std::abs(x[1] - y));
+        if (k == 0) worst = std::max(worst, std::abs(v[1] - (3 - kG * t)));
+      }
+    }
+    return worst;
+  };
+  CHECK(run(0, 0.1) < 1e-13);
+  const double coarse = run(0.8, 0.1), fine = run(0.8, 0.05);
+  INFO("errors " << coarse << " " << fine);
+  CHECK(coarse < 1e-5);
+  CHECK(coarse / fine == Approx(16).epsilon(0.4));
+  DenseOutput<double> unused;
+  double x = 0, *p[3] = {&x, &x, &x};
+  CHECK_THROWS_AS(unused.state_at(0, p, p), Error);
+}
