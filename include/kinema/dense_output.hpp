@@ -56,7 +56,9 @@ inline std::array<double, 3> dense_velocity(const StepEnds& e, double theta) {
 //   dense.state_at(t, x, v);        // any t in [t0, t0 + h]
 // Each begin and end evaluates the model once (Stepper::accelerations) and copies the state:
 // a set that asks nothing of this pays nothing. Not for the inside of a frame's budget: the
-// first call allocates.
+// first call allocates. Forces applied to single bodies are cleared by the step (unless the
+// set keeps them, ParticleSet::keep_forces), so end() would not see them: keep them over a
+// step that dense output spans.
 template <class T>
 class DenseOutput {
  public:
@@ -73,7 +75,7 @@ class DenseOutput {
   }
   double start_time() const { return t0_; }
   double end_time() const { return t1_; }
-  // Body i at time t (t0 <= t <= t1; kinema::Error otherwise, or before end()).
+  // Body i at both ends of the step (after end(); i below the set's size).
   StepEnds ends(std::size_t i) const {
     StepEnds e;
     e.h = t1_ - t0_;

@@ -70,7 +70,8 @@ struct EventBlock {
 // Writes value[i] for each body i < count of the block. Like a ForceCallback it must be a
 // pure function of the view, the time and the user's own read-only data, safe to call
 // concurrently: it is called on each slice of bodies at both ends of every step, and on
-// single interpolated states while a crossing is located.
+// single interpolated states while a crossing is located. What it throws leaves the set and
+// the clock as before the call (a call with a user event keeps a copy of the state for that).
 template <class T>
 using EventFunction = std::function<void(const EventBlock<T>& block, T* value)>;
 

@@ -32,7 +32,10 @@ class World {
   // does (a step abandoned is not taken); returns the steps taken, fewer than asked once
   // `stop` returned true. The bits are those of one call.
   std::uint64_t advance(T h, std::uint64_t steps, const StopRequest& stop);
-  // The scene's events (Scene::events) found by the last advance call, in order, and whether
+  // Watches the scene's events (Scene::events) from the next advance on; a world watches none
+  // until asked (the analyses that build worlds from a scene step it to fixed times).
+  void watch_events();
+  // The events found by the last advance call, in order, and whether
   // one of them stopped it (the world then at its time; the steps returned count the cut one).
   const std::vector<EventHit<T>>& event_hits() const { return event_hits_; }
   bool stopped_at_event() const { return particle_stepper_.stopped_at_event(); }
@@ -75,6 +78,7 @@ class World {
 
   Stepper<T> particle_stepper_, rigid_stepper_;
   std::vector<EventHit<T>> event_hits_;
+  std::vector<EventSpec> scene_events_;
 };
 
 extern template class World<float>;

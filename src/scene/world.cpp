@@ -13,8 +13,14 @@ World<T>::World(const Scene& scene, const Method& method, StepperOptions options
       particles(make_particles<T>(scene)),
       rigid(make_rigid_bodies<T>(scene)),
       particle_stepper_(forces_, method, options),
-      rigid_stepper_(forces_, method, options) {
-  if (!scene.events.empty()) particle_stepper_.set_events(make_events<T>(scene));
+      rigid_stepper_(forces_, method, options),
+      scene_events_(scene.events) {}
+
+template <class T>
+void World<T>::watch_events() {
+  Scene events;
+  events.events = scene_events_;
+  particle_stepper_.set_events(make_events<T>(events));
 }
 
 template <class T>

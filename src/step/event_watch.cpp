@@ -105,6 +105,9 @@ void EventWatch<T>::set(EventOptions<T> options) {
   jobs_ = std::move(jobs);
   tolerance_ = options.time_tolerance;
   stops_ = stops;
+  calls_user_ = std::any_of(events_.begin(), events_.end(),
+                            [](const Event<T>& e) { return std::holds_alternative<EventFunction<T>>(e.kind); });
+  settled_.reset();
   clear();
 }
 
@@ -117,14 +120,11 @@ void EventWatch<T>::clear() {
 template <class T>
 void EventWatch<T>::rollback(std::size_t kept) {
   hits_.resize(std::min(kept, hits_.size()));
-  stop_.reset();
-  for (const EventHit<T>& hit : hits_) {
-    if (events_[hit.event].action == EventAction::stop && (!stop_ || hit.time < *stop_)) stop_ = hit.time;
-  }
+  stop_.reset();  // the hits kept are of steps before: a stop among them would have ended the call
 }
 
 template <class T>
-std::optional<double> EventWatch<T>::stop_time() const {
+std::optional<typename EventWatch<T>::Stop> EventWatch<T>::first_stop() const {
   std::lock_guard lock(mutex_);
   return stop_;
 }
@@ -246,16 +246,23 @@ void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& 
         return value(e, dense_position(ends, f), reads_velocity ? dense_velocity(ends, f) : Vec{}, body, t0 + f * h);
       },
       tolerance_ / h);
+  // The crossing a stop left the set at, found again at the next call's start when the body's
+  // state in T lies a rounding short of it: the same crossing, not a new one.
+  const bool settled_here = settled_ && settled_->body == body && settled_->event == e && settled_->time == t0;
+  if (settled_here && theta <= std::sqrt(std::numeric_limits<T>::epsilon())) return;
   EventHit<T> hit{t0 + theta * h, body, e, narrow<T>(dense_position(ends, theta)),
                   narrow<T>(dense_velocity(ends, theta))};
   std::lock_guard lock(mutex_);
   hits_.push_back(hit);
-  if (events_[e].action == EventAction::stop && (!stop_ || hit.time < *stop_)) stop_ = hit.time;
+  const bool earlier = !stop_ || hit.time < stop_->time || (hit.time == stop_->time && body < stop_->body);
+  if (events_[e].action == EventAction::stop && earlier) stop_ = Stop{hit.time, theta, body, e};
 }
 
 template <class T>
 void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const EventCall<T>& call,
-                           const T* const before[6], double theta, double h) {
+                           const T* const before[6], const Stop& stop, double h) {
+  settled_ = stop;
+  const double theta = stop.theta;
   const std::size_t n = b.padded_size();
   for (auto& a : acc_) {
     if (a.size() < n) a = AlignedArray<T>(b.capacity());

@@ -50,6 +50,8 @@ class EventWatch {
   bool active() const { return !events_.empty(); }
   // Whether an event stops the call: then steps run one pass each over the whole set.
   bool stops() const { return stops_; }
+  // Whether an event is a user's function (which may throw).
+  bool calls_user() const { return calls_user_; }
 
   // Forgets the hits (a call starts, or steps are taken again).
   void clear();
@@ -58,16 +60,27 @@ class EventWatch {
   void scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h);
   // Forgets the hits recorded after the first `kept` (steps taken back).
   void rollback(std::size_t kept);
-  // The time of the earliest stop hit recorded, if any.
-  std::optional<double> stop_time() const;
+  // The earliest stop hit recorded, if any: its time and the fraction of its step.
+  struct Stop {
+    double time, theta;
+    std::size_t body;
+    int event;
+  };
+  std::optional<Stop> first_stop() const;
+  std::optional<double> stop_time() const {
+    const auto stop = first_stop();
+    return stop ? std::optional<double>(stop->time) : std::nullopt;
+  }
   // Orders the hits (time, body, event) and drops those after `until`.
   void finish(std::optional<double> until);
   const std::vector<EventHit<T>>& hits() const { return hits_; }
 
   // Puts every body of the set (at the step's end now, `before` its start) on the dense
   // output at theta of the step of size h: where a stop event ended the call.
+  // The set is left at `stop`: its body, whose state in T may lie a rounding short of the
+  // crossing, is not stopped again by the same crossing at the next call's start.
   void settle(const Workers& workers, ParticleSet<T>& bodies, const EventCall<T>& call,
-              const T* const before[6], double theta, double h);
+              const T* const before[6], const Stop& stop, double h);
 
  private:
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
@@ -80,9 +93,11 @@ class EventWatch {
   std::vector<kernels::EventScanJob<T>> jobs_;  // the built-in events' sign tests
   double tolerance_ = 0;
   bool stops_ = false;
+  bool calls_user_ = false;
   mutable std::mutex mutex_;  // hits_ and stop_
   std::vector<EventHit<T>> hits_;
-  std::optional<double> stop_;
+  std::optional<Stop> stop_;
+  std::optional<Stop> settled_;  // the stop the set was last left at
   AlignedArray<T> acc_[6];  // settle: the accelerations at both ends
 };
 

@@ -11,7 +11,7 @@ template <class T>
 std::size_t FixedSteps<T>::checkpoint_bytes() const {
   std::size_t previous = 0;
   for (const auto& a : previous_) previous += a.size() * sizeof(T);
-  return checkpoint_.bytes() + buffer_.bytes() + previous;
+  return checkpoint_.bytes() + buffer_.bytes() + call_start_.bytes() + previous;
 }
 
 template <class T>
@@ -30,9 +30,27 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
     ~Ordered() { events.finish(events.stop_time()); }
   } ordered{events_};
   if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
-    if (events_.stops()) return advance_to_stop(w, b, h, steps);
+    const auto watched = [&] { return events_.stops() ? advance_to_stop(w, b, h, steps) : advance_checked(w, b, h, steps); };
+    if (!events_.calls_user()) return watched();
+    // A user's event function may throw with blocks at different steps: the set goes back to
+    // where the call started (the guard's own NonFiniteError leaves it where it says).
+    const StateArrays<T> state = state_arrays(b);
+    call_start_.reserve(state);
+    for_each_block(w, b.padded_size(), [&](Block block) { call_start_.save(state, block); });
+    const Clock<T> clock = core_.clock;
+    try {
+      watched();
+    } catch (const NonFiniteError&) {
+      throw;
+    } catch (...) {
+      call_start_.restore(w, state);
+      core_.clock = clock;
+      events_.clear();
+      throw;
+    }
+  } else {
+    advance_checked(w, b, h, steps);
   }
-  advance_checked(w, b, h, steps);
 }
 
 template <class T>
@@ -52,21 +70,19 @@ void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, st
     if (a.size() != b.capacity()) a = AlignedArray<T>(b.capacity());
   }
   for (std::uint64_t k = 0; k < steps; ++k) {
-    const double t0 = core_.clock.time();
     try {
       advance_checked(w, b, h, 1);
     } catch (const NonFiniteError& e) {
       throw NonFiniteError(k + 1, e.time, e.body, e.field);
     }
-    const std::optional<double> stop = events_.stop_time();
+    const auto stop = events_.first_stop();
     if (!stop) continue;
     steps_to_stop_ = k + 1;
-    const double theta = std::clamp((*stop - t0) / double(h), 0.0, 1.0);
-    if (theta == 1) return;
+    if (stop->theta == 1) return;
     const T* const before[6] = {previous_[0].data(), previous_[1].data(), previous_[2].data(),
                                 previous_[3].data(), previous_[4].data(), previous_[5].data()};
-    events_.settle(w, b, event_call(b), before, theta, double(h));
-    core_.clock.set(*stop);
+    events_.settle(w, b, event_call(b), before, *stop, double(h));
+    core_.clock.set(stop->time);
     return;
   }
 }

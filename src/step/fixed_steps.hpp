@@ -123,6 +123,7 @@ class FixedSteps {
   EventWatch<T> events_;
   std::array<AlignedArray<T>, 6> previous_;  // stop events: where each body's last step started
   std::uint64_t steps_to_stop_ = 0;
+  Checkpoint<T> call_start_;  // events with a user function: the state a call starts from
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for
   // a block the call never started).
   static constexpr std::uint64_t kNotRun = ~std::uint64_t(0);

@@ -47,7 +47,7 @@ struct Stepper<T>::Impl {
   std::uint64_t advance(ParticleSet<T>& bodies, T h, std::uint64_t steps, const StopRequest& stop) {
     if (!stop) {
       advance(bodies, h, steps);
-      return steps;
+      return fixed.events().stop_time() ? fixed.steps_to_stop() : steps;
     }
     continuation.active = false;
     const std::uint64_t start = core.clock.steps;

@@ -312,3 +312,47 @@ TEST_CASE("dense output is exact inside a projectile's step and of rk4's order u
   double x = 0, *p[3] = {&x, &x, &x};
   CHECK_THROWS_AS(unused.state_at(0, p, p), Error);
 }
+
+TEST_CASE("calls that stop again and again make progress: a crossing a stop settled at is not found twice",
+          "[events]") {
+  Stepper<float> s(ForceModel<float>{}, rk4, test::serial_options());
+  s.set_events({{{DistanceEvent{{0, 0, 0}, 1}, Crossing::either, EventAction::stop}}});
+  ParticleSet<float> b;
+  for (std::size_t i = 0; i < 2000; ++i) {  // straight out through r = 1 along many directions
+    const float a = 0.37f * float(i), c = 0.11f * float(i), r = 0.5f + 0.0002f * float(i);
+    const Vec3<float> dir{std::cos(a) * std::cos(c), std::sin(a) * std::cos(c), std::sin(c)};
+    b.add({r * dir[0], r * dir[1], r * dir[2]}, {0.3f * dir[0], 0.3f * dir[1], 0.3f * dir[2]}, 1);
+  }
+  s.set_time(1000);
+  double last = s.time();
+  std::size_t stops = 0;
+  for (int call = 0; call < 2500 && s.time() < 1002; ++call) {
+    const std::uint64_t taken = s.advance(b, 0.01f, 50, StopRequest{});
+    INFO("call " << call << " at t = " << s.time());
+    REQUIRE(s.time() > last);  // never stuck where the last call stopped
+    last = s.time();
+    if (s.stopped_at_event()) {
+      ++stops;
+      CHECK(taken >= 1);
+      CHECK(taken <= 50);
+    } else {
+      CHECK(taken == 50);
+    }
+  }
+  CHECK(stops > 10);
+}
+
+TEST_CASE("a throwing event function leaves the set and the clock as before the call", "[events]") {
+  ParticleSet<double> b = test::cloud<double>(3000);
+  const ParticleSet<double> before = b;
+  Stepper<double> s(test::all_local_terms<double>(), rk4, test::serial_options());
+  int calls = 0;
+  s.set_events({{{EventFunction<double>([&](const EventBlock<double>& block, double* value) {
+    if (block.first >= 2048 && ++calls > 3) throw std::runtime_error("the game's event failed");
+    for (std::size_t i = 0; i < block.count; ++i) value[i] = block.py[i];
+  })}}});
+  CHECK_THROWS_WITH(s.advance(b, 0.01, 10), "the game's event failed");
+  CHECK(test::state_hash(b) == test::state_hash(before));
+  CHECK(s.time() == 0);
+  CHECK(s.event_hits().empty());
+}

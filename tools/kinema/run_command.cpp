@@ -316,19 +316,37 @@ void record_events(const World<T>& world, const Scene& scene, Stepped& s) {
     s.event_rows += row;
     ++s.events;
   }
-  if (world.stopped_at_event() && !world.event_hits().empty()) {
-    const EventHit<T>& last = world.event_hits().back();
-    s.stop_event = "events[" + std::to_string(last.event) + "] (" + event_type(scene.events[std::size_t(last.event)]) +
-                   "), body " + std::to_string(last.body);
+  if (!world.stopped_at_event()) return;
+  for (const EventHit<T>& hit : world.event_hits()) {  // the first stop hit in time, then body, order
+    const EventSpec& spec = scene.events[std::size_t(hit.event)];
+    if (spec.action != EventAction::stop) continue;
+    s.stop_event = "events[" + std::to_string(hit.event) + "] (" + event_type(spec) + "), body " + std::to_string(hit.body);
+    return;
   }
+}
+
+std::filesystem::path events_path(const RunOptions& o) {
+  return std::filesystem::path(o.trajectory_path).parent_path() / "events.csv";
 }
 
 // events.csv beside the trajectory: every hit of the run (of a resumed run: since the resume).
 void write_events(const RunOptions& o, const Scene& scene, const Stepped& s) {
   if (scene.events.empty() || o.trajectory_path.empty()) return;
   const std::string text = "time,body,event,type,px,py,pz,vx,vy,vz\n" + s.event_rows;
-  const auto path = std::filesystem::path(o.trajectory_path).parent_path() / "events.csv";
-  write_whole_file(path, std::as_bytes(std::span(text.data(), text.size())), "events");
+  write_whole_file(events_path(o), std::as_bytes(std::span(text.data(), text.size())), "events");
+}
+
+// Events are watched on fixed steps of a model of local terms; events.csv is a file of its own.
+void check_events(const Scene& scene, const RunOptions& o) {
+  if (scene.events.empty()) return;
+  if (scene.rtol || scene.atol) throw Error(o.scene_path + ": events are watched on fixed steps: drop rtol and atol");
+  if (scene.nbody || !scene.springs.empty()) {
+    throw Error(o.scene_path + ": events are watched on the fused path: a scene with nbody or springs cannot have them");
+  }
+  if (!o.trajectory_path.empty()) {
+    check_distinct({{"the scene", o.scene_path}, {"--out", o.trajectory_path}, {"--summary", o.summary_path},
+                    {"--checkpoint", o.checkpoint.path}}, {{"events.csv", events_path(o).string()}});
+  }
 }
 
 // A span a signal cut short is not searched for the step that stopped being finite: the
@@ -370,6 +388,7 @@ RunRecord run_record(const Stepped& s, double initial_energy,
                       {"smallest_step", exact(a.smallest_step)}, {"largest_step", exact(a.largest_step)},
                       {"next_step", exact(a.next_step)}, {"initial_energy", exact(initial_energy)}};
   if (trajectory_bytes) f["trajectory_bytes"] = *trajectory_bytes;
+  if (s.stop_event) f["stopped_by_event"] = *s.stop_event;  // the run is over: a resume steps no more
   return {"run", s.fingerprint, f};
 }
 
@@ -391,6 +410,7 @@ Resumed resumed_from(const nlohmann::json& f) {
   a.next_step = exact(f.at("next_step").get<std::uint64_t>());
   r.initial_energy = exact(f.at("initial_energy").get<std::uint64_t>());
   if (f.contains("trajectory_bytes")) r.trajectory_bytes = f.at("trajectory_bytes").get<std::uint64_t>();
+  if (f.contains("stopped_by_event")) s.stop_event = f.at("stopped_by_event").get<std::string>();
   s.resumed_at = s.done;
   return r;
 }
@@ -468,7 +488,7 @@ void step_scene(World<T>& world, const Scene& scene, const RunOptions& o, const 
   Progress progress("kinema run", o.quiet);
   CheckpointTimer checkpoints(o.checkpoint);
   if (trajectory && !s.resumed_at) trajectory->write(0, world.time(), world.particles, world.rigid);
-  while (s.done < scene.steps && interrupting_signal() == 0) {
+  while (s.done < scene.steps && !s.stop_event && interrupting_signal() == 0) {
     std::uint64_t n = std::min(chunk, scene.steps - s.done);
     if (trajectory) n = std::min(n, o.every - s.done % o.every);  // stop at each K-th step
     const auto save = [&] { save_checkpoint(world, o, s, initial_energy, trajectory), checkpoints.saved(); };
@@ -705,6 +725,7 @@ template <class T>
 int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context, ReportFile& summary_file) {
   const StepperOptions options = stepper_options(o);
   World<T> world = build_world<T>(scene, o, options);
+  world.watch_events();
   double initial_energy = world.total_energy(interrupt_request());
   StepPlan plan;
   Stepped stepped;
@@ -749,6 +770,7 @@ int run_scene(const RunOptions& o) {
   check_distinct({{"the scene", o.scene_path}},
                  {{"--out", o.trajectory_path}, {"--summary", o.summary_path}, {"--checkpoint", o.checkpoint.path}});
   Scene scene = scene_with_overrides(o);
+  check_events(scene, o);
   // Before any work: a path that cannot be written is refused now.
   ReportFile summary_file(o.summary_path, "summary");
   try {
