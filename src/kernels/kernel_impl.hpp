@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <utility>
 
+#include "kernels/event_kernels.hpp"
 #include "kernels/kernels.hpp"
 #include "kernels/wide.hpp"
 
@@ -287,23 +288,64 @@ struct StateSource {
   const T* x[3];
   const T* v[3];
   T* const* before = nullptr;  // FusedJob::before
+  EventProbe<T>* probe = nullptr;  // FusedJob::probe
+  // A probe of one plane along an axis (a floor, a wall): the value a x[axis] - b, read from
+  // the state arrays before the batch's store (axis_in) and picked from the registers after
+  // it, without a branch on the axis in the loop.
+  const T* axis_in = nullptr;
+  int axis = 0;
+  T axis_a = 0, axis_b = 0;
 };
 template <class T>
-StateSource<T> in_place(const BodyArrays<T>& b, T* const* before = nullptr) {
-  return {{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}, before};
+StateSource<T> with_probe(StateSource<T> in, const FusedJob<T>& job) {
+  in.before = job.before, in.probe = job.probe;
+  if (in.probe == nullptr || in.probe->count != 1 || in.probe->tests[0].value != EventValue::axis_plane) return in;
+  const EventScanJob<T>& plane = in.probe->tests[0];
+  in.axis_in = in.x[plane.axis], in.axis = plane.axis;
+  in.axis_a = plane.a[plane.axis], in.axis_b = plane.b;
+  return in;
+}
+template <class T>
+StateSource<T> in_place(const BodyArrays<T>& b) {
+  return {{b.x[0], b.x[1], b.x[2]}, {b.v[0], b.v[1], b.v[2]}};
 }
 template <class T>
 StateSource<T> source_of(const FusedJob<T>& job) {
   const T* const* s = job.source;
-  return {{s[0], s[1], s[2]}, {s[3], s[4], s[5]}, job.before};
+  return with_probe<T>({{s[0], s[1], s[2]}, {s[3], s[4], s[5]}}, job);
 }
 
-// The state a batch starts from, where the job asks for it (a branch the batches all take
-// the same way).
+// The one-plane probe's value (EventTest's axis_plane value) of the bodies at i of its array,
+// before the batch's store.
 template <class V>
-KINEMA_INLINE void keep_before(const StateSource<value_t<V>>& in, std::size_t i, const Vec<V>& x, const Vec<V>& v) {
+KINEMA_INLINE V axis_start(const StateSource<value_t<V>>& in, std::size_t i) {
+  if (in.axis_in == nullptr) return V(0);
+  return V(in.axis_a) * load<V>(in.axis_in + i) - V(in.axis_b);
+}
+// And of positions x: the axis picked by selects (loop-invariant masks), not by an index,
+// which would send the registers to memory.
+template <class V>
+KINEMA_INLINE V axis_value(const StateSource<value_t<V>>& in, const Vec<V>& x) {
+  using T = value_t<V>;
+  const auto first = V(T(in.axis == 0)) != V(0), second = V(T(in.axis == 1)) != V(0);
+  return V(in.axis_a) * pick(first, x.c[0], pick(second, x.c[1], x.c[2])) - V(in.axis_b);
+}
+
+// After a batch's store: the state it started from (x0, v0), where the job asks for it (a
+// branch the batches all take the same way); with a probe, only where a body may have crossed
+// an event on its way to (x1, v1). `start`: the one-plane probe's value before the store.
+template <class V>
+KINEMA_INLINE void keep_before(const StateSource<value_t<V>>& in, std::size_t i, const Vec<V>& x0, const Vec<V>& v0,
+                               const Vec<V>& x1, const Vec<V>& v1, const V& start) {
   if (in.before == nullptr) return;
-  for (int d = 0; d < 3; ++d) store(in.before[d] + i, x.c[d]), store(in.before[3 + d] + i, v.c[d]);
+  if (in.axis_in != nullptr) {
+    if (!any_lane(axis_value<V>(in, x0) * axis_value<V>(in, x1) <= V(0))) return;  // probe_crossed's test
+    in.probe->batches[in.probe->found++] = std::uint32_t(i);
+  } else if (in.probe != nullptr) {
+    if (!probe_crossed(*in.probe, x0.c, v0.c, x1.c, v1.c)) return;
+    in.probe->batches[in.probe->found++] = std::uint32_t(i);
+  }
+  for (int d = 0; d < 3; ++d) store(in.before[d] + i, x0.c[d]), store(in.before[3 + d] + i, v0.c[d]);
 }
 
 // Asks for the state 1 KiB ahead, once per cache line, and for the source where it is not
@@ -345,9 +387,11 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Stat
     kx[s] = vs;
     kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
   });
-  keep_before<V>(in, i, x, v);
-  store3(b.x, i, advanced<tab.b>(h, kx, x));
-  store3(b.v, i, advanced<tab.b, sigma>(h, kv, v));
+  const Vec<V> x1 = advanced<tab.b>(h, kx, x), v1 = advanced<tab.b, sigma>(h, kv, v);
+  const V start = axis_start<V>(in, i);
+  store3(b.x, i, x1);
+  store3(b.v, i, v1);
+  keep_before<V>(in, i, x, v, x1, v1, start);
 }
 
 // In place (rigid bodies' centres).
@@ -373,7 +417,7 @@ void fused_runge_kutta(const FusedJob<value_t<V>>& job, std::size_t begin, std::
   const Forces<V> f(job.forces, value_t<V>(acceleration_scale(M.tableau)) * h);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
   if (job.source == nullptr) {
-    return runge_kutta_loop<M, Quadratic, Variant>(b, in_place(b, job.before), f, h, begin, end);
+    return runge_kutta_loop<M, Quadratic, Variant>(b, with_probe(in_place(b), job), f, h, begin, end);
   }
   runge_kutta_loop<M, Quadratic, Variant>(b, source_of(job), f, h, begin, end);
 }
@@ -387,8 +431,9 @@ KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateS
   V wh[kMaxStages];
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    Vec<V> x = load3<V>(in.x, i), v = load3<V>(in.v, i);
-    keep_before<V>(in, i, x, v);
+    const Vec<V> x0 = load3<V>(in.x, i), v0 = load3<V>(in.v, i);
+    const V start = axis_start<V>(in, i);
+    Vec<V> x = x0, v = v0;
     const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.per_body, i);
     static_for<scheme.count>([&](auto k) {
       if constexpr (scheme.ops[k].kind == OpKind::kick) {
@@ -399,6 +444,7 @@ KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateS
     });
     store3(b.x, i, x);
     store3(b.v, i, v);
+    keep_before<V>(in, i, x0, v0, x, v, start);
   }
 }
 
@@ -407,7 +453,7 @@ void fused_kick_drift(const FusedJob<value_t<V>>& job, std::size_t begin, std::s
   const Forces<V> f(job.forces);
   const auto b = job.bodies;  // a copy: stores cannot alias it, so pointers stay in registers
   if (job.source == nullptr) {
-    return kick_drift_loop<M, Quadratic, Variant>(b, in_place(b, job.before), f, job.h, begin, end);
+    return kick_drift_loop<M, Quadratic, Variant>(b, with_probe(in_place(b), job), f, job.h, begin, end);
   }
   kick_drift_loop<M, Quadratic, Variant>(b, source_of(job), f, job.h, begin, end);
 }

@@ -156,6 +156,9 @@ using BlockStepFn = void (*)(const BlockJob<T>& job, T* scratch, T step, std::si
 
 // One fused step over bodies [begin, end) (multiples of the SIMD width).
 template <class T>
+struct EventProbe;
+
+template <class T>
 struct FusedJob {
   BodyArrays<T> bodies;
   LocalForces<T> forces;
@@ -167,6 +170,9 @@ struct FusedJob {
   // Where the kernel also writes each body's px .. vz as the step found them (six arrays, the
   // events' test reads both ends of the step from there and the set). Null: nowhere.
   T* const* before = nullptr;
+  // With `before`: the events' sign test, run on both ends of each batch's step in registers;
+  // only the batches where a body crossed store their start state. Null: every batch stores it.
+  EventProbe<T>* probe = nullptr;
 };
 template <class T>
 using FusedFn = void (*)(const FusedJob<T>& job, std::size_t begin, std::size_t end);
@@ -386,6 +392,17 @@ struct EventScanJob {
   T b;
   int axis = 0;
   bool down, up;  // the sign changes that count: > 0 to <= 0, < 0 to >= 0
+};
+// The sign tests a fused kernel runs as it steps (FusedJob::probe): at most kProbeTests
+// built-in events. Each batch with a body that crossed any of them is listed by its first
+// body's index, in order; the caller then tests that batch's bodies one by one.
+inline constexpr int kProbeTests = 4;
+template <class T>
+struct EventProbe {
+  const EventScanJob<T>* tests = nullptr;  // their values and directions (not their arrays)
+  int count = 0;
+  std::uint32_t* batches = nullptr;  // room for one entry per batch stepped
+  std::size_t found = 0;
 };
 // Writes the indices (from 0) of the bodies among `count` (a multiple of the width) whose
 // value crossed into `found`, in order; returns how many.

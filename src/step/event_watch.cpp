@@ -24,35 +24,68 @@ bool finite(const Vec& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) &&
   throw Error("events[" + std::to_string(e) + "]: " + what);
 }
 
+// An event's value at a fraction of the step, and its slope there where known (NaN if not).
+struct Sample {
+  double value, slope;
+};
+
+// Where the next value is taken: the Newton point of the last sample where it lies inside the
+// bracket, else regula falsi (with the Anderson-Bjorck scaling), a bisection past 40 tries.
+// A Newton point within half the tolerance of the last one steps half the tolerance past it,
+// so a bracket closing from one side closes.
+double next_fraction(const Sample& last, double m, double lo, double hi, double g_lo, double g_hi,
+                     double tolerance, int iteration) {
+  double next = m - last.value / last.slope;
+  if (std::abs(next - m) < 0.5 * tolerance) next = next > m ? m + 0.5 * tolerance : m - 0.5 * tolerance;
+  if (next > lo && next < hi) return next;
+  next = iteration < 40 ? (lo * g_hi - hi * g_lo) / (g_hi - g_lo) : 0.5 * (lo + hi);
+  return next > lo && next < hi ? next : 0.5 * (lo + hi);
+}
+
 // The fraction of the step at which g changes sign, g(0) and g(1) on either side (or g(1)
-// zero): regula falsi with the Anderson-Bjorck scaling of an end kept twice (6 to 9 values on
-// a step's cubic), a bisection past 40 iterations. Returns the bracket's end past the crossing
-// once the bracket is at most `tolerance` wide (at least a few ulps of the fraction).
+// zero): safeguarded Newton where g gives its slope (4 to 6 values on a step's cubic),
+// regula falsi otherwise (6 to 9). Returns the bracket's end past the crossing once the
+// bracket is at most `tolerance` wide (at least a few ulps of the fraction).
 template <class G>
 double crossing_fraction(G&& g, double tolerance) {
   tolerance = std::max(tolerance, 4 * std::numeric_limits<double>::epsilon());
-  double lo = 0, hi = 1, g_lo = g(0.0), g_hi = g(1.0);
+  const Sample first = g(0.0);
+  double lo = 0, hi = 1, g_lo = first.value, g_hi = g(1.0).value;
   if (g_lo == 0) return 0;
   if ((g_lo > 0) == (g_hi > 0) && g_hi != 0) return std::abs(g_hi) <= std::abs(g_lo) ? 1 : 0;  // round-off
+  Sample last = first;
+  double m = 0;
   int kept = 0;  // the end the last value did not replace: +1 hi, -1 lo
   for (int iteration = 0; iteration < 200 && hi - lo > tolerance; ++iteration) {
-    double m = iteration < 40 ? (lo * g_hi - hi * g_lo) / (g_hi - g_lo) : 0.5 * (lo + hi);
-    if (!(m > lo && m < hi)) m = 0.5 * (lo + hi);
+    m = next_fraction(last, m, lo, hi, g_lo, g_hi, tolerance, iteration);
     if (!(m > lo && m < hi)) break;  // lo and hi are neighbours
-    const double g_m = g(m);
-    if (g_m == 0) return m;
-    if ((g_m > 0) == (g_lo > 0)) {
-      const double scale = 1 - g_m / g_lo;
+    last = g(m);
+    if (last.value == 0) return m;
+    if ((last.value > 0) == (g_lo > 0)) {
+      const double scale = 1 - last.value / g_lo;
       if (kept == +1) g_hi *= scale > 0 ? scale : 0.5;
-      lo = m, g_lo = g_m, kept = +1;
+      lo = m, g_lo = last.value, kept = +1;
     } else {
-      const double scale = 1 - g_m / g_hi;
+      const double scale = 1 - last.value / g_hi;
       if (kept == -1) g_lo *= scale > 0 ? scale : 0.5;
-      hi = m, g_hi = g_m, kept = -1;
+      hi = m, g_hi = last.value, kept = -1;
     }
   }
   return hi;
 }
+
+// One component of the step's cubic Hermite, y(theta) = y0 + c1 theta + c2 theta^2 + c3 theta^3,
+// from its ends and rates (the differences formed once: little cancellation when y is large).
+// Both ends are exact: a value at zero at the step's end is seen there.
+struct Cubic {
+  double c0, c1, c2, c3, end;
+  static Cubic hermite(double y0, double rate0, double y1, double rate1, double h) {
+    const double d = y1 - y0, r0 = h * rate0, r1 = h * rate1;
+    return {y0, r0, 3 * d - 2 * r0 - r1, r0 + r1 - 2 * d, y1};
+  }
+  double at(double t) const { return t == 1 ? end : c0 + t * (c1 + t * (c2 + t * c3)); }
+  double slope(double t) const { return c1 + t * (2 * c2 + t * (3 * c3)); }
+};
 
 template <class T>
 bool counts(const kernels::EventScanJob<T>& job, T g0, T g1) {
@@ -112,6 +145,15 @@ void EventWatch<T>::set(EventOptions<T> options) {
 }
 
 template <class T>
+std::optional<kernels::EventProbe<T>> EventWatch<T>::probe() const {
+  if (calls_user_ || jobs_.size() > std::size_t(kernels::kProbeTests)) return std::nullopt;
+  kernels::EventProbe<T> probe;
+  probe.tests = jobs_.data();
+  probe.count = int(jobs_.size());
+  return probe;
+}
+
+template <class T>
 void EventWatch<T>::clear() {
   hits_.clear();
   stop_.reset();
@@ -141,7 +183,7 @@ void EventWatch<T>::finish(std::optional<double> until) {
 
 template <class T>
 void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
-  if (slice.first >= call.size) return;
+  if (slice.first >= call.size || (slice.batches != nullptr && slice.batch_count == 0)) return;
   const std::size_t real = std::min(slice.count, call.size - slice.first);
   std::uint32_t found[kEventSliceBodies<T>];
   for (std::size_t e = 0; e < events_.size(); ++e) {
@@ -150,18 +192,35 @@ void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, do
   }
 }
 
+namespace {
+
+// The built-in event's test over the slice's bodies from `from`, `count` of them.
+template <class T>
+std::size_t scan_range(const kernels::KernelTable<T>& table, kernels::EventScanJob<T> job, const SliceEnds<T>& slice,
+                       std::size_t from, std::size_t count, std::uint32_t* found) {
+  for (int a = 0; a < 6; ++a) job.before[a] = slice.before[a] + from, job.after[a] = slice.after[a] + from;
+  const std::size_t n = table.event_scan[int(job.value)](job, count, found);
+  for (std::size_t k = 0; k < n; ++k) found[k] += std::uint32_t(from);
+  return n;
+}
+
+}  // namespace
+
 // The bodies of the slice whose value changed sign as the event asks: the kernel's test for
-// the built-in values, the user's function at both ends otherwise.
+// the built-in values (over the batches the fused kernel's probe listed, if it ran one), the
+// user's function at both ends otherwise.
 template <class T>
 std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real,
                                       double t0, double h, std::uint32_t* found) const {
   const kernels::EventScanJob<T>& test = jobs_[e];
   const auto* fn = std::get_if<EventFunction<T>>(&events_[e].kind);
+  if (fn == nullptr && slice.batches == nullptr) return scan_range(*call.table, test, slice, 0, slice.count, found);
   if (fn == nullptr) {
-    kernels::EventScanJob<T> job = test;
-    std::copy(slice.before, slice.before + 6, job.before);
-    std::copy(slice.after, slice.after + 6, job.after);
-    return call.table->event_scan[int(job.value)](job, slice.count, found);
+    std::size_t n = 0;
+    for (std::size_t k = 0; k < slice.batch_count; ++k) {
+      n += scan_range(*call.table, test, slice, slice.batches[k], call.table->width, found + n);
+    }
+    return n;
   }
   const auto view = [&](const T* const s[6], double t) {
     return EventBlock<T>{slice.first, real, t, s[0], s[1], s[2], s[3], s[4], s[5]};
@@ -218,34 +277,62 @@ Vec3<T> narrow(const Vec& v) {
 
 }  // namespace
 
-template <class T>
-double EventWatch<T>::value(int e, const Vec& x, const Vec& v, std::size_t body, double t) const {
-  const auto& kind = events_[e].kind;
-  if (const auto* plane = std::get_if<PlaneEvent>(&kind)) return dot(plane->normal, x) - plane->offset;
-  if (const auto* distance = std::get_if<DistanceEvent>(&kind)) {
-    const Vec d{x[0] - distance->point[0], x[1] - distance->point[1], x[2] - distance->point[2]};
-    return dot(d, d) - distance->radius * distance->radius;
+namespace {
+
+// A body's step as cubics: positions from (x, v), velocities from (v, a).
+struct Track {
+  Cubic x[3], v[3];
+  explicit Track(const StepEnds& e) {
+    for (int d = 0; d < 3; ++d) {
+      x[d] = Cubic::hermite(e.x0[d], e.v0[d], e.x1[d], e.v1[d], e.h);
+      v[d] = Cubic::hermite(e.v0[d], e.a0[d], e.v1[d], e.a1[d], e.h);
+    }
   }
-  if (const auto* speed = std::get_if<SpeedEvent>(&kind)) return dot(v, v) - speed->speed * speed->speed;
-  const Vec3<T> xt = narrow<T>(x), vt = narrow<T>(v);
-  const EventBlock<T> one{body, 1, t, &xt[0], &xt[1], &xt[2], &vt[0], &vt[1], &vt[2]};
-  T g = 0;
-  std::get<EventFunction<T>>(kind)(one, &g);
-  return double(g);
+};
+
+// |y(theta) - p|^2 - r2 and its slope.
+Sample squared_distance(const Cubic (&y)[3], const Vec& p, double r2, double theta) {
+  double sum = 0, slope = 0;
+  for (int d = 0; d < 3; ++d) {
+    const double offset = y[d].at(theta) - p[d];
+    sum += offset * offset, slope += 2 * offset * y[d].slope(theta);
+  }
+  return {sum - r2, slope};
 }
+
+// The event's value at theta: the built-in ones with their slopes, a user's function on the
+// state in T (no slope).
+template <class T>
+Sample sample(const Event<T>& event, const Track& track, const StepEnds& ends, std::size_t body, double t0,
+              double theta) {
+  if (const auto* plane = std::get_if<PlaneEvent>(&event.kind)) {
+    double value = 0, slope = 0;
+    for (int d = 0; d < 3; ++d) value += plane->normal[d] * track.x[d].at(theta), slope += plane->normal[d] * track.x[d].slope(theta);
+    return {value - plane->offset, slope};
+  }
+  if (const auto* distance = std::get_if<DistanceEvent>(&event.kind)) {
+    return squared_distance(track.x, distance->point, distance->radius * distance->radius, theta);
+  }
+  if (const auto* speed = std::get_if<SpeedEvent>(&event.kind)) {
+    return squared_distance(track.v, Vec{}, speed->speed * speed->speed, theta);
+  }
+  const Vec3<T> xt = narrow<T>(dense_position(ends, theta)), vt = narrow<T>(dense_velocity(ends, theta));
+  const EventBlock<T> one{body, 1, t0 + theta * ends.h, &xt[0], &xt[1], &xt[2], &vt[0], &vt[1], &vt[2]};
+  T g = 0;
+  std::get<EventFunction<T>>(event.kind)(one, &g);
+  return {double(g), std::numeric_limits<double>::quiet_NaN()};
+}
+
+}  // namespace
 
 template <class T>
 void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0,
                            double h) {
   const StepEnds ends = ends_of(call, slice, local, h);
   const std::size_t body = slice.first + local;
-  const bool reads_velocity = !std::holds_alternative<PlaneEvent>(events_[e].kind) &&
-                              !std::holds_alternative<DistanceEvent>(events_[e].kind);
-  const double theta = crossing_fraction(
-      [&](double f) {
-        return value(e, dense_position(ends, f), reads_velocity ? dense_velocity(ends, f) : Vec{}, body, t0 + f * h);
-      },
-      tolerance_ / h);
+  const Track track(ends);
+  const double theta =
+      crossing_fraction([&](double f) { return sample(events_[e], track, ends, body, t0, f); }, tolerance_ / h);
   // The crossing a stop left the set at, found again at the next call's start when the body's
   // state in T lies a rounding short of it: the same crossing, not a new one.
   const bool settled_here = settled_ && settled_->body == body && settled_->event == e && settled_->time == t0;

@@ -17,8 +17,8 @@
 
 namespace kinema {
 
-// Bodies per slice of the sign test: a slice's state at the step's start (a copy) and end
-// stay in L1 from the kernel's stores to the test's loads.
+// Bodies per slice of the sign test: a slice's state at the step's start (the kernel's
+// stores) and end stay in L1 from the kernel's stores to the test's loads.
 template <class T>
 inline constexpr std::size_t kEventSliceBodies = 2048 / sizeof(T);
 
@@ -40,6 +40,10 @@ struct SliceEnds {
   const T* after[6];   // and at its end
   std::size_t first;   // the slice's first body
   std::size_t count;   // bodies, padding included (a multiple of the SIMD width)
+  // The batches (offsets of their first bodies) the fused kernel's probe found a crossing
+  // in; `before` holds those batches only. Null: every batch, all of `before`.
+  const std::uint32_t* batches = nullptr;
+  std::size_t batch_count = 0;
 };
 
 template <class T>
@@ -52,6 +56,8 @@ class EventWatch {
   bool stops() const { return stops_; }
   // Whether an event is a user's function (which may throw).
   bool calls_user() const { return calls_user_; }
+  // The sign test a fused kernel can run as it steps, when every event is a built-in one.
+  std::optional<kernels::EventProbe<T>> probe() const;
 
   // Forgets the hits (a call starts, or steps are taken again).
   void clear();
@@ -86,8 +92,6 @@ class EventWatch {
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
                          double h, std::uint32_t* found) const;
   void locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0, double h);
-  double value(int e, const std::array<double, 3>& x, const std::array<double, 3>& v, std::size_t body,
-               double t) const;
 
   std::vector<Event<T>> events_;
   std::vector<kernels::EventScanJob<T>> jobs_;  // the built-in events' sign tests

@@ -25,6 +25,11 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
   if (!events_.active()) return advance_checked(w, b, h, steps);
   check_events(b);
   events_.clear();
+  if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
+    for (auto& a : previous_) {
+      if (a.size() != b.capacity()) a = AlignedArray<T>(b.capacity());
+    }
+  }
   struct Ordered {  // whatever ends the call, its hits are in order
     EventWatch<T>& events;
     ~Ordered() { events.finish(events.stop_time()); }
@@ -66,9 +71,6 @@ void FixedSteps<T>::check_events(const Set& b) const {
 
 template <class T>
 void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps) {
-  for (auto& a : previous_) {
-    if (a.size() != b.capacity()) a = AlignedArray<T>(b.capacity());
-  }
   for (std::uint64_t k = 0; k < steps; ++k) {
     try {
       advance_checked(w, b, h, 1);
@@ -274,21 +276,30 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
 // The kernel steps each slice in place and writes the state each body started from as it
 // goes (stores of values in registers, no extra loads): to scratch in L1, or to previous_
 // when an event stops (a settle reads where every body started). The test then reads both
-// ends of the step while the slice is in cache.
+// ends of the step while the slice is in cache. Where every event is a built-in one and
+// nothing changes the state after the kernel, the kernel runs their sign test itself and
+// writes the start (to previous_) only of the batches where a body crossed: a slice is then
+// a whole block, as without events.
 template <class T>
 void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
                                 const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard) {
   const EventCall<T> call = event_call(b);
   const Clock<T> start = core_.clock;
   const bool keeps_previous = events_.stops();
+  const bool clamps = guard && guard->clamp;
+  const auto probe = keeps_previous || clamps ? std::nullopt : events_.probe();
+  const std::size_t slice_bodies = probe ? kBlockBodies : kEventSliceBodies<T>;
   T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
   for_each_block(w, b.padded_size(), [&](Block block) {
     if (guard) guard->checkpoint.save(guard->state, block);
     alignas(64) T kept[6][kEventSliceBodies<T>];
-    for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
-      const std::size_t count = std::min(kEventSliceBodies<T>, block.end - s);
+    std::uint32_t batches[kBlockBodies];
+    kernels::EventProbe<T> block_probe;
+    if (probe) block_probe = *probe, block_probe.batches = batches;
+    for (std::size_t s = block.begin; s < block.end; s += slice_bodies) {
+      const std::size_t count = std::min(slice_bodies, block.end - s);
       T* before[6];
-      for (int a = 0; a < 6; ++a) before[a] = keeps_previous ? previous_[a].data() + s : kept[a];
+      for (int a = 0; a < 6; ++a) before[a] = keeps_previous || probe ? previous_[a].data() + s : kept[a];
       // The slice as a job of its own: every array from its first body.
       kernels::FusedJob<T> slice_job = job;
       for (int d = 0; d < 3; ++d) slice_job.bodies.x[d] = state[d] + s, slice_job.bodies.v[d] = state[3 + d] + s;
@@ -297,9 +308,12 @@ void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::Fu
       slice_job.before = before;
       SliceEnds<T> ends{{before[0], before[1], before[2], before[3], before[4], before[5]}, {}, s, count};
       for (int a = 0; a < 6; ++a) ends.after[a] = state[a] + s;
+      if (probe) slice_job.probe = &block_probe, ends.batches = batches;
       for (std::uint64_t k = 0; k < steps; ++k) {
+        block_probe.found = 0;
         fused_fn(slice_job, 0, count);
-        if (guard && guard->clamp) clamp(b, {s, s + count});
+        ends.batch_count = block_probe.found;
+        if (clamps) clamp(b, {s, s + count});
         Clock<T> now = start;
         now.steps += k;
         events_.scan(call, ends, now.time(), double(job.h));

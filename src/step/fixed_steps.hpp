@@ -121,7 +121,9 @@ class FixedSteps {
   Checkpoint<T> checkpoint_;  // the state a guarded call starts from
   StateBuffer<T> buffer_;     // or, on the fused particle path, where it steps to
   EventWatch<T> events_;
-  std::array<AlignedArray<T>, 6> previous_;  // stop events: where each body's last step started
+  // Events: where each body's last step started (every body under a stop event, else the
+  // batches the kernel's probe listed).
+  std::array<AlignedArray<T>, 6> previous_;
   std::uint64_t steps_to_stop_ = 0;
   Checkpoint<T> call_start_;  // events with a user function: the state a call starts from
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for

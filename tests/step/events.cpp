@@ -209,28 +209,86 @@ TEST_CASE("events give the same hits on every ISA, thread count and job system",
   const EventFunction<float> above_diagonal = [](const EventBlock<float>& b, float* value) {
     for (std::size_t i = 0; i < b.count; ++i) value[i] = b.px[i] - b.py[i];
   };
+  const std::vector<Event<float>> built_in = {{PlaneEvent{{0.2, 1, -0.1}, -0.5}, Crossing::either},
+                                              {DistanceEvent{{0.5, 0, 0}, 1.5}, Crossing::up},
+                                              {SpeedEvent{2}, Crossing::down}};
+  std::vector<Event<float>> with_user = built_in;
+  with_user.push_back({above_diagonal, Crossing::either});
+  // The full scan (a user function), the kernels' sign test, and its one-plane form.
+  const std::vector<std::vector<Event<float>>> lists = {
+      with_user, built_in, {{PlaneEvent{{0, 1, 0}, -0.5}, Crossing::either}}};
   const auto hash = [&](StepperOptions o, std::size_t count) {
-    ParticleSet<float> b = test::cloud<float>(count);
-    Stepper<float> s(test::all_local_terms<float>(), rk4, o);
-    s.set_events({{{PlaneEvent{{0.2, 1, -0.1}, -0.5}, Crossing::either},
-                   {DistanceEvent{{0.5, 0, 0}, 1.5}, Crossing::up},
-                   {SpeedEvent{2}, Crossing::down},
-                   {above_diagonal, Crossing::either}}});
     std::uint64_t h = 1469598103934665603ull;
-    std::size_t hits = 0;
-    for (int call = 0; call < 4; ++call) {
-      s.advance(b, 0.01f, 5);
-      for (const EventHit<float>& hit : s.event_hits()) {
-        const double values[] = {hit.time, double(hit.body), double(hit.event), hit.position[0], hit.position[1],
-                                 hit.position[2], hit.velocity[0], hit.velocity[1], hit.velocity[2]};
-        for (double v : values) h = (h ^ std::hash<double>{}(v)) * 1099511628211ull;
-        ++hits;
+    for (const auto& events : lists) {
+      ParticleSet<float> b = test::cloud<float>(count);
+      Stepper<float> s(test::all_local_terms<float>(), rk4, o);
+      s.set_events({events});
+      std::size_t hits = 0;
+      for (int call = 0; call < 4; ++call) {
+        s.advance(b, 0.01f, 5);
+        for (const EventHit<float>& hit : s.event_hits()) {
+          const double values[] = {hit.time, double(hit.body), double(hit.event), hit.position[0], hit.position[1],
+                                   hit.position[2], hit.velocity[0], hit.velocity[1], hit.velocity[2]};
+          for (double v : values) h = (h ^ std::hash<double>{}(v)) * 1099511628211ull;
+          ++hits;
+        }
       }
+      CHECK(hits > count / 50);  // the test sees many hits
+      h ^= test::state_hash(b);
     }
-    CHECK(hits > count / 20);  // the test sees many hits
-    return h ^ test::state_hash(b);
+    return h;
   };
   test::check_same_bits_everywhere(hash, 512, 5000);
+}
+
+namespace {
+
+// The hits of `events` on a cloud, with an extra user function that never crosses when
+// `scanned` (which makes every slice store its start and be scanned whole).
+std::vector<EventHit<float>> cloud_hits(const Method& method, std::vector<Event<float>> events, bool scanned) {
+  if (scanned) {
+    events.push_back({EventFunction<float>([](const EventBlock<float>& b, float* value) {
+                        std::fill(value, value + b.count, 1.0f);
+                      }),
+                      Crossing::either});
+  }
+  ParticleSet<float> b = test::cloud<float>(3000);
+  Stepper<float> s(test::all_local_terms<float>(), method, test::serial_options());
+  s.set_events({events});
+  std::vector<EventHit<float>> hits;
+  for (int call = 0; call < 4; ++call) {
+    s.advance(b, 0.01f, 5);
+    hits.insert(hits.end(), s.event_hits().begin(), s.event_hits().end());
+  }
+  return hits;
+}
+
+bool same_hit(const EventHit<float>& a, const EventHit<float>& b) {
+  return a.time == b.time && a.body == b.body && a.event == b.event && a.position == b.position &&
+         a.velocity == b.velocity;
+}
+
+}  // namespace
+
+TEST_CASE("the fused kernels' own sign test finds exactly the crossings a full scan finds", "[events]") {
+  const Event<float> floor{PlaneEvent{{0, 1, 0}, -0.5}, Crossing::either};  // along an axis: one array
+  const Event<float> wall{PlaneEvent{{-1, 0, 0}, 0.25}, Crossing::up};
+  const std::vector<std::vector<Event<float>>> lists = {
+      {floor},
+      {wall},
+      {{PlaneEvent{{0.2, 1, -0.1}, -0.5}, Crossing::either},
+       {DistanceEvent{{0.5, 0, 0}, 1.5}, Crossing::up},
+       {SpeedEvent{2}, Crossing::down}},
+      {floor, wall, floor, wall, {SpeedEvent{2}, Crossing::either}}};  // more than the kernels test
+  for (const Method* method : {&rk4, &velocity_verlet, &euler}) {
+    for (const auto& events : lists) {
+      INFO(method->name << ", " << events.size() << " events");
+      const auto probed = cloud_hits(*method, events, false), scanned = cloud_hits(*method, events, true);
+      REQUIRE(probed.size() > 10);  // the scene crosses
+      REQUIRE(probed.size() == scanned.size());  // the function never crosses
+      CHECK(std::equal(probed.begin(), probed.end(), scanned.begin(), same_hit));
+    }
+  }
 }
 
 TEST_CASE("events are refused where they cannot be watched, and checked when set", "[events]") {
