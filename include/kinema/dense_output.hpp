@@ -5,11 +5,15 @@
 // velocities from (v0, a0, v1, a1), a the accelerations the force model gives at each end.
 // Its error inside a step is O(h^4) (exact for a trajectory of degree 2 or 3: a projectile
 // under constant gravity), the order of rk4's own error, and below the error of the lower
-// orders. Events (kinema/events.hpp) are located on it.
+// orders. It is bs3's own interpolant (bs3 evaluates the model at both ends anyway). dopri5
+// adds its own term of order 4 (Shampine's, from the step's seven stages, taken again for
+// the bodies asked about): the Hermite plus (theta (1 - theta))^2 h sum_i d_i k_i. Events
+// (kinema/events.hpp) are located on these.
 
 #include <array>
 #include <algorithm>
 #include <cstddef>
+#include <initializer_list>
 
 #include "kinema/bodies.hpp"
 #include "kinema/error.hpp"
@@ -17,11 +21,29 @@
 
 namespace kinema {
 
-// One body at both ends of a step of size h, in double.
+// One body at both ends of a step of size h, in double; rx and rv: dopri5's own term
+// h sum_i d_i k_i for positions and velocities (zero for every other method).
 struct StepEnds {
   double h = 0;
   std::array<double, 3> x0{}, v0{}, a0{}, x1{}, v1{}, a1{};
+  std::array<double, 3> rx{}, rv{};
 };
+
+// dopri5's dense output weights d_i (Shampine 1986, as Hairer and Wanner give them).
+inline constexpr std::array<double, 7> kDopri5Dense = {
+    -12715105075.0 / 11282082432.0, 0, 87487479700.0 / 32700410799.0, -10690763975.0 / 1880347072.0,
+    701980252875.0 / 199316789632.0, -1453857185.0 / 822651844.0, 69997945.0 / 29380423.0};
+
+// Whether a method is dopri5 (its tableau), whose steps have the interpolant above.
+inline bool has_dopri5_interpolant(const Method& m) {
+  return m.kind == MethodKind::runge_kutta && m.tableau.a == dopri5.tableau.a && m.tableau.b == dopri5.tableau.b;
+}
+
+// The weight of dopri5's own term at theta.
+inline double dopri5_weight(double theta) {
+  const double w = theta * (1 - theta);
+  return w * w;
+}
 
 // The cubic Hermite weights at theta in [0, 1] (the fraction of the step).
 struct HermiteWeights {
@@ -38,14 +60,18 @@ struct HermiteWeights {
 
 inline std::array<double, 3> dense_position(const StepEnds& e, double theta) {
   const HermiteWeights w = HermiteWeights::at(theta);
-  return {w.of(e.x0[0], e.v0[0], e.x1[0], e.v1[0], e.h), w.of(e.x0[1], e.v0[1], e.x1[1], e.v1[1], e.h),
-          w.of(e.x0[2], e.v0[2], e.x1[2], e.v1[2], e.h)};
+  const double r = dopri5_weight(theta);
+  std::array<double, 3> x;
+  for (int d = 0; d < 3; ++d) x[d] = w.of(e.x0[d], e.v0[d], e.x1[d], e.v1[d], e.h) + r * e.rx[d];
+  return x;
 }
 
 inline std::array<double, 3> dense_velocity(const StepEnds& e, double theta) {
   const HermiteWeights w = HermiteWeights::at(theta);
-  return {w.of(e.v0[0], e.a0[0], e.v1[0], e.a1[0], e.h), w.of(e.v0[1], e.a0[1], e.v1[1], e.a1[1], e.h),
-          w.of(e.v0[2], e.a0[2], e.v1[2], e.a1[2], e.h)};
+  const double r = dopri5_weight(theta);
+  std::array<double, 3> v;
+  for (int d = 0; d < 3; ++d) v[d] = w.of(e.v0[d], e.a0[d], e.v1[d], e.a1[d], e.h) + r * e.rv[d];
+  return v;
 }
 
 // The state of every body of a set at any time inside a step, for a caller that wants it
@@ -54,8 +80,10 @@ inline std::array<double, 3> dense_velocity(const StepEnds& e, double theta) {
 //   stepper.step(bodies, h);
 //   dense.end(stepper, bodies);     // after it
 //   dense.state_at(t, x, v);        // any t in [t0, t0 + h]
-// Each begin and end evaluates the model once (Stepper::accelerations) and copies the state:
-// a set that asks nothing of this pays nothing. Not for the inside of a frame's budget: the
+// Each begin and end evaluates the model once (Stepper::accelerations) and copies the state;
+// after a dopri5 step, end also takes the step's five inner stages again (five more
+// evaluations, on a copy of the set) for dopri5's own interpolant. A set that asks nothing
+// of this pays nothing. Not for the inside of a frame's budget: the
 // first call allocates. Forces applied to single bodies are cleared by the step (unless the
 // set keeps them, ParticleSet::keep_forces), so end() would not see them: keep them over a
 // step that dense output spans.
@@ -71,6 +99,8 @@ class DenseOutput {
     if (start_.x[0].size() != bodies.padded_size()) throw Error("DenseOutput::end: call begin on the same set first");
     t1_ = stepper.time();
     keep(stepper, bodies, end_);
+    own_ = has_dopri5_interpolant(stepper.method());
+    if (own_) dopri5_terms(stepper, bodies);
     ended_ = true;
   }
   double start_time() const { return t0_; }
@@ -82,6 +112,7 @@ class DenseOutput {
     for (int d = 0; d < 3; ++d) {
       e.x0[d] = start_.x[d][i], e.v0[d] = start_.v[d][i], e.a0[d] = start_.a[d][i];
       e.x1[d] = end_.x[d][i], e.v1[d] = end_.v[d][i], e.a1[d] = end_.a[d][i];
+      if (own_) e.rx[d] = rx_[d][i], e.rv[d] = rv_[d][i];
     }
     return e;
   }
@@ -89,11 +120,13 @@ class DenseOutput {
   void state_at(double t, T* const x[3], T* const v[3]) const {
     const double theta = fraction(t);
     const HermiteWeights w = HermiteWeights::at(theta);
-    const double h = t1_ - t0_;
+    const double h = t1_ - t0_, r = dopri5_weight(theta);
     for (std::size_t i = 0; i < size_; ++i) {
       for (int d = 0; d < 3; ++d) {
-        x[d][i] = T(w.of(start_.x[d][i], start_.v[d][i], end_.x[d][i], end_.v[d][i], h));
-        v[d][i] = T(w.of(start_.v[d][i], start_.a[d][i], end_.v[d][i], end_.a[d][i], h));
+        double xi = w.of(start_.x[d][i], start_.v[d][i], end_.x[d][i], end_.v[d][i], h);
+        double vi = w.of(start_.v[d][i], start_.a[d][i], end_.v[d][i], end_.a[d][i], h);
+        if (own_) xi += r * rx_[d][i], vi += r * rv_[d][i];
+        x[d][i] = T(xi), v[d][i] = T(vi);
       }
     }
   }
@@ -108,11 +141,7 @@ class DenseOutput {
   };
   void keep(Stepper<T>& stepper, const ParticleSet<T>& bodies, End& end) {
     const std::size_t n = bodies.padded_size();
-    for (auto* arrays : {&end.x, &end.v, &end.a}) {
-      for (auto& a : *arrays) {
-        if (a.size() != n) a = AlignedArray<T>(n);
-      }
-    }
+    resize(n, {&end.x, &end.v, &end.a});
     const T* x[3] = {bodies.px(), bodies.py(), bodies.pz()};
     const T* v[3] = {bodies.vx(), bodies.vy(), bodies.vz()};
     for (int d = 0; d < 3; ++d) {
@@ -124,10 +153,57 @@ class DenseOutput {
     size_ = bodies.size();
   }
 
+  // dopri5's k_j (the stage velocities and accelerations) for the inner stages j = 1 .. 5,
+  // each stage's state formed in double from the step's start, then its term
+  // h sum_j d_j k_j (k_0 and k_6 are the ends').
+  void dopri5_terms(Stepper<T>& stepper, const ParticleSet<T>& bodies) {
+    const std::size_t n = bodies.padded_size();
+    const ButcherTableau& tab = dopri5.tableau;
+    const double h = t1_ - t0_;
+    stages_ = bodies;
+    resize(n, {&rx_, &rv_});
+    for (auto& k : inner_) resize(n, {&k.v, &k.a});
+    const auto k_x = [&](int j, int d) { return j == 0 ? start_.v[d].data() : inner_[j - 1].v[d].data(); };
+    const auto k_v = [&](int j, int d) { return j == 0 ? start_.a[d].data() : inner_[j - 1].a[d].data(); };
+    T* const state[6] = {stages_.px(), stages_.py(), stages_.pz(), stages_.vx(), stages_.vy(), stages_.vz()};
+    for (int s = 1; s < 6; ++s) {
+      for (int d = 0; d < 3; ++d) {
+        for (std::size_t i = 0; i < n; ++i) {
+          double x = start_.x[d][i], v = start_.v[d][i];
+          for (int j = 0; j < s; ++j) x += h * tab.a[s][j] * k_x(j, d)[i], v += h * tab.a[s][j] * k_v(j, d)[i];
+          state[d][i] = T(x), state[3 + d][i] = T(v);
+          inner_[s - 1].v[d][i] = T(v);
+        }
+      }
+      T* const a[3] = {inner_[s - 1].a[0].data(), inner_[s - 1].a[1].data(), inner_[s - 1].a[2].data()};
+      stepper.accelerations(stages_, t0_ + tab.c[s] * h, a);
+    }
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t i = 0; i < n; ++i) {
+        double rx = kDopri5Dense[6] * end_.v[d][i], rv = kDopri5Dense[6] * end_.a[d][i];
+        for (int j = 0; j < 6; ++j) rx += kDopri5Dense[j] * k_x(j, d)[i], rv += kDopri5Dense[j] * k_v(j, d)[i];
+        rx_[d][i] = h * rx, rv_[d][i] = h * rv;
+      }
+    }
+  }
+  static void resize(std::size_t n, std::initializer_list<std::array<AlignedArray<T>, 3>*> arrays) {
+    for (auto* three : arrays) {
+      for (auto& a : *three) {
+        if (a.size() != n) a = AlignedArray<T>(n);
+      }
+    }
+  }
+
   End start_, end_;
+  struct Stage {
+    std::array<AlignedArray<T>, 3> v, a;
+  };
+  std::array<Stage, 5> inner_;
+  std::array<AlignedArray<T>, 3> rx_, rv_;
+  ParticleSet<T> stages_;
   double t0_ = 0, t1_ = 0;
   std::size_t size_ = 0;
-  bool ended_ = false;
+  bool ended_ = false, own_ = false;
 };
 
 }  // namespace kinema

@@ -74,17 +74,18 @@ double crossing_fraction(G&& g, double tolerance) {
   return hi;
 }
 
-// One component of the step's cubic Hermite, y(theta) = y0 + c1 theta + c2 theta^2 + c3 theta^3,
-// from its ends and rates (the differences formed once: little cancellation when y is large).
-// Both ends are exact: a value at zero at the step's end is seen there.
-struct Cubic {
-  double c0, c1, c2, c3, end;
-  static Cubic hermite(double y0, double rate0, double y1, double rate1, double h) {
+// One component of a body's path over the step: the cubic Hermite of its ends and rates plus
+// dopri5's own term r (theta (1 - theta))^2 (r = 0 for other methods), as
+// y0 + c1 theta + ... + c4 theta^4, the differences formed once (little cancellation when y
+// is large). Both ends are exact: a value at zero at the step's end is seen there.
+struct Curve {
+  double c0, c1, c2, c3, c4, end;
+  static Curve of(double y0, double rate0, double y1, double rate1, double h, double r) {
     const double d = y1 - y0, r0 = h * rate0, r1 = h * rate1;
-    return {y0, r0, 3 * d - 2 * r0 - r1, r0 + r1 - 2 * d, y1};
+    return {y0, r0, 3 * d - 2 * r0 - r1 + r, r0 + r1 - 2 * d - 2 * r, r, y1};
   }
-  double at(double t) const { return t == 1 ? end : c0 + t * (c1 + t * (c2 + t * c3)); }
-  double slope(double t) const { return c1 + t * (2 * c2 + t * (3 * c3)); }
+  double at(double t) const { return t == 1 ? end : c0 + t * (c1 + t * (c2 + t * (c3 + t * c4))); }
+  double slope(double t) const { return c1 + t * (2 * c2 + t * (3 * c3 + t * (4 * c4))); }
 };
 
 template <class T>
@@ -237,36 +238,78 @@ std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const Sli
 
 namespace {
 
-// The accelerations of the SIMD group holding `local` of the arrays `state` (body `body`),
-// through the stage kernel (the staged path's stage 0: the same terms the steps use).
+constexpr std::size_t kMaxWidth = 16;
+
+// The accelerations of the SIMD group whose first body is `body0`, its state at `state` (six
+// arrays from the group's first body), through the stage kernel (the staged path's stage 0:
+// the same terms the steps use).
 template <class T>
-Vec acceleration(const EventCall<T>& call, const T* const state[6], std::size_t local, std::size_t body) {
-  const std::size_t width = call.table->width, lane = local % width, group = body - lane;
-  alignas(64) T acc[3][16];
+void group_accelerations(const EventCall<T>& call, const T* const state[6], std::size_t body0,
+                         T (&acc)[3][kMaxWidth]) {
   kernels::StageJob<T> job{};
-  for (int d = 0; d < 3; ++d) {
-    job.x.in[d] = state[d] + (local - lane);
-    job.v.in[d] = state[3 + d] + (local - lane);
-    job.acc[d] = acc[d];
-  }
+  for (int d = 0; d < 3; ++d) job.x.in[d] = state[d], job.v.in[d] = state[3 + d], job.acc[d] = acc[d];
   job.accel_scale = 1;
-  job.inv_mass = call.inv_mass + group;
-  job.per_body = call.per_body.from(group);
+  job.inv_mass = call.inv_mass + body0;
+  job.per_body = call.per_body.from(body0);
   job.forces = call.forces;
-  call.table->stage[call.forces.has_quadratic()][call.forces.has_central()](job, 0, width);
-  return {double(acc[0][lane]), double(acc[1][lane]), double(acc[2][lane])};
+  call.table->stage[call.forces.has_quadratic()][call.forces.has_central()](job, 0, call.table->width);
+}
+
+// dopri5's own term h sum_j d_j k_j for every lane of a SIMD group: its five inner stages
+// taken again from the step's start, each state formed in double as DenseOutput forms it.
+struct GroupTerms {
+  double x[3][kMaxWidth], v[3][kMaxWidth];
+};
+template <class T>
+GroupTerms dopri5_terms(const EventCall<T>& call, const T* const start[6], const T* const end[6],
+                        const T* const a0[3], const T* const a1[3], std::size_t body0, double h) {
+  const ButcherTableau& tab = dopri5.tableau;
+  const std::size_t width = call.table->width;
+  alignas(64) T kx[6][3][kMaxWidth], kv[6][3][kMaxWidth], state[6][kMaxWidth];
+  for (int d = 0; d < 3; ++d) std::copy(start[3 + d], start[3 + d] + width, kx[0][d]), std::copy(a0[d], a0[d] + width, kv[0][d]);
+  const T* const stage[6] = {state[0], state[1], state[2], state[3], state[4], state[5]};
+  for (int s = 1; s < 6; ++s) {
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t l = 0; l < width; ++l) {
+        double x = start[d][l], v = start[3 + d][l];
+        for (int j = 0; j < s; ++j) x += h * tab.a[s][j] * kx[j][d][l], v += h * tab.a[s][j] * kv[j][d][l];
+        state[d][l] = T(x), state[3 + d][l] = T(v), kx[s][d][l] = T(v);
+      }
+    }
+    group_accelerations(call, stage, body0, kv[s]);
+  }
+  GroupTerms r;
+  for (int d = 0; d < 3; ++d) {
+    for (std::size_t l = 0; l < width; ++l) {
+      double rx = kDopri5Dense[6] * end[3 + d][l], rv = kDopri5Dense[6] * a1[d][l];
+      for (int j = 0; j < 6; ++j) rx += kDopri5Dense[j] * kx[j][d][l], rv += kDopri5Dense[j] * kv[j][d][l];
+      r.x[d][l] = h * rx, r.v[d][l] = h * rv;
+    }
+  }
+  return r;
 }
 
 template <class T>
 StepEnds ends_of(const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double h) {
+  const std::size_t lane = local % call.table->width, group = local - lane, body0 = slice.first + group;
+  const T* before[6];
+  const T* after[6];
+  for (int a = 0; a < 6; ++a) before[a] = slice.before[a] + group, after[a] = slice.after[a] + group;
+  alignas(64) T a0[3][kMaxWidth], a1[3][kMaxWidth];
+  group_accelerations(call, before, body0, a0);
+  group_accelerations(call, after, body0, a1);
   StepEnds e;
   e.h = h;
   for (int d = 0; d < 3; ++d) {
-    e.x0[d] = double(slice.before[d][local]), e.v0[d] = double(slice.before[3 + d][local]);
-    e.x1[d] = double(slice.after[d][local]), e.v1[d] = double(slice.after[3 + d][local]);
+    e.x0[d] = double(before[d][lane]), e.v0[d] = double(before[3 + d][lane]), e.a0[d] = double(a0[d][lane]);
+    e.x1[d] = double(after[d][lane]), e.v1[d] = double(after[3 + d][lane]), e.a1[d] = double(a1[d][lane]);
   }
-  e.a0 = acceleration(call, slice.before, local, slice.first + local);
-  e.a1 = acceleration(call, slice.after, local, slice.first + local);
+  if (call.dopri5) {
+    const T* const acc0[3] = {a0[0], a0[1], a0[2]};
+    const T* const acc1[3] = {a1[0], a1[1], a1[2]};
+    const GroupTerms r = dopri5_terms(call, before, after, acc0, acc1, body0, h);
+    for (int d = 0; d < 3; ++d) e.rx[d] = r.x[d][lane], e.rv[d] = r.v[d][lane];
+  }
   return e;
 }
 
@@ -279,19 +322,19 @@ Vec3<T> narrow(const Vec& v) {
 
 namespace {
 
-// A body's step as cubics: positions from (x, v), velocities from (v, a).
+// A body's step as curves: positions from (x, v), velocities from (v, a).
 struct Track {
-  Cubic x[3], v[3];
+  Curve x[3], v[3];
   explicit Track(const StepEnds& e) {
     for (int d = 0; d < 3; ++d) {
-      x[d] = Cubic::hermite(e.x0[d], e.v0[d], e.x1[d], e.v1[d], e.h);
-      v[d] = Cubic::hermite(e.v0[d], e.a0[d], e.v1[d], e.a1[d], e.h);
+      x[d] = Curve::of(e.x0[d], e.v0[d], e.x1[d], e.v1[d], e.h, e.rx[d]);
+      v[d] = Curve::of(e.v0[d], e.a0[d], e.v1[d], e.a1[d], e.h, e.rv[d]);
     }
   }
 };
 
 // |y(theta) - p|^2 - r2 and its slope.
-Sample squared_distance(const Cubic (&y)[3], const Vec& p, double r2, double theta) {
+Sample squared_distance(const Curve (&y)[3], const Vec& p, double r2, double theta) {
   double sum = 0, slope = 0;
   for (int d = 0; d < 3; ++d) {
     const double offset = y[d].at(theta) - p[d];
@@ -356,6 +399,17 @@ void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const Even
   }
   T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
   const HermiteWeights w = HermiteWeights::at(theta);
+  const double own = dopri5_weight(theta);
+  // dopri5's term of a group, from the accelerations at both ends in acc_.
+  const auto dopri5_group_terms = [&](const EventCall<T>& c, const T* const start[6], T* const end[6],
+                                      std::size_t group, double step) {
+    const T* s0[6];
+    const T* s1[6];
+    for (int a = 0; a < 6; ++a) s0[a] = start[a] + group, s1[a] = end[a] + group;
+    const T* const a0[3] = {acc_[0].data() + group, acc_[1].data() + group, acc_[2].data() + group};
+    const T* const a1[3] = {acc_[3].data() + group, acc_[4].data() + group, acc_[5].data() + group};
+    return dopri5_terms(c, s0, s1, a0, a1, group, step);
+  };
   for_each_block(workers, n, [&](Block block) {
     for (int end = 0; end < 2; ++end) {
       kernels::StageJob<T> job{};
@@ -370,11 +424,17 @@ void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const Even
       job.forces = call.forces;
       call.table->stage[call.forces.has_quadratic()][call.forces.has_central()](job, block.begin, block.end);
     }
-    for (std::size_t i = block.begin; i < std::min(block.end, call.size); ++i) {
-      for (int d = 0; d < 3; ++d) {
-        const double x = w.of(before[d][i], before[3 + d][i], state[d][i], state[3 + d][i], h);
-        const double v = w.of(before[3 + d][i], acc_[d][i], state[3 + d][i], acc_[3 + d][i], h);
-        state[d][i] = T(x), state[3 + d][i] = T(v);
+    const std::size_t width = call.table->width, real_end = std::min(block.end, call.size);
+    for (std::size_t group = block.begin; group < real_end; group += width) {
+      GroupTerms r{};
+      if (call.dopri5) r = dopri5_group_terms(call, before, state, group, h);
+      for (std::size_t i = group; i < std::min(group + width, real_end); ++i) {
+        for (int d = 0; d < 3; ++d) {
+          double x = w.of(before[d][i], before[3 + d][i], state[d][i], state[3 + d][i], h);
+          double v = w.of(before[3 + d][i], acc_[d][i], state[3 + d][i], acc_[3 + d][i], h);
+          if (call.dopri5) x += own * r.x[d][i - group], v += own * r.v[d][i - group];
+          state[d][i] = T(x), state[3 + d][i] = T(v);
+        }
       }
     }
   });

@@ -31,6 +31,7 @@ struct EventCall {
   const T* inv_mass = nullptr;
   kernels::PerBody<T> per_body{};
   std::size_t size = 0;  // real bodies
+  bool dopri5 = false;    // the steps have dopri5's own interpolant (kinema/dense_output.hpp)
 };
 
 // One slice of bodies at both ends of a step, every array from the slice's first body.

@@ -2,6 +2,8 @@
 
 #include "step/step_checks.hpp"
 
+#include "kinema/dense_output.hpp"
+
 #include <string>
 #include <type_traits>
 
@@ -63,9 +65,9 @@ template <class Set>
 void FixedSteps<T>::check_events(const Set& b) const {
   if constexpr (!std::is_same_v<Set, ParticleSet<T>>) {
     throw Error("events are watched on particle sets only: step rigid bodies with a stepper without events");
-  } else if (core_.paths.block || core_.paths.fused_for(reads_per_body(b)) == nullptr) {
-    throw Error("events are watched on the fused path only (built-in local terms and a built-in method): "
-                "this model takes the " + std::string(core_.paths.block ? "block" : "staged") + " path");
+  } else if (core_.paths.block || (core_.paths.fused_for(reads_per_body(b)) == nullptr && !core_.forces().fusable())) {
+    throw Error("events are watched with built-in local terms only (any method): this model takes the " +
+                std::string(core_.paths.block ? "block" : "staged") + " path for its callbacks or coupled terms");
   }
 }
 
@@ -91,7 +93,8 @@ void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, st
 
 template <class T>
 EventCall<T> FixedSteps<T>::event_call(ParticleSet<T>& b) const {
-  return {core_.table, core_.lowered().particle, b.inv_mass(), per_body(b), b.size()};
+  return {core_.table, core_.lowered().particle, b.inv_mass(), per_body(b), b.size(),
+          has_dopri5_interpolant(core_.method)};
 }
 
 template <class T>
@@ -328,6 +331,7 @@ template <class T>
 void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
   StagedPath<T>& staged = *core_.paths.staged;
   staged.reserve(c.bodies.padded_size());
+  if (events_.active()) return run_staged_watched(c, steps, guard);
   if (!staged.blocks_alone()) {
     return run_steps(c.workers, c.bodies, steps, guard, [&](double t0) {
       c.t0 = t0;
@@ -337,6 +341,33 @@ void FixedSteps<T>::run_staged(StepContext<T>& c, std::uint64_t steps, Guard* gu
   staged.prepare(c);
   ParticleBlocks blocks{staged, c};
   run_blocks(c.workers, c.bodies, blocks, steps, guard);
+}
+
+// Events on the staged path (its methods with local terms only: check_events): each step
+// keeps where the set started (previous_), then the sign test and the root finder read both
+// ends slice by slice, as the fused path's scan does.
+template <class T>
+void FixedSteps<T>::run_staged_watched(StepContext<T>& c, std::uint64_t steps, Guard* guard) {
+  StagedPath<T>& staged = *core_.paths.staged;
+  ParticleSet<T>& b = c.bodies;
+  const EventCall<T> call = event_call(b);
+  const bool clamps = guard && guard->clamp;
+  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  run_steps(c.workers, b, steps, guard, [&](double t0) {
+    for_each_block(c.workers, b.padded_size(), [&](Block block) {
+      for (int a = 0; a < 6; ++a) std::copy(state[a] + block.begin, state[a] + block.end, previous_[a].data() + block.begin);
+    });
+    c.t0 = t0;
+    staged.step(c);
+    for_each_block(c.workers, b.padded_size(), [&](Block block) {
+      if (clamps) clamp(b, block);
+      for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
+        SliceEnds<T> ends{{}, {}, s, std::min(kEventSliceBodies<T>, block.end - s)};
+        for (int a = 0; a < 6; ++a) ends.before[a] = previous_[a].data() + s, ends.after[a] = state[a] + s;
+        events_.scan(call, ends, t0, double(c.h));
+      }
+    });
+  });
 }
 
 // The block path: each slice of a block takes every step of the call while its stage state is

@@ -76,6 +76,7 @@ class FixedSteps {
   void run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard);
   void run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps, Guard* guard);
   void run_staged(StepContext<T>& c, std::uint64_t steps, Guard* guard);
+  void run_staged_watched(StepContext<T>& c, std::uint64_t steps, Guard* guard);
   // Steps of a path whose phases are passes over every block: step(t0) takes one.
   template <class Set, class Step>
   void run_steps(const Workers& w, Set& set, std::uint64_t steps, Guard* guard, Step&& step);

@@ -41,11 +41,11 @@ double drag_landing(double y0, double v0, double k) {
   return t;
 }
 
-double drag_crossing_error(double h) {
+double drag_crossing_error(double h, const Method& method = rk4) {
   const double y0 = 10, v0 = 3, k = 0.8;
   ForceModel<double> f = falling();
   f.add(LinearDrag{k});
-  Stepper<double> s(f, rk4, test::serial_options());
+  Stepper<double> s(f, method, test::serial_options());
   s.set_events({{floor_event()}});
   ParticleSet<double> b;
   b.add({0, y0, 0}, {0, v0, 0}, 1);
@@ -128,6 +128,15 @@ TEST_CASE("a crossing under drag is located to rk4's fourth order", "[events]") 
   INFO("errors " << errors[0] << " " << errors[1] << " " << errors[2]);
   CHECK(test::fitted_order(hs, errors) == Approx(4).margin(0.5));
   CHECK(errors[2] < 1e-7);
+}
+
+TEST_CASE("under dopri5 a crossing is located on its own interpolant, to its fifth order", "[events]") {
+  // The Hermite alone is of order 4 inside a step; dopri5's term lifts it to the method's order.
+  std::vector<double> hs{0.2, 0.1, 0.05}, errors;
+  for (double h : hs) errors.push_back(drag_crossing_error(h, dopri5));
+  INFO("errors " << errors[0] << " " << errors[1] << " " << errors[2]);
+  CHECK(test::fitted_order(hs, errors) == Approx(5).margin(0.5));
+  CHECK(errors[2] < drag_crossing_error(0.05) / 20);  // far below rk4's at the same step
 }
 
 TEST_CASE("Kepler e = 0.6: radius crossings match Kepler's equation, periapsis passages the period",
@@ -245,7 +254,8 @@ namespace {
 
 // The hits of `events` on a cloud, with an extra user function that never crosses when
 // `scanned` (which makes every slice store its start and be scanned whole).
-std::vector<EventHit<float>> cloud_hits(const Method& method, std::vector<Event<float>> events, bool scanned) {
+std::vector<EventHit<float>> cloud_hits(const Method& method, std::vector<Event<float>> events, bool scanned,
+                                        bool staged = false) {
   if (scanned) {
     events.push_back({EventFunction<float>([](const EventBlock<float>& b, float* value) {
                         std::fill(value, value + b.count, 1.0f);
@@ -253,7 +263,9 @@ std::vector<EventHit<float>> cloud_hits(const Method& method, std::vector<Event<
                       Crossing::either});
   }
   ParticleSet<float> b = test::cloud<float>(3000);
-  Stepper<float> s(test::all_local_terms<float>(), method, test::serial_options());
+  StepperOptions o = test::serial_options();
+  o.force_staged = staged;
+  Stepper<float> s(test::all_local_terms<float>(), method, o);
   s.set_events({events});
   std::vector<EventHit<float>> hits;
   for (int call = 0; call < 4; ++call) {
@@ -287,6 +299,10 @@ TEST_CASE("the fused kernels' own sign test finds exactly the crossings a full s
       REQUIRE(probed.size() > 10);  // the scene crosses
       REQUIRE(probed.size() == scanned.size());  // the function never crosses
       CHECK(std::equal(probed.begin(), probed.end(), scanned.begin(), same_hit));
+      // The staged path steps the same bits and scans each step whole.
+      const auto staged = cloud_hits(*method, events, false, true);
+      REQUIRE(staged.size() == probed.size());
+      CHECK(std::equal(probed.begin(), probed.end(), staged.begin(), same_hit));
     }
   }
 }
@@ -313,7 +329,10 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   callback.add(ForceCallback<double>([](const ParticleBlock<double>&) {}));
   Stepper<double> block_path(callback, rk4, test::serial_options());
   block_path.set_events({{floor_event()}});
-  CHECK_THROWS_WITH(block_path.step(b, 0.1), Catch::Contains("fused path"));
+  CHECK_THROWS_WITH(block_path.step(b, 0.1), Catch::Contains("local terms only"));
+  Stepper<double> staged_callback(callback, dopri5, test::serial_options());
+  staged_callback.set_events({{floor_event()}});
+  CHECK_THROWS_WITH(staged_callback.step(b, 0.1), Catch::Contains("staged path"));
   CHECK(b.position(0)[1] == 1);  // nothing moved
   pair.set_events({});
   pair.advance_to(b, 0.1, Tolerances{});  // an empty list watches nothing
@@ -335,11 +354,11 @@ TEST_CASE("under the finiteness guard a call taken again records its hits once",
   CHECK(b.position(0)[1] == 0.05);
 }
 
-TEST_CASE("dense output is exact inside a projectile's step and of rk4's order under drag", "[events][dense]") {
-  const auto run = [](double k, double h) {
+TEST_CASE("dense output is exact inside a projectile's step, of rk4's order under drag, of dopri5's with its own", "[events][dense]") {
+  const auto run = [](double k, double h, const Method& method) {
     ForceModel<double> f = falling();
     if (k > 0) f.add(LinearDrag{k});
-    Stepper<double> s(f, rk4, test::serial_options());
+    Stepper<double> s(f, method, test::serial_options());
     ParticleSet<double> b;
     b.add({0, 10, 0}, {0, 3, 0}, 1);
     DenseOutput<double> dense;
@@ -356,16 +375,24 @@ TEST_CASE("dense output is exact inside a projectile's step and of rk4's order u
         dense.state_at(t, xp, vp);
         const double y = k > 0 ? drag_height(10, 3, k, t) : 10 + 3 * t - kG * t * t / 2;
         worst = std::max(worst, std::abs(x[1] - y));
-        if (k == 0) worst = std::max(worst, std::abs(v[1] - (3 - kG * t)));
+        const double u = -kG / k, rate = k > 0 ? u + (3 - u) * std::exp(-k * t) : 3 - kG * t;
+        worst = std::max(worst, std::abs(v[1] - rate));
       }
     }
     return worst;
   };
-  CHECK(run(0, 0.1) < 1e-13);
-  const double coarse = run(0.8, 0.1), fine = run(0.8, 0.05);
+  CHECK(run(0, 0.1, rk4) < 1e-13);
+  const double coarse = run(0.8, 0.1, rk4), fine = run(0.8, 0.05, rk4);
   INFO("errors " << coarse << " " << fine);
   CHECK(coarse < 1e-5);
   CHECK(coarse / fine == Approx(16).epsilon(0.4));
+  // dopri5: its own interpolant, of the method's fifth order over the run; the Hermite of
+  // the same steps would be of order 4.
+  CHECK(run(0, 0.1, dopri5) < 1e-13);
+  const double own_coarse = run(0.8, 0.2, dopri5), own_fine = run(0.8, 0.1, dopri5);
+  INFO("dopri5 errors " << own_coarse << " " << own_fine);
+  CHECK(std::log2(own_coarse / own_fine) == Approx(5).margin(0.5));
+  CHECK(own_fine < coarse / 20);  // far below the Hermite's at the same step
   DenseOutput<double> unused;
   double x = 0, *p[3] = {&x, &x, &x};
   CHECK_THROWS_AS(unused.state_at(0, p, p), Error);
