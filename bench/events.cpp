@@ -1,10 +1,12 @@
 // What events cost (kinema/events.hpp): 100k bodies falling from rest onto a plane under
 // gravity, one rk4 step per call (a frame's), without events, with the floor as an event,
-// and with four (the floor, a distance, a speed and a user function). The heights spread
+// and with four (the floor, a distance, a speed and a user function); and dopri5 (the staged
+// path) without events and with the floor. The heights spread
 // over 0.5 .. 500 m, so a few bodies in a thousand cross per step; the set is put back
 // every 4 simulated seconds. Same bodies, same run, 1 thread at the best ISA.
 #include <benchmark/benchmark.h>
 
+#include <functional>
 #include <string>
 
 #include "bench_scene.hpp"
@@ -45,13 +47,13 @@ EventOptions<T> watched(Watch w) {
 }
 
 template <class T>
-void falling_step(benchmark::State& state, Watch w) {
+void falling_step(benchmark::State& state, Watch w, const Method& method) {
   const auto n = std::size_t(state.range(0));
   const ParticleSet<T>& initial = falling_bodies<T>(n);
   ParticleSet<T> bodies = initial;
   ForceModel<T> gravity;
   gravity.add(Gravity{{0, kGravity, 0}});
-  Stepper<T> stepper(gravity, rk4, on_calling_thread());
+  Stepper<T> stepper(gravity, method, on_calling_thread());
   stepper.set_events(watched<T>(w));
   stepper.step(bodies, T(kDt));
   std::int64_t k = 0;
@@ -67,17 +69,23 @@ void falling_step(benchmark::State& state, Watch w) {
   state.counters["hits_per_step"] = hits / double(state.iterations());
 }
 
+// rk4 on the fused path (off, floor, four); dopri5 on the staged path (dopri5-off,
+// dopri5-floor), where each step keeps its start and is scanned whole.
 void register_all() {
   const std::string isa(isa_name(best_isa()));
-  for (const auto& [name, w] : {std::pair{"off", Watch::none}, std::pair{"floor", Watch::floor},
-                                std::pair{"four", Watch::four}}) {
-    for (auto* b : {benchmark::RegisterBenchmark(("events/float/" + std::string(name) + "/" + isa).c_str(),
-                                                 falling_step<float>, w),
-                    benchmark::RegisterBenchmark(("events/double/" + std::string(name) + "/" + isa).c_str(),
-                                                 falling_step<double>, w)}) {
+  const auto add = [&](const std::string& name, Watch w, const Method& method) {
+    for (auto* b : {benchmark::RegisterBenchmark(("events/float/" + name + "/" + isa).c_str(), falling_step<float>,
+                                                 w, std::cref(method)),
+                    benchmark::RegisterBenchmark(("events/double/" + name + "/" + isa).c_str(), falling_step<double>,
+                                                 w, std::cref(method))}) {
       b->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
     }
-  }
+  };
+  add("off", Watch::none, rk4);
+  add("floor", Watch::floor, rk4);
+  add("four", Watch::four, rk4);
+  add("dopri5-off", Watch::none, dopri5);
+  add("dopri5-floor", Watch::floor, dopri5);
 }
 
 const int registered = (register_all(), 0);

@@ -52,11 +52,18 @@ void print_events_row(const Results& results, Noise& noise, const std::string& p
   // The step's own traffic (7 arrays read, 6 written) at this size's state-stream speed.
   const auto s = state_stream(results, p, 100000, 1);
   const double step_ns = s ? 13.0 * value_bytes(p) / s->median : 0;
-  std::printf("%-6s off %.3f | floor %s (%s) | four %s (%s) | %s hits per step | the step's traffic %s\n",
+  const auto staged_off = results.find("events/" + p + "/dopri5-off" + at, "ns_per_body_step");
+  const auto staged_floor = results.find("events/" + p + "/dopri5-floor" + at, "ns_per_body_step");
+  for (const auto& r : {staged_off, staged_floor}) {
+    if (r) noise.add(r->cv);
+  }
+  std::printf("%-6s off %.3f | floor %s (%s) | four %s (%s) | %s hits per step | the step's traffic %s"
+              " | dopri5 (staged) off %s, floor %s (%s)\n",
               p.c_str(), off->median, cell(median(floor), "%.3f").c_str(), cell(ratio(floor, off), "%.2fx").c_str(),
               cell(median(four), "%.3f").c_str(), cell(ratio(four, off), "%.2fx").c_str(),
               results.value("events/" + p + "/floor" + at, "hits_per_step", "%.0f").c_str(),
-              step_ns > 0 ? cell(step_ns, "%.3f").c_str() : "-");
+              step_ns > 0 ? cell(step_ns, "%.3f").c_str() : "-", cell(median(staged_off), "%.3f").c_str(),
+              cell(median(staged_floor), "%.3f").c_str(), cell(ratio(staged_floor, staged_off), "%.2fx").c_str());
 }
 
 void print_adaptive_row(const Results& results, Noise& noise, const std::string& p) {
@@ -119,7 +126,8 @@ void print_guard_table(const Results& results, Noise& noise) {
 void print_events_table(const Results& results, Noise& noise) {
   if (!results.find("events/float/off/" + results.isa() + "/100000/real_time", "ns_per_body_step")) return;
   std::printf("\nEvents, 100k bodies falling onto a plane, one rk4 step per call, 1 thread, %s: ns per body-step "
-              "(times no events); floor: one plane event, four: plane, distance, speed and a user function\n",
+              "(times no events); floor: one plane event, four: plane, distance, speed and a user function; "
+              "dopri5 takes the staged path\n",
               results.isa().c_str());
   for (const std::string p : {"float", "double"}) print_events_row(results, noise, p);
 }

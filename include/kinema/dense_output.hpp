@@ -11,6 +11,7 @@
 // (kinema/events.hpp) are located on these.
 
 #include <array>
+#include <cmath>
 #include <algorithm>
 #include <cstddef>
 #include <initializer_list>
@@ -204,6 +205,78 @@ class DenseOutput {
   double t0_ = 0, t1_ = 0;
   std::size_t size_ = 0;
   bool ended_ = false, own_ = false;
+};
+
+// Dense output of rigid bodies: each of the 13 state components (centre x, v; orientation q;
+// angular momentum L) on the cubic Hermite of its values and rates (Stepper::rates) at both
+// ends, the orientation normalized after (a unit quaternion at every t; the Hermite's error
+// is O(h^4) before and after). Used as DenseOutput is; every method gets the Hermite.
+template <class T>
+class RigidDenseOutput {
+ public:
+  static constexpr int kComponents = 13;
+  void begin(Stepper<T>& stepper, const RigidBodySet<T>& bodies) {
+    t0_ = stepper.time();
+    keep(stepper, bodies, start_);
+    ended_ = false;
+  }
+  void end(Stepper<T>& stepper, const RigidBodySet<T>& bodies) {
+    if (start_.y[0].size() != bodies.padded_size()) {
+      throw Error("RigidDenseOutput::end: call begin on the same set first");
+    }
+    t1_ = stepper.time();
+    keep(stepper, bodies, end_);
+    ended_ = true;
+  }
+  double start_time() const { return t0_; }
+  double end_time() const { return t1_; }
+  // Every body at time t: x, v, L into three arrays each, q into four (w x y z), the set's
+  // size each.
+  void state_at(double t, T* const x[3], T* const v[3], T* const q[4], T* const l[3]) const {
+    if (!ended_ || !(t >= t0_ && t <= t1_)) {
+      throw Error("RigidDenseOutput: t must lie inside the last step, after end()");
+    }
+    const double theta = t1_ > t0_ ? (t - t0_) / (t1_ - t0_) : 1, h = t1_ - t0_;
+    const HermiteWeights w = HermiteWeights::at(theta);
+    T* const out[kComponents] = {x[0], x[1], x[2], v[0], v[1], v[2], q[0], q[1], q[2], q[3], l[0], l[1], l[2]};
+    for (std::size_t i = 0; i < size_; ++i) {
+      double y[kComponents];
+      for (int c = 0; c < kComponents; ++c) {
+        y[c] = w.of(start_.y[c][i], start_.rate[c][i], end_.y[c][i], end_.rate[c][i], h);
+      }
+      const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
+      for (int c = 6; c < 10; ++c) y[c] /= norm;
+      for (int c = 0; c < kComponents; ++c) out[c][i] = T(y[c]);
+    }
+  }
+
+ private:
+  struct End {
+    std::array<AlignedArray<T>, kComponents> y, rate;
+  };
+  void keep(Stepper<T>& stepper, const RigidBodySet<T>& bodies, End& end) {
+    const std::size_t n = bodies.padded_size();
+    for (auto* arrays : {&end.y, &end.rate}) {
+      for (auto& a : *arrays) {
+        if (a.size() != n) a = AlignedArray<T>(n);
+      }
+    }
+    const ParticleSet<T>& c = bodies.centers();
+    const T* const y[kComponents] = {c.px(), c.py(), c.pz(), c.vx(), c.vy(), c.vz(), bodies.q(0),
+                                     bodies.q(1), bodies.q(2), bodies.q(3), bodies.l(0), bodies.l(1), bodies.l(2)};
+    T* rate[kComponents];
+    for (int k = 0; k < kComponents; ++k) {
+      std::copy(y[k], y[k] + n, end.y[k].data());
+      rate[k] = end.rate[k].data();
+    }
+    stepper.rates(bodies, stepper.time(), rate);
+    size_ = bodies.size();
+  }
+
+  End start_, end_;
+  double t0_ = 0, t1_ = 0;
+  std::size_t size_ = 0;
+  bool ended_ = false;
 };
 
 }  // namespace kinema

@@ -5,10 +5,13 @@
 // Each event is a value of one body's state whose sign change counts: n . x - offset for a
 // plane, |x - point| - radius for a distance, |v| - speed for a speed, or a user function.
 // After every step (Stepper::step, Stepper::advance) each body's value at both ends of the
-// step is compared; a body whose value changed sign the way the event asks is handed to a
-// bracketing root finder on the step's dense output (kinema/dense_output.hpp: the cubic
-// Hermite of both ends' positions, velocities and accelerations), which finds the time to
-// `time_tolerance`. The hit records the time, the body, the event and the state there.
+// step is compared (by the fused kernels themselves for up to four built-in events); a body
+// whose value changed sign the way the event asks is handed to a bracketing root finder on
+// the step's dense output (kinema/dense_output.hpp: the cubic Hermite of both ends'
+// positions, velocities and accelerations, with dopri5's own term after a dopri5 step),
+// which finds the time to `time_tolerance`. The hit records the time, the body, the event and
+// the state there. Events are watched on particle sets whose model has built-in local terms
+// only, under any method (fixed steps: not advance_to).
 //
 // - A value that reaches zero exactly at a step's end counts in that step (its sign at the
 //   next step's start is zero, neither above nor below): each crossing is found once.

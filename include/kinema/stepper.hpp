@@ -173,6 +173,10 @@ class Stepper {
   // bodies at time t, into out[0..2] (padded_size() each). Not for the inside of a frame:
   // the first call allocates what it needs.
   void accelerations(const ParticleSet<T>& bodies, double t, T* const out[3]);
+  // The rates of rigid bodies' 13 state components at time t, into out[0..12] (padded_size()
+  // each): x' = v (0..2), v' = force / mass (3..5), q' = (0, omega) q / 2 (6..9, w x y z),
+  // L' = torque (10..12). Not for the inside of a frame: the first call allocates.
+  void rates(const RigidBodySet<T>& bodies, double t, T* const out[13]);
   // A hint for a frame loop, called before step() or advance(): when the stepper's next call
   // of the kind it last made is to use workers, the job system is asked to wake them now
   // (JobSystem::wake), so that they may be awake when the call comes. Otherwise nothing

@@ -267,6 +267,11 @@ void Stepper<T>::accelerations(const ParticleSet<T>& bodies, double t, T* const 
 }
 
 template <class T>
+void Stepper<T>::rates(const RigidBodySet<T>& bodies, double t, T* const out[13]) {
+  impl_->rigid_rates(bodies, t, out);
+}
+
+template <class T>
 void Stepper<T>::prepare() {
   impl_->workers.prepare();
 }

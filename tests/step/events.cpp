@@ -441,3 +441,46 @@ TEST_CASE("a throwing event function leaves the set and the clock as before the 
   CHECK(s.time() == 0);
   CHECK(s.event_hits().empty());
 }
+
+TEST_CASE("rigid dense output: a spinning body's orientation to rk4's order and of unit length, its centre exact",
+          "[events][dense]") {
+  // Free spin about the principal z axis at omega: q(t) = (cos(omega t / 2), 0, 0, sin(omega t / 2));
+  // the centre falls under gravity (a parabola, on which the Hermite is exact).
+  const double omega = 2;
+  const auto run = [&](double h) {
+    Stepper<double> s(falling(), rk4, test::serial_options());
+    RigidBodySet<double> b;
+    b.add({{0, 10, 0}, {1, 3, 0}, {1, 0, 0, 0}, {0, 0, omega * 0.5}, 2, {0.3, 0.4, 0.5}});
+    RigidDenseOutput<double> dense;
+    double worst_angle = 0, worst_centre = 0, worst_norm = 0;
+    for (int step = 0; step < int(std::llround(1 / h)); ++step) {
+      dense.begin(s, b);
+      s.step(b, h);
+      dense.end(s, b);
+      for (double theta : {0.25, 0.5, 0.8}) {
+        const double t = dense.start_time() + theta * h;
+        double x[3], v[3], q[4], l[3];
+        double* xp[3] = {&x[0], &x[1], &x[2]};
+        double* vp[3] = {&v[0], &v[1], &v[2]};
+        double* qp[4] = {&q[0], &q[1], &q[2], &q[3]};
+        double* lp[3] = {&l[0], &l[1], &l[2]};
+        dense.state_at(t, xp, vp, qp, lp);
+        worst_angle = std::max({worst_angle, std::abs(q[0] - std::cos(omega * t / 2)),
+                                std::abs(q[3] - std::sin(omega * t / 2)), std::abs(q[1]), std::abs(q[2])});
+        worst_norm = std::max(worst_norm, std::abs(std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) - 1));
+        worst_centre = std::max({worst_centre, std::abs(x[0] - t), std::abs(x[1] - (10 + 3 * t - kG * t * t / 2)),
+                                 std::abs(v[1] - (3 - kG * t)), std::abs(l[2] - omega * 0.5)});
+      }
+    }
+    return std::array<double, 3>{worst_angle, worst_centre, worst_norm};
+  };
+  const auto coarse = run(0.1), fine = run(0.05);
+  INFO("orientation errors " << coarse[0] << " " << fine[0]);
+  CHECK(std::log2(coarse[0] / fine[0]) == Approx(4).margin(0.5));
+  CHECK(coarse[0] < 1e-5);
+  CHECK(coarse[1] < 1e-12);
+  CHECK(coarse[2] < 1e-15);
+  RigidDenseOutput<double> unused;
+  double z = 0, *p[4] = {&z, &z, &z, &z};
+  CHECK_THROWS_AS(unused.state_at(0, p, p, p, p), Error);
+}

@@ -341,7 +341,7 @@ void check_events(const Scene& scene, const RunOptions& o) {
   if (scene.events.empty()) return;
   if (scene.rtol || scene.atol) throw Error(o.scene_path + ": events are watched on fixed steps: drop rtol and atol");
   if (scene.nbody || !scene.springs.empty()) {
-    throw Error(o.scene_path + ": events are watched on the fused path: a scene with nbody or springs cannot have them");
+    throw Error(o.scene_path + ": events are watched with local terms only: a scene with nbody or springs cannot have them");
   }
   if (!o.trajectory_path.empty()) {
     check_distinct({{"the scene", o.scene_path}, {"--out", o.trajectory_path}, {"--summary", o.summary_path},
