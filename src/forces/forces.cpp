@@ -220,6 +220,7 @@ std::uint64_t ForceModel<T>::fingerprint() const {
   for (const std::size_t count : {callbacks_.size(), rigid_callbacks_.size(), coupled_.size()}) fnv.add(std::uint64_t(count));
   fnv.add(bool(nbody_));
   if (nbody_) fnv.add(nbody_->G), fnv.add(nbody_->softening);
+  if (nbody_ && nbody_->fast) fnv.add(std::uint64_t(1));  // exact models keep their older value
   fnv.add(std::uint64_t(springs_.size()));
   for (const SpringPair& p : springs_) fnv.add(p.i), fnv.add(p.j), fnv.add(p.rest), fnv.add(p.k), fnv.add(p.damping);
   if (body_springs_.empty()) return fnv.value();  // the models before body springs keep their value

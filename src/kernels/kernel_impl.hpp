@@ -315,15 +315,8 @@ StateSource<T> source_of(const FusedJob<T>& job) {
   return with_probe<T>({{s[0], s[1], s[2]}, {s[3], s[4], s[5]}}, job);
 }
 
-// The one-plane probe's value (EventTest's axis_plane value) of the bodies at i of its array,
-// before the batch's store.
-template <class V>
-KINEMA_INLINE V axis_start(const StateSource<value_t<V>>& in, std::size_t i) {
-  if (in.axis_in == nullptr) return V(0);
-  return V(in.axis_a) * load<V>(in.axis_in + i) - V(in.axis_b);
-}
-// And of positions x: the axis picked by selects (loop-invariant masks), not by an index,
-// which would send the registers to memory.
+// The one-plane probe's value (EventTest's axis_plane value) of positions x: the axis picked
+// by selects (loop-invariant masks), not by an index, which would send the registers to memory.
 template <class V>
 KINEMA_INLINE V axis_value(const StateSource<value_t<V>>& in, const Vec<V>& x) {
   using T = value_t<V>;
@@ -333,10 +326,10 @@ KINEMA_INLINE V axis_value(const StateSource<value_t<V>>& in, const Vec<V>& x) {
 
 // After a batch's store: the state it started from (x0, v0), where the job asks for it (a
 // branch the batches all take the same way); with a probe, only where a body may have crossed
-// an event on its way to (x1, v1). `start`: the one-plane probe's value before the store.
+// an event on its way to (x1, v1).
 template <class V>
 KINEMA_INLINE void keep_before(const StateSource<value_t<V>>& in, std::size_t i, const Vec<V>& x0, const Vec<V>& v0,
-                               const Vec<V>& x1, const Vec<V>& v1, const V& start) {
+                               const Vec<V>& x1, const Vec<V>& v1) {
   if (in.before == nullptr) return;
   if (in.axis_in != nullptr) {
     if (!any_lane(axis_value<V>(in, x0) * axis_value<V>(in, x1) <= V(0))) return;  // probe_crossed's test
@@ -388,10 +381,9 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Stat
     kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
   });
   const Vec<V> x1 = advanced<tab.b>(h, kx, x), v1 = advanced<tab.b, sigma>(h, kv, v);
-  const V start = axis_start<V>(in, i);
   store3(b.x, i, x1);
   store3(b.v, i, v1);
-  keep_before<V>(in, i, x, v, x1, v1, start);
+  keep_before<V>(in, i, x, v, x1, v1);
 }
 
 // In place (rigid bodies' centres).
@@ -432,7 +424,6 @@ KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateS
   for (int k = 0; k < scheme.count; ++k) wh[k] = V(T(scheme.ops[k].weight) * h);
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const Vec<V> x0 = load3<V>(in.x, i), v0 = load3<V>(in.v, i);
-    const V start = axis_start<V>(in, i);
     Vec<V> x = x0, v = v0;
     const auto body = body_terms_at<reads_applied<Variant>>(f, load<V>(b.inv_mass + i), b.per_body, i);
     static_for<scheme.count>([&](auto k) {
@@ -444,7 +435,7 @@ KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateS
     });
     store3(b.x, i, x);
     store3(b.v, i, v);
-    keep_before<V>(in, i, x0, v0, x, v, start);
+    keep_before<V>(in, i, x0, v0, x, v);
   }
 }
 

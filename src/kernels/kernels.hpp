@@ -318,6 +318,7 @@ struct NBodyJob {
   T eps2;               // softening squared
   T scale_G;            // stage acceleration scale times G
   T* acc[3];
+  bool fast;            // float: the fast inverse cube (coupled_kernels.hpp), not exact
 };
 template <class T>
 using NBodyFn = void (*)(const NBodyJob<T>& job, std::size_t begin, std::size_t end);

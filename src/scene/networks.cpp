@@ -192,11 +192,12 @@ void parse_coupled_force(const Node& n, const std::string& type, Scene& scene) {
     return;
   }
   if (type == "body_springs") return parse_body_springs(n, scene);
-  n.expect_object({"type", "G", "softening"});
+  n.expect_object({"type", "G", "softening", "fast"});
   if (scene.nbody) n.fail("at most one nbody term per scene");
   NBody term;
   if (n.has("G")) term.G = n.child("G").non_negative();
   if (n.has("softening")) term.softening = n.child("softening").non_negative();
+  if (n.has("fast")) term.fast = n.child("fast").boolean();
   scene.nbody = term;
 }
 

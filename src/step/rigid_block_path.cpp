@@ -186,6 +186,7 @@ void RigidBlockPath<T>::rates(const kernels::RigidBlockJob<T>& j, Block b, doubl
     g.sources = padded_;
     g.eps2 = lowered_.coupled.eps2;
     g.scale_G = T(nbody->G);
+    g.fast = nbody->fast;
     table_.nbody(g, b.begin, b.end);
   }
 }

@@ -352,6 +352,7 @@ void StagedPath<T>::add_gravity(const StepContext<T>& c, int s, Block b) {
   job.sources = c.bodies.padded_size();
   job.eps2 = coupled_.eps2;
   job.scale_G = c.accel_scale * T(coupled_.nbody->G);
+  job.fast = coupled_.nbody->fast;
   table_.nbody(job, b.begin, b.end);
 }
 

@@ -1,5 +1,6 @@
-// N-body gravity: the kernel against a plain loop, the two-body Kepler orbit, conservation
-// of momentum, rk4's order on the energy error, and bit-identical results everywhere.
+// N-body gravity: the kernel against a plain loop, the fast variant's error, the two-body
+// Kepler orbit, conservation of momentum, rk4's order on the energy error, and bit-identical
+// results everywhere.
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -34,11 +35,11 @@ ParticleSet<T> cluster(std::size_t n, bool kinematic = false, std::uint64_t seed
 
 // The kernel's sums over a whole set, block by block, with stage scale 1.
 template <class T>
-std::vector<T> kernel_sums(const ParticleSet<T>& b, Isa isa, T G, T eps2) {
+std::vector<T> kernel_sums(const ParticleSet<T>& b, Isa isa, T G, T eps2, bool fast = false) {
   const std::size_t n = b.padded_size();
   AlignedArray<T> acc(3 * n);  // the kernels' stores are aligned
   kernels::NBodyJob<T> job{{b.px(), b.py(), b.pz()}, b.inv_mass(), n, eps2, G,
-                           {acc.data(), acc.data() + n, acc.data() + 2 * n}};
+                           {acc.data(), acc.data() + n, acc.data() + 2 * n}, fast};
   const auto& table = kernels::kernel_table<T>(isa);
   for (std::size_t begin = 0; begin < n; begin += kBlockBodies) {
     table.nbody(job, begin, std::min(n, begin + kBlockBodies));
@@ -243,6 +244,92 @@ TEST_CASE("nbody: the same bits on every instruction set, thread count and job s
   check_nbody_determinism<double>();
 }
 
+namespace {
+
+// The pull of one source on one target, as the kernel sums it and as a long double.
+struct Pull {
+  double got, exact;
+};
+
+// A target at the origin and a source at distance r along a random direction, mass m.
+Pull one_pull(Isa isa, std::mt19937_64& rng, double eps, bool fast) {
+  std::uniform_real_distribution<double> unit(-1, 1), decade(-3, 3);
+  const double r = std::pow(10.0, decade(rng)), m = std::pow(10.0, decade(rng));
+  double dir[3] = {unit(rng), unit(rng), unit(rng)};
+  const double norm = std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+  ParticleSet<float> b;
+  b.add({0, 0, 0}, {0, 0, 0}, 1);
+  b.add({float(r * dir[0] / norm), float(r * dir[1] / norm), float(r * dir[2] / norm)}, {0, 0, 0}, float(m));
+  const float eps2 = float(eps) * float(eps);
+  const std::vector<float> sums = kernel_sums(b, isa, 1.0f, eps2, fast);
+  const long double dx = b.px()[1], dy = b.py()[1], dz = b.pz()[1], mass = 1.0L / b.inv_mass()[1];
+  const long double r2 = dx * dx + dy * dy + dz * dz + (long double)eps2;
+  return {double(sums[0]), double(mass * dx / (r2 * std::sqrt(r2)))};
+}
+
+// The worst relative error of one pull over random distances from 1e-3 to 1e3, masses from
+// 1e-3 to 1e3 and softenings from 0 to the distance scale.
+double worst_pull_error(Isa isa, bool fast) {
+  std::mt19937_64 rng(17);
+  double worst = 0;
+  for (int k = 0; k < 4000; ++k) {
+    const Pull p = one_pull(isa, rng, k % 4 == 0 ? 0.0 : std::pow(10.0, k % 7 - 3), fast);
+    worst = std::max(worst, std::abs(p.got - p.exact) / std::abs(p.exact));
+  }
+  return worst;
+}
+
+}  // namespace
+
+TEST_CASE("nbody fast: each pull within the stated error of the exact one, on every instruction set", "[nbody]") {
+  for (Isa isa : {Isa::scalar, Isa::sse2, Isa::avx2, Isa::avx512}) {
+    if (!isa_available(isa)) continue;
+    INFO("isa " << isa_name(isa));
+    const double exact = worst_pull_error(isa, false), fast = worst_pull_error(isa, true);
+    INFO("exact " << exact << ", fast " << fast);
+    CHECK(exact < 5e-7);  // about nine float roundings at most
+    // The bounds in forces.hpp: 1e-6 where the start has 14 bits or more, 2e-6 with 12. The
+    // start alone, uncorrected, would be off by up to 1.8e-4 and 1.1e-3.
+    CHECK(fast < (isa == Isa::sse2 || isa == Isa::avx2 ? 2e-6 : 1e-6));
+  }
+}
+
+TEST_CASE("nbody fast: a cluster's accelerations stay near the exact ones; the same bits on every thread count",
+          "[nbody][determinism]") {
+  const ParticleSet<float> b = cluster<float>(1500, true);
+  const std::vector<float> exact = kernel_sums(b, test::test_isa(), 1.0f, 1e-4f);
+  const std::vector<float> fast = kernel_sums(b, test::test_isa(), 1.0f, 1e-4f, true);
+  const std::size_t n = b.padded_size();
+  double worst = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const double a = std::hypot(exact[i], exact[n + i], exact[2 * n + i]);
+    for (int k = 0; k < 3; ++k) worst = std::max(worst, std::abs(double(fast[k * n + i]) - exact[k * n + i]) / a);
+  }
+  INFO("worst difference relative to |a| " << worst);
+  CHECK(worst > 0);
+  CHECK(worst < 1e-4);
+  ForceModel<float> f = test::all_local_terms<float>();
+  f.add(NBody{0.5, 0.05, true});
+  auto hash = [&](StepperOptions o) {
+    ParticleSet<float> run = cluster<float>(2100, true);
+    Stepper<float> s(f, rk4, o);
+    s.step(run, 1e-3f);
+    REQUIRE(all_finite(run));
+    return test::state_hash(run);
+  };
+  const std::uint64_t serial = hash(test::serial_options(best_isa()));
+  for (unsigned threads : {2u, 3u}) {
+    TbbJobSystem tbb(threads);
+    test::ThreadPool pool(threads);
+    StepperOptions o;
+    o.inline_below = 0;
+    o.jobs = &tbb;
+    CHECK(hash(o) == serial);
+    o.jobs = &pool;
+    CHECK(hash(o) == serial);
+  }
+}
+
 TEST_CASE("nbody: with G = 0 the local terms give the fused path's positions", "[nbody]") {
   for (const Method* m : builtin_methods) {
     INFO("method " << m->name);
@@ -271,14 +358,17 @@ TEST_CASE("nbody: a body's own term and massless neighbours never make NaN", "[n
   b.add({1e-20f, 0, 0}, {0, 0, 0}, 1);
   b.add_kinematic({1, 0.5f + 1e-9f, 0});
   b.add({1, 0.5f, 0}, {0, 0, 0}, 1);
-  ForceModel<float> f;
-  f.add(NBody{1, 1e-12});
-  for (const Method* m : {&euler, &rk4}) {
-    ParticleSet<float> run = b;
-    Stepper<float> s(f, *m, test::serial_options());
-    s.step(run, 1e-6f);
-    CHECK(all_finite(run));
-    CHECK(run.vx()[1] < 0);  // the two heavy bodies pull on each other
-    CHECK(run.vx()[0] > 0);
+  for (const bool fast : {false, true}) {
+    ForceModel<float> f;
+    f.add(NBody{1, 1e-12, fast});
+    for (const Method* m : {&euler, &rk4}) {
+      INFO((fast ? "fast " : "exact ") << m->name);
+      ParticleSet<float> run = b;
+      Stepper<float> s(f, *m, test::serial_options());
+      s.step(run, 1e-6f);
+      CHECK(all_finite(run));
+      CHECK(run.vx()[1] < 0);  // the two heavy bodies pull on each other
+      CHECK(run.vx()[0] > 0);
+    }
   }
 }

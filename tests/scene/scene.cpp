@@ -157,7 +157,7 @@ TEST_CASE("rigid body scene errors name the JSON path", "[scene][rigid][errors]"
 
 TEST_CASE("coupled terms in scenes: nbody, spring pairs, chain and grid generators", "[scene][springs]") {
   const Scene s = parse_scene(R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0]}],
-      "forces": [{"type": "nbody", "G": 2, "softening": 0.5},
+      "forces": [{"type": "nbody", "G": 2, "softening": 0.5, "fast": true},
                  {"type": "springs", "pairs": [[0, 1, 1.5, 10, 0.25]]},
                  {"type": "springs", "chain": {"count": 3, "spacing": 0.5, "k": 4, "direction": [2, 0, 0]}},
                  {"type": "springs", "grid": {"rows": 2, "columns": 3, "spacing": 1, "k": 7, "shear_k": 5,
@@ -165,6 +165,7 @@ TEST_CASE("coupled terms in scenes: nbody, spring pairs, chain and grid generato
   REQUIRE(s.nbody);
   CHECK(s.nbody->G == 2);
   CHECK(s.nbody->softening == 0.5);
+  CHECK(s.nbody->fast);
   REQUIRE(s.springs.size() == 3);
   CHECK(s.springs[0].pairs[0].rest == 1.5);
   CHECK(s.springs[0].pairs[0].damping == 0.25);
@@ -212,6 +213,7 @@ TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") 
       {two + R"({"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1, "direction": [0, 0, 0]}}]})",
        "scene: forces[0].chain.direction: expected a nonzero direction"},
       {two + R"({"type": "nbody", "G": -1}]})", "scene: forces[0].G: expected a number >= 0"},
+      {two + R"({"type": "nbody", "fast": 1}]})", "scene: forces[0].fast: expected true or false"},
       {two + R"({"type": "nbody"}, {"type": "nbody"}]})", "scene: forces[1]: at most one nbody term"},
       {R"({"rigid_bodies": [{"position": [0,0,0]}], "particles": [{"position": [0,0,0]}], "forces": [{"type": "nbody"}]})",
        "scene: forces[0]: nbody acts among bodies of one kind; the scene has particles and rigid bodies"},
