@@ -42,6 +42,7 @@ struct EventTest {
   }
   // The value of the bodies at i of the arrays s (px .. vz); only the arrays it needs are read.
   KINEMA_INLINE V value(const value_t<V>* const s[6], std::size_t i) const {
+    if constexpr (K == EventValue::given) return load<V>(s[0] + i);
     V x[3], v[3];
     for (int c = 0; c < 3; ++c) {
       const bool reads_x = K == EventValue::plane || K == EventValue::distance || (K == EventValue::axis_plane && c == axis);

@@ -56,6 +56,7 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.event_scan[int(EventValue::distance)] = &event_scan<EventValue::distance, V>;
   t.event_scan[int(EventValue::speed)] = &event_scan<EventValue::speed, V>;
   t.event_scan[int(EventValue::axis_plane)] = &event_scan<EventValue::axis_plane, V>;
+  t.event_scan[int(EventValue::given)] = &event_scan<EventValue::given, V>;
   return t;
 }
 

@@ -380,14 +380,15 @@ constexpr int fused_variant(const LocalForces<T>& f, bool applied) {
 }
 
 // Events (kinema/events.hpp): which bodies' event values changed sign over one step.
-enum class EventValue { plane, distance, speed, axis_plane };
-inline constexpr int kEventValues = 4;
+enum class EventValue { plane, distance, speed, axis_plane, given };
+inline constexpr int kEventValues = 5;
 template <class T>
 struct EventScanJob {
   const T* before[6];  // px .. vz at the step's start, from the first body scanned
   const T* after[6];   // and at its end
   // plane: a . x - b; distance: |x - a|^2 - b (b the radius squared); speed: |v|^2 - b;
-  // axis_plane (a plane whose normal is along an axis): a[axis] x[axis] - b, one array read
+  // axis_plane (a plane whose normal is along an axis): a[axis] x[axis] - b, one array read;
+  // given: the values themselves, in before[0] and after[0] (a user's event function's)
   EventValue value = EventValue::plane;
   T a[3];
   T b;

@@ -88,10 +88,6 @@ struct Curve {
   double slope(double t) const { return c1 + t * (2 * c2 + t * (3 * c3 + t * (4 * c4))); }
 };
 
-template <class T>
-bool counts(const kernels::EventScanJob<T>& job, T g0, T g1) {
-  return (job.down && g0 > 0 && g1 <= 0) || (job.up && g0 < 0 && g1 >= 0);
-}
 
 }  // namespace
 
@@ -226,14 +222,18 @@ std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const Sli
   const auto view = [&](const T* const s[6], double t) {
     return EventBlock<T>{slice.first, real, t, s[0], s[1], s[2], s[3], s[4], s[5]};
   };
-  T g0[kEventSliceBodies<T>], g1[kEventSliceBodies<T>];
+  // The values, then the kernels' test on them: whole SIMD batches, zeros past the real
+  // bodies (a zero never counts as a crossing from zero).
+  alignas(64) T g0[kEventSliceBodies<T>], g1[kEventSliceBodies<T>];
   (*fn)(view(slice.before, t0), g0);
   (*fn)(view(slice.after, t0 + h), g1);
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < real; ++i) {
-    if (counts(test, g0[i], g1[i])) found[n++] = std::uint32_t(i);
-  }
-  return n;
+  const std::size_t batched = (real + call.table->width - 1) / call.table->width * call.table->width;
+  std::fill(g0 + real, g0 + batched, T(0));
+  std::fill(g1 + real, g1 + batched, T(0));
+  kernels::EventScanJob<T> given = test;
+  given.value = kernels::EventValue::given;
+  given.before[0] = g0, given.after[0] = g1;
+  return call.table->event_scan[int(kernels::EventValue::given)](given, batched, found);
 }
 
 namespace {
