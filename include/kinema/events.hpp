@@ -11,7 +11,7 @@
 // positions, velocities and accelerations, with dopri5's own term after a dopri5 step),
 // which finds the time to `time_tolerance`. The hit records the time, the body, the event and
 // the state there. Events are watched on particle sets whose model has built-in local terms
-// only, under any method (fixed steps: not advance_to).
+// only, under any method, by step(), advance() and advance_to() (each accepted step).
 //
 // - A value that reaches zero exactly at a step's end counts in that step (its sign at the
 //   next step's start is zero, neither above nor below): each crossing is found once.

@@ -195,15 +195,17 @@ class Stepper {
   // system. A model of local terms keeps the fused path. The clock goes on.
   void set_forces(ForceModel<T> forces);
 
-  // Events (kinema/events.hpp) watched by every later step() and advance() on a particle
-  // set, on the fused path (built-in local terms and method): the sign test runs per slice
-  // of bodies while it is in cache, only the bodies that crossed are located. A call that
-  // cannot watch them (rigid bodies, a model on another path, advance_to) throws
-  // kinema::Error before any body moves. An empty list watches nothing. Throws
-  // kinema::Error for an invalid event (its index and field named).
+  // Events (kinema/events.hpp) watched by every later step(), advance() and advance_to()
+  // on a particle set whose model has built-in local terms only (any method): on the fused
+  // path the kernels run the sign test themselves, elsewhere each step is scanned; only the
+  // bodies that crossed are located. A call that cannot watch them (rigid bodies, a model
+  // with callbacks or coupled terms) throws kinema::Error before any body moves. Under
+  // advance_to a stop event ends the call at the event (the set and time() there), and a
+  // throwing event function takes back the step it scanned. An empty list watches nothing.
+  // Throws kinema::Error for an invalid event (its index and field named).
   void set_events(EventOptions<T> events);
-  // The hits of the last step() or advance() call, ordered by time, body and event (the list
-  // grows as hits are found: a call with hits may allocate).
+  // The hits of the last step(), advance() or advance_to() call, ordered by time, body and
+  // event (the list grows as hits are found: a call with hits may allocate).
   const std::vector<EventHit<T>>& event_hits() const;
   // Whether the last call ended at a stop event: the set and time() are at its time.
   bool stopped_at_event() const;

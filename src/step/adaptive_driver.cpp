@@ -45,8 +45,9 @@ void count_accepted(AdaptiveStats& stats, double size) {
 template <class T>
 class AdaptiveRun {
  public:
-  AdaptiveRun(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies, const Tolerances& tolerances)
-      : core_(core), staged_(*core.paths.staged), workers_(workers), bodies_(bodies), tol_(tolerances) {}
+  AdaptiveRun(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies, const Tolerances& tolerances,
+              const AdaptiveEvents<T>& events)
+      : core_(core), staged_(*core.paths.staged), workers_(workers), bodies_(bodies), tol_(tolerances), events_(events) {}
 
   AdaptiveStats to(double t_end, double max_step, AdaptiveContinuation& continuation, const CallStops& stops) {
     staged_.reserve(bodies_.padded_size());
@@ -87,7 +88,9 @@ class AdaptiveRun {
       stats_.evaluations += std::uint64_t(method.tableau.stages - (kept_scale_ > 0 ? 1 : 0));
       const bool accepted = err <= 1;
       if (accepted) {
+        const Clock<T> start = core_.clock;
         accept(size, last, t_end, c);
+        if (events_.watch && stops_at_event(c, start)) break;
         t = core_.clock.time();
       } else {
         reject(c);
@@ -124,6 +127,36 @@ class AdaptiveRun {
   // this attempt's scale: it stays kept at that scale. Without one it was half evaluated.
   void abandon(const StepContext<T>& c) {
     kept_scale_ = kept_scale_ > 0 ? c.accel_scale : T(0);
+  }
+
+  // The accepted step's scan, both ends at hand (the attempt's start and the set); at a stop
+  // event, the set and the clock go to it and the call ends. A throwing event function puts
+  // the step back, and the clock.
+  bool stops_at_event(const StepContext<T>& c, const Clock<T>& start) {
+    const std::array<const T*, 6> before = staged_.attempt_start();
+    T* const after[6] = {bodies_.px(), bodies_.py(), bodies_.pz(), bodies_.vx(), bodies_.vy(), bodies_.vz()};
+    const double t0 = start.time(), h = double(c.h);
+    try {
+      for_each_block(workers_, bodies_.padded_size(), [&](Block block) {
+        for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
+          SliceEnds<T> ends{{}, {}, s, std::min(kEventSliceBodies<T>, block.end - s)};
+          for (int a = 0; a < 6; ++a) ends.before[a] = before[a] + s, ends.after[a] = after[a] + s;
+          events_.watch->scan(events_.call, ends, t0, h);
+        }
+      });
+    } catch (...) {
+      staged_.take_back(c);
+      core_.clock = start;
+      throw;
+    }
+    const auto stop = events_.watch->first_stop();
+    if (!stop) return false;
+    if (stop->theta < 1) {
+      events_.watch->settle(workers_, bodies_, events_.call, before.data(), *stop, h);
+      core_.clock.set(stop->time);
+      kept_scale_ = 0;  // the kept stage was the step's end
+    }
+    return true;
   }
 
   // Stage 0's kept accelerations, rescaled to this step's acceleration scale; 0: none kept.
@@ -199,6 +232,7 @@ class AdaptiveRun {
   T kept_scale_ = 0;  // the acceleration scale stage 0's kept accelerations carry; 0: none
   T last_size_ = 0;  // of the last attempt
   const StopRequest* interrupt_ = nullptr;  // the call's, for the attempts to poll
+  const AdaptiveEvents<T>& events_;
 };
 
 }  // namespace
@@ -206,8 +240,9 @@ class AdaptiveRun {
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
                                  double t_end, const Tolerances& tolerances, double max_step,
-                                 AdaptiveContinuation& continuation, const CallStops& stops) {
-  return AdaptiveRun<T>(core, workers, bodies, tolerances).to(t_end, max_step, continuation, stops);
+                                 AdaptiveContinuation& continuation, const CallStops& stops,
+                                 const AdaptiveEvents<T>& events) {
+  return AdaptiveRun<T>(core, workers, bodies, tolerances, events).to(t_end, max_step, continuation, stops);
 }
 
 template <class T>
@@ -250,8 +285,10 @@ template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, R
 template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, RigidBodySet<double>&, double,
                                           const Tolerances&);
 template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, ParticleSet<float>&, double,
-                                          const Tolerances&, double, AdaptiveContinuation&, const CallStops&);
+                                          const Tolerances&, double, AdaptiveContinuation&, const CallStops&,
+                                          const AdaptiveEvents<float>&);
 template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, ParticleSet<double>&, double,
-                                          const Tolerances&, double, AdaptiveContinuation&, const CallStops&);
+                                          const Tolerances&, double, AdaptiveContinuation&, const CallStops&,
+                                          const AdaptiveEvents<double>&);
 
 }  // namespace kinema

@@ -6,6 +6,7 @@
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
 #include "parallel/blocks.hpp"
+#include "step/event_watch.hpp"
 #include "step/step_controller.hpp"
 #include "step/stepper_core.hpp"
 
@@ -40,15 +41,24 @@ struct CallStops {
   bool after_step() const { return (pause && (*pause)()) || (interrupt && (*interrupt)()); }
 };
 
+// The events an adaptive call watches (FixedSteps::watch_adaptive); watch null: none.
+template <class T>
+struct AdaptiveEvents {
+  EventWatch<T>* watch = nullptr;
+  EventCall<T> call{};
+};
+
 // Steps the bodies from the core's clock to t_end on `workers`, no step longer than
 // `max_step`; the last step lands on t_end, unless `stops` say to stop sooner: then
 // `continuation` keeps what the next call to t_end goes on from (and a call that continues
-// it takes it). The request must have passed check_adaptive. Throws kinema::Error when the
-// step size underflows.
+// it takes it). Each accepted step is scanned for `events`; a stop event ends the call with
+// the set and the clock at it. The request must have passed check_adaptive. Throws
+// kinema::Error when the step size underflows.
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
                                  double t_end, const Tolerances& tolerances, double max_step,
-                                 AdaptiveContinuation& continuation, const CallStops& stops);
+                                 AdaptiveContinuation& continuation, const CallStops& stops,
+                                 const AdaptiveEvents<T>& events = {});
 
 // Rigid bodies on the rigid path: the same steps, sizes and last step, the error over x, v, q
 // and L (RigidBlockPath::attempt); every stage evaluated (no first stage reused), no stop

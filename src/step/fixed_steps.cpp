@@ -92,6 +92,14 @@ void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, st
 }
 
 template <class T>
+std::optional<EventCall<T>> FixedSteps<T>::watch_adaptive(ParticleSet<T>& b) {
+  if (!events_.active()) return std::nullopt;
+  check_events(b);
+  events_.clear();
+  return event_call(b);
+}
+
+template <class T>
 EventCall<T> FixedSteps<T>::event_call(ParticleSet<T>& b) const {
   return {core_.table, core_.lowered().particle, b.inv_mass(), per_body(b), b.size(),
           has_dopri5_interpolant(core_.method)};

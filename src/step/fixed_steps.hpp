@@ -38,6 +38,9 @@ class FixedSteps {
   const EventWatch<T>& events() const { return events_; }
   // The steps the last call took when a stop event ended it (its last one cut at the event).
   std::uint64_t steps_to_stop() const { return steps_to_stop_; }
+  // Events under advance_to: refuses a model they cannot be watched on, clears the last
+  // call's hits and gives what the adaptive driver's scans read; nothing without events.
+  std::optional<EventCall<T>> watch_adaptive(ParticleSet<T>& b);
   // What the block paths keep per block for `padded` bodies (allocates only to grow).
   void reserve_blocks(std::size_t padded) { completed_.resize(std::max(completed_.size(), block_count(padded))); }
 

@@ -67,6 +67,11 @@ class StagedPath {
   // Stage 0's accelerations (times the scale they were evaluated with), for the driver's
   // first step size.
   std::array<const T*, 3> first_stage() const { return accelerations(0); }
+  // Where the last attempt started (px .. vz), for a method with an embedded pair.
+  std::array<const T*, 6> attempt_start() const {
+    return {saved_[0][0].data(), saved_[0][1].data(), saved_[0][2].data(),
+            saved_[1][0].data(), saved_[1][1].data(), saved_[1][2].data()};
+  }
   // Stage 0's accelerations to write into (a checkpoint's kept first stage), `padded` long.
   std::array<T*, 3> first_stage_for(std::size_t padded) {
     reserve(padded);

@@ -64,7 +64,7 @@ struct Stepper<T>::Impl {
   }
 
   void refuse_events() const {
-    if (fixed.events().active()) throw Error("advance_to does not watch events: step() and advance() do");
+    if (fixed.events().active()) throw Error("advance_to watches events on particle sets only");
   }
 
   // Applied forces last one call, unless the set keeps them.
@@ -75,7 +75,12 @@ struct Stepper<T>::Impl {
 
   AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const CallStops& stops) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
-    refuse_events();
+    AdaptiveEvents<T> events;
+    if (const auto call = fixed.watch_adaptive(bodies)) events = {&fixed.events(), *call};
+    struct Ordered {  // whatever ends the call, its hits are in order
+      EventWatch<T>& events;
+      ~Ordered() { events.finish(events.stop_time()); }
+    } ordered{fixed.events()};
     core.reach(bodies);
     // A call that goes on from one stopped early keeps its cap (the bodies have moved since)
     // and was checked when it began.
@@ -92,7 +97,7 @@ struct Stepper<T>::Impl {
       }
     }
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
-      stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stops);
+      stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stops, events);
       return double(bodies.size()) * double(stats.evaluations);
     });
     if (stats.accepted > 0 && !stats.stopped) forces_used(bodies);  // they act to the call's end

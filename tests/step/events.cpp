@@ -307,6 +307,75 @@ TEST_CASE("the fused kernels' own sign test finds exactly the crossings a full s
   }
 }
 
+namespace {
+
+ForceModel<double> callback_model() {
+  ForceModel<double> f = falling();
+  f.add(ForceCallback<double>([](const ParticleBlock<double>&) {}));
+  return f;
+}
+
+}  // namespace
+
+TEST_CASE("advance_to watches events on its own steps: crossings to its tolerance, a stop ends the call there",
+          "[events][adaptive]") {
+  // Bodies under gravity and drag from different heights: each lands once, at its own time.
+  const double k = 0.8;
+  ForceModel<double> f = falling();
+  f.add(LinearDrag{k});
+  ParticleSet<double> b;
+  for (int i = 0; i < 40; ++i) b.add({double(i), 2.0 + 0.5 * i, 0}, {0, 1.0 - 0.05 * i, 0}, 1);
+  for (const Method* method : {&dopri5, &bs3}) {
+    INFO(method->name);
+    ParticleSet<double> run = b;
+    Stepper<double> s(f, *method, test::serial_options());
+    s.set_events({{floor_event()}});
+    const Tolerances tol{1e-10, 1e-10};
+    const AdaptiveStats stats = s.advance_to(run, 5, tol);
+    REQUIRE(s.event_hits().size() == b.size());  // each body once, none twice
+    double worst = 0;
+    for (std::size_t i = 0; i < s.event_hits().size(); ++i) {
+      const EventHit<double>& hit = s.event_hits()[i];
+      if (i > 0) CHECK(hit.time >= s.event_hits()[i - 1].time);  // in order of time
+      worst = std::max(worst, std::abs(hit.time - drag_landing(b.position(hit.body)[1], b.velocity(hit.body)[1], k)));
+      CHECK(std::abs(hit.position[1]) < 1e-7);
+    }
+    INFO("steps " << stats.accepted << ", worst time error " << worst);
+    // Located inside the steps the tolerance sized (dopri5 on its own interpolant, bs3 on the
+    // Hermite), not at their ends.
+    CHECK(worst < 1e-7);
+  }
+  // A stop: the call ends at the first landing, every body on the step's interpolant there.
+  ParticleSet<double> run = b;
+  Stepper<double> s(f, dopri5, test::serial_options());
+  s.set_events({{floor_event(EventAction::stop)}});
+  s.advance_to(run, 5, {1e-10, 1e-10});
+  REQUIRE(s.stopped_at_event());
+  REQUIRE(s.event_hits().size() == 1);
+  const EventHit<double>& first = s.event_hits()[0];
+  CHECK(first.body == 0);  // the lowest body lands first
+  CHECK(s.time() == first.time);
+  CHECK(std::abs(s.time() - drag_landing(2, 1, k)) < 1e-7);
+  CHECK(std::abs(run.position(0)[1]) < 1e-7);
+  CHECK(std::abs(run.position(5)[1] - drag_height(4.5, 0.75, k, s.time())) < 1e-7);
+  // The next call goes on from there to the second landing, not the first again.
+  s.advance_to(run, 5, {1e-10, 1e-10});
+  REQUIRE(s.stopped_at_event());
+  CHECK(s.event_hits()[0].body == 1);
+  CHECK(std::abs(s.time() - drag_landing(2.5, 0.95, k)) < 1e-7);
+  // A throwing event function takes back the step it was scanning: set and clock agree.
+  ParticleSet<double> thrown = b;
+  Stepper<double> t(f, dopri5, test::serial_options());
+  t.set_events({{{EventFunction<double>([&](const EventBlock<double>& block, double* value) {
+    if (block.t > 0.5) throw std::runtime_error("the game's event failed");
+    for (std::size_t i = 0; i < block.count; ++i) value[i] = block.py[i];
+  })}}});
+  CHECK_THROWS_WITH(t.advance_to(thrown, 5, {1e-10, 1e-10}), "the game's event failed");
+  CHECK(t.time() <= 0.5);
+  CHECK(t.time() > 0.3);
+  CHECK(std::abs(thrown.position(7)[1] - drag_height(5.5, 0.65, k, t.time())) < 1e-8);
+}
+
 TEST_CASE("events are refused where they cannot be watched, and checked when set", "[events]") {
   Stepper<double> s(falling(), rk4, test::serial_options());
   CHECK_THROWS_WITH(s.set_events({{{PlaneEvent{{0, 0, 0}, 0}}}}), Catch::Contains("events[0]") &&
@@ -321,12 +390,15 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   b.add({0, 1, 0}, {0, 0, 0}, 1);
   Stepper<double> pair(falling(), dopri5, test::serial_options());
   pair.set_events({{floor_event()}});
-  CHECK_THROWS_WITH(pair.advance_to(b, 1, Tolerances{}), Catch::Contains("advance_to"));
   RigidBodySet<double> rigid;
   rigid.add({{0, 1, 0}, {}, {1, 0, 0, 0}, {}, 1, {1, 1, 1}});
   CHECK_THROWS_WITH(s.step(rigid, 0.1), Catch::Contains("particle sets"));
-  ForceModel<double> callback = falling();
-  callback.add(ForceCallback<double>([](const ParticleBlock<double>&) {}));
+  CHECK_THROWS_WITH(pair.advance_to(rigid, 1, Tolerances{}), Catch::Contains("advance_to") &&
+                                                                 Catch::Contains("particle sets"));
+  Stepper<double> pair_callback(callback_model(), dopri5, test::serial_options());
+  pair_callback.set_events({{floor_event()}});
+  CHECK_THROWS_WITH(pair_callback.advance_to(b, 1, Tolerances{}), Catch::Contains("local terms only"));
+  const ForceModel<double> callback = callback_model();
   Stepper<double> block_path(callback, rk4, test::serial_options());
   block_path.set_events({{floor_event()}});
   CHECK_THROWS_WITH(block_path.step(b, 0.1), Catch::Contains("local terms only"));
