@@ -426,6 +426,21 @@ TEST_CASE("under the finiteness guard a call taken again records its hits once",
   CHECK(b.position(0)[1] == 0.05);
 }
 
+namespace {
+
+// Steps a second at h, a dense output around each step; `at(dense, t)` at three times inside.
+template <class Set, class Dense, class At>
+void inside_steps(Stepper<double>& s, Set& b, Dense& dense, double h, At&& at) {
+  for (int step = 0; step < int(std::llround(1 / h)); ++step) {
+    dense.begin(s, b);
+    s.step(b, h);
+    dense.end(s, b);
+    for (double theta : {0.25, 0.5, 0.8}) at(dense.start_time() + theta * h);
+  }
+}
+
+}  // namespace
+
 TEST_CASE("dense output is exact inside a projectile's step, of rk4's order under drag, of dopri5's with its own", "[events][dense]") {
   const auto run = [](double k, double h, const Method& method) {
     ForceModel<double> f = falling();
@@ -435,22 +450,16 @@ TEST_CASE("dense output is exact inside a projectile's step, of rk4's order unde
     b.add({0, 10, 0}, {0, 3, 0}, 1);
     DenseOutput<double> dense;
     double worst = 0;
-    for (int step = 0; step < int(std::llround(1 / h)); ++step) {
-      dense.begin(s, b);
-      s.step(b, h);
-      dense.end(s, b);
-      for (double theta : {0.25, 0.5, 0.8}) {
-        const double t = dense.start_time() + theta * h;
-        double x[3], v[3];
-        double* xp[3] = {&x[0], &x[1], &x[2]};
-        double* vp[3] = {&v[0], &v[1], &v[2]};
-        dense.state_at(t, xp, vp);
-        const double y = k > 0 ? drag_height(10, 3, k, t) : 10 + 3 * t - kG * t * t / 2;
-        worst = std::max(worst, std::abs(x[1] - y));
-        const double u = -kG / k, rate = k > 0 ? u + (3 - u) * std::exp(-k * t) : 3 - kG * t;
-        worst = std::max(worst, std::abs(v[1] - rate));
-      }
-    }
+    inside_steps(s, b, dense, h, [&](double t) {
+      double x[3], v[3];
+      double* xp[3] = {&x[0], &x[1], &x[2]};
+      double* vp[3] = {&v[0], &v[1], &v[2]};
+      dense.state_at(t, xp, vp);
+      const double y = k > 0 ? drag_height(10, 3, k, t) : 10 + 3 * t - kG * t * t / 2;
+      worst = std::max(worst, std::abs(x[1] - y));
+      const double u = -kG / k, rate = k > 0 ? u + (3 - u) * std::exp(-k * t) : 3 - kG * t;
+      worst = std::max(worst, std::abs(v[1] - rate));
+    });
     return worst;
   };
   CHECK(run(0, 0.1, rk4) < 1e-13);
@@ -525,25 +534,19 @@ TEST_CASE("rigid dense output: a spinning body's orientation to rk4's order and 
     b.add({{0, 10, 0}, {1, 3, 0}, {1, 0, 0, 0}, {0, 0, omega * 0.5}, 2, {0.3, 0.4, 0.5}});
     RigidDenseOutput<double> dense;
     double worst_angle = 0, worst_centre = 0, worst_norm = 0;
-    for (int step = 0; step < int(std::llround(1 / h)); ++step) {
-      dense.begin(s, b);
-      s.step(b, h);
-      dense.end(s, b);
-      for (double theta : {0.25, 0.5, 0.8}) {
-        const double t = dense.start_time() + theta * h;
-        double x[3], v[3], q[4], l[3];
-        double* xp[3] = {&x[0], &x[1], &x[2]};
-        double* vp[3] = {&v[0], &v[1], &v[2]};
-        double* qp[4] = {&q[0], &q[1], &q[2], &q[3]};
-        double* lp[3] = {&l[0], &l[1], &l[2]};
-        dense.state_at(t, xp, vp, qp, lp);
-        worst_angle = std::max({worst_angle, std::abs(q[0] - std::cos(omega * t / 2)),
-                                std::abs(q[3] - std::sin(omega * t / 2)), std::abs(q[1]), std::abs(q[2])});
-        worst_norm = std::max(worst_norm, std::abs(std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) - 1));
-        worst_centre = std::max({worst_centre, std::abs(x[0] - t), std::abs(x[1] - (10 + 3 * t - kG * t * t / 2)),
-                                 std::abs(v[1] - (3 - kG * t)), std::abs(l[2] - omega * 0.5)});
-      }
-    }
+    inside_steps(s, b, dense, h, [&](double t) {
+      double x[3], v[3], q[4], l[3];
+      double* xp[3] = {&x[0], &x[1], &x[2]};
+      double* vp[3] = {&v[0], &v[1], &v[2]};
+      double* qp[4] = {&q[0], &q[1], &q[2], &q[3]};
+      double* lp[3] = {&l[0], &l[1], &l[2]};
+      dense.state_at(t, xp, vp, qp, lp);
+      worst_angle = std::max({worst_angle, std::abs(q[0] - std::cos(omega * t / 2)),
+                              std::abs(q[3] - std::sin(omega * t / 2)), std::abs(q[1]), std::abs(q[2])});
+      worst_norm = std::max(worst_norm, std::abs(std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) - 1));
+      worst_centre = std::max({worst_centre, std::abs(x[0] - t), std::abs(x[1] - (10 + 3 * t - kG * t * t / 2)),
+                               std::abs(v[1] - (3 - kG * t)), std::abs(l[2] - omega * 0.5)});
+    });
     return std::array<double, 3>{worst_angle, worst_centre, worst_norm};
   };
   const auto coarse = run(0.1), fine = run(0.05);
