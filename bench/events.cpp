@@ -1,7 +1,7 @@
 // What events cost (kinema/events.hpp): 100k bodies falling from rest onto a plane under
 // gravity, one rk4 step per call (a frame's), without events, with the floor as an event,
 // and with four (the floor, a distance, a speed and a user function); and dopri5 (the staged
-// path) without events and with the floor. The heights spread
+// path) without events and with the floor, on fixed steps and under advance_to. The heights spread
 // over 0.5 .. 500 m, so a few bodies in a thousand cross per step; the set is put back
 // every 4 simulated seconds. Same bodies, same run, 1 thread at the best ISA.
 #include <benchmark/benchmark.h>
@@ -69,8 +69,35 @@ void falling_step(benchmark::State& state, Watch w, const Method& method) {
   state.counters["hits_per_step"] = hits / double(state.iterations());
 }
 
+// A frame's advance_to under dopri5 (error control, rtol = atol = 1e-6), watched as above:
+// per body-step of the steps it accepted.
+template <class T>
+void falling_adaptive(benchmark::State& state, Watch w) {
+  const auto n = std::size_t(state.range(0));
+  const ParticleSet<T>& initial = falling_bodies<T>(n);
+  ParticleSet<T> bodies = initial;
+  ForceModel<T> gravity;
+  gravity.add(Gravity{{0, kGravity, 0}});
+  Stepper<T> stepper(gravity, dopri5, on_calling_thread());
+  stepper.set_events(watched<T>(w));
+  const Tolerances tol{1e-6, 1e-6};
+  stepper.advance_to(bodies, kDt, tol);
+  std::int64_t k = 0;
+  double hits = 0, accepted = 0;
+  for (auto _ : state) {
+    if (++k % kRestoreSteps == 0) restore(bodies, initial), stepper.set_time(0);
+    accepted += double(stepper.advance_to(bodies, stepper.time() + kDt, tol).accepted);
+    hits += double(stepper.event_hits().size());
+    benchmark::ClobberMemory();
+  }
+  require_finite(state, bodies);
+  report_body_steps(state, double(n) * accepted / double(state.iterations()), particle_step_bytes<T>());
+  state.counters["hits_per_step"] = hits / std::max(accepted, 1.0);
+}
+
 // rk4 on the fused path (off, floor, four); dopri5 on the staged path (dopri5-off,
-// dopri5-floor), where each step keeps its start and is scanned whole.
+// dopri5-floor), where each step keeps its start and is scanned whole; a frame's advance_to
+// (adaptive-off, adaptive-floor).
 void register_all() {
   const std::string isa(isa_name(best_isa()));
   const auto add = [&](const std::string& name, Watch w, const Method& method) {
@@ -86,6 +113,13 @@ void register_all() {
   add("four", Watch::four, rk4);
   add("dopri5-off", Watch::none, dopri5);
   add("dopri5-floor", Watch::floor, dopri5);
+  for (Watch w : {Watch::none, Watch::floor}) {
+    const std::string name = w == Watch::none ? "adaptive-off" : "adaptive-floor";
+    for (auto* b : {benchmark::RegisterBenchmark(("events/float/" + name + "/" + isa).c_str(), falling_adaptive<float>, w),
+                    benchmark::RegisterBenchmark(("events/double/" + name + "/" + isa).c_str(), falling_adaptive<double>, w)}) {
+      b->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
+    }
+  }
 }
 
 const int registered = (register_all(), 0);

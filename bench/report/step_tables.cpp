@@ -54,16 +54,20 @@ void print_events_row(const Results& results, Noise& noise, const std::string& p
   const double step_ns = s ? 13.0 * value_bytes(p) / s->median : 0;
   const auto staged_off = results.find("events/" + p + "/dopri5-off" + at, "ns_per_body_step");
   const auto staged_floor = results.find("events/" + p + "/dopri5-floor" + at, "ns_per_body_step");
-  for (const auto& r : {staged_off, staged_floor}) {
+  const auto adaptive_off = results.find("events/" + p + "/adaptive-off" + at, "ns_per_body_step");
+  const auto adaptive_floor = results.find("events/" + p + "/adaptive-floor" + at, "ns_per_body_step");
+  for (const auto& r : {staged_off, staged_floor, adaptive_off, adaptive_floor}) {
     if (r) noise.add(r->cv);
   }
   std::printf("%-6s off %.3f | floor %s (%s) | four %s (%s) | %s hits per step | the step's traffic %s"
-              " | dopri5 (staged) off %s, floor %s (%s)\n",
+              " | dopri5 (staged) off %s, floor %s (%s) | advance_to off %s, floor %s (%s)\n",
               p.c_str(), off->median, cell(median(floor), "%.3f").c_str(), cell(ratio(floor, off), "%.2fx").c_str(),
               cell(median(four), "%.3f").c_str(), cell(ratio(four, off), "%.2fx").c_str(),
               results.value("events/" + p + "/floor" + at, "hits_per_step", "%.0f").c_str(),
               step_ns > 0 ? cell(step_ns, "%.3f").c_str() : "-", cell(median(staged_off), "%.3f").c_str(),
-              cell(median(staged_floor), "%.3f").c_str(), cell(ratio(staged_floor, staged_off), "%.2fx").c_str());
+              cell(median(staged_floor), "%.3f").c_str(), cell(ratio(staged_floor, staged_off), "%.2fx").c_str(),
+              cell(median(adaptive_off), "%.3f").c_str(), cell(median(adaptive_floor), "%.3f").c_str(),
+              cell(ratio(adaptive_floor, adaptive_off), "%.2fx").c_str());
 }
 
 void print_adaptive_row(const Results& results, Noise& noise, const std::string& p) {
@@ -127,7 +131,8 @@ void print_events_table(const Results& results, Noise& noise) {
   if (!results.find("events/float/off/" + results.isa() + "/100000/real_time", "ns_per_body_step")) return;
   std::printf("\nEvents, 100k bodies falling onto a plane, one rk4 step per call, 1 thread, %s: ns per body-step "
               "(times no events); floor: one plane event, four: plane, distance, speed and a user function; "
-              "dopri5 takes the staged path\n",
+              "dopri5 takes the staged path; advance_to: a frame's error-controlled dopri5 steps "
+              "(rtol = atol = 1e-6), per step accepted\n",
               results.isa().c_str());
   for (const std::string p : {"float", "double"}) print_events_row(results, noise, p);
 }
