@@ -343,7 +343,6 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
     const Node events = root.child("events");
     if (!s.rigid_bodies.empty() || (s.generate && s.generate->rigid)) events.fail("events watch particles; this scene has rigid bodies");
     if (s.nbody || !s.springs.empty()) events.fail("events are watched with local terms only: not with nbody or springs");
-    if (s.rtol || s.atol) events.fail("events are watched on fixed steps: not with rtol or atol");
   }
   if (s.particles.empty() && s.rigid_bodies.empty() && (!s.generate || s.generate->count == 0)) {
     root.fail("the scene has no bodies (give 'particles', 'rigid_bodies' or 'generate')");

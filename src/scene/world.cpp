@@ -85,7 +85,11 @@ void World<T>::advance_rigid(T h, std::uint64_t steps, bool cut_short) {
 template <class T>
 AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop,
                                    const StopRequest& interrupt) {
-  if (rigid.size() == 0) return particle_stepper_.advance_to(particles, t_end, tolerances, stop, interrupt);
+  if (rigid.size() == 0) {
+    const AdaptiveStats stats = particle_stepper_.advance_to(particles, t_end, tolerances, stop, interrupt);
+    event_hits_ = particle_stepper_.event_hits();
+    return stats;
+  }
   if (particles.size() > 0) {
     throw Error("error-controlled steps take one kind of body; the scene has particles and rigid bodies");
   }

@@ -605,8 +605,9 @@ TEST_CASE("run writes the scene's events to events.csv beside the trajectory; a 
           "[cli][events]") {
   // Body 0 lands at (3 + sqrt(9 + 2 g 10)) / g, body 1 at (-2 + sqrt(4 + 2 g 30)) / g.
   const double g = 9.81, first = (3 + std::sqrt(9 + 2 * g * 10)) / g, second = (-2 + std::sqrt(4 + 2 * g * 30)) / g;
-  const auto drop = [](const std::string& action) {
-    return R"({"name": "drop", "precision": "double", "dt": 0.05, "steps": 100,
+  // Fixed steps, then error control (dopri5's steps, exact on a parabola).
+  const auto drop = [](const std::string& action, const std::string& control = "") {
+    return R"({"name": "drop", "precision": "double", "dt": 0.05, "steps": 100, )" + control + R"(
       "particles": [{"position": [0, 10, 0], "velocity": [1, 3, 0]}, {"position": [2, 30, 0], "velocity": [0, -2, 0]}],
       "forces": [{"type": "gravity", "g": [0, -9.81, 0]}],
       "events": [{"type": "plane", "normal": [0, 1, 0], "direction": "down", "action": ")" + action + R"("},
@@ -615,32 +616,34 @@ TEST_CASE("run writes the scene's events to events.csv beside the trajectory; a 
   const fs::path dir = work_dir() / "events";
   fs::create_directories(dir);
   const fs::path csv = dir / "traj.csv", summary = dir / "summary.json", events = dir / "events.csv";
-  for (const std::string action : {"record", "stop"}) {
-    INFO(action);
-    const fs::path file = write("drop_" + action + ".json", drop(action));
-    REQUIRE(kinema_cli("run " + file.string() + " -q --out " + csv.string() + " --summary " + summary.string()).code == 0);
-    std::istringstream rows(read(events));
-    std::string line;
-    std::getline(rows, line);
-    CHECK(line == "time,body,event,type,px,py,pz,vx,vy,vz");
-    std::vector<double> times;
-    while (std::getline(rows, line)) {
-      CHECK(line.find(",plane,") != std::string::npos);
-      times.push_back(std::stod(line));
-    }
-    const auto j = nlohmann::json::parse(read(summary));
-    CHECK(j["complete"] == true);
-    if (action == "record") {
-      REQUIRE(times.size() == 2);
-      CHECK(std::abs(times[0] - first) < 1e-12);
-      CHECK(std::abs(times[1] - second) < 1e-12);
-      CHECK(j["events"] == 2);
-      CHECK(j["t_final"].get<double>() == Approx(5));
-    } else {
-      REQUIRE(times.size() == 1);
-      CHECK(j["events"] == 1);
-      CHECK(j["stopped_by_event"] == "events[0] (plane), body 0");
-      CHECK(std::abs(j["t_final"].get<double>() - first) < 1e-12);
+  for (const std::string control : {"", R"("method": "dopri5", "rtol": 1e-9, "atol": 1e-9,)"}) {
+    for (const std::string action : {"record", "stop"}) {
+      INFO(action << " " << control);
+      const fs::path file = write("drop_" + action + ".json", drop(action, control));
+      REQUIRE(kinema_cli("run " + file.string() + " -q --out " + csv.string() + " --summary " + summary.string()).code == 0);
+      std::istringstream rows(read(events));
+      std::string line;
+      std::getline(rows, line);
+      CHECK(line == "time,body,event,type,px,py,pz,vx,vy,vz");
+      std::vector<double> times;
+      while (std::getline(rows, line)) {
+        CHECK(line.find(",plane,") != std::string::npos);
+        times.push_back(std::stod(line));
+      }
+      const auto j = nlohmann::json::parse(read(summary));
+      CHECK(j["complete"] == true);
+      if (action == "record") {
+        REQUIRE(times.size() == 2);
+        CHECK(std::abs(times[0] - first) < 1e-12);
+        CHECK(std::abs(times[1] - second) < 1e-12);
+        CHECK(j["events"] == 2);
+        CHECK(j["t_final"].get<double>() == Approx(5));
+      } else {
+        REQUIRE(times.size() == 1);
+        CHECK(j["events"] == 1);
+        CHECK(j["stopped_by_event"] == "events[0] (plane), body 0");
+        CHECK(std::abs(j["t_final"].get<double>() - first) < 1e-12);
+      }
     }
   }
   const Result bad = kinema_cli("run " + write("bad_event.json", R"({"particles": [{"position": [0, 1, 0]}],

@@ -144,12 +144,14 @@ void add_stats(AdaptiveStats& total, const AdaptiveStats& s) {
   if (s.next_step > 0) total.next_step = s.next_step;
 }
 
-// Error-controlled steps to t, starting from the size the last call proposed. A signal or a
-// checkpoint due stops the call between steps; for a checkpoint it goes on after (the bits of
-// one call). Returns false when a signal stopped it short of t (the stepper keeps the rest).
+// Error-controlled steps to t, starting from the size the last call proposed; each call's
+// event hits to `record`. A signal or a checkpoint due stops the call between steps; for a
+// checkpoint it goes on after (the bits of one call). Returns false when a signal or a stop
+// event stopped it short of t (the stepper keeps the rest).
 template <class T>
 bool advance_adaptive(World<T>& world, double t, Tolerances tolerances, AdaptiveStats& total,
-                      CheckpointTimer& checkpoints, const std::function<void()>& save) {
+                      CheckpointTimer& checkpoints, const std::function<void()>& save,
+                      const std::function<void()>& record) {
   tolerances.initial_step = total.next_step;
   // A checkpoint waits for the step under way (stopping inside would lose it, and an attempt
   // longer than the interval would never finish); a signal does not.
@@ -157,6 +159,8 @@ bool advance_adaptive(World<T>& world, double t, Tolerances tolerances, Adaptive
   for (;;) {
     const AdaptiveStats s = world.advance_to(t, tolerances, checkpoint_due, interrupt_request());
     add_stats(total, s);
+    record();
+    if (world.stopped_at_event()) return false;
     if (!s.stopped) return true;
     if (interrupting_signal() != 0) return false;
     save();
@@ -336,10 +340,9 @@ void write_events(const RunOptions& o, const Scene& scene, const Stepped& s) {
   write_whole_file(events_path(o), std::as_bytes(std::span(text.data(), text.size())), "events");
 }
 
-// Events are watched on fixed steps of a model of local terms; events.csv is a file of its own.
+// Events are watched on a model of local terms; events.csv is a file of its own.
 void check_events(const Scene& scene, const RunOptions& o) {
   if (scene.events.empty()) return;
-  if (scene.rtol || scene.atol) throw Error(o.scene_path + ": events are watched on fixed steps: drop rtol and atol");
   if (scene.nbody || !scene.springs.empty()) {
     throw Error(o.scene_path + ": events are watched with local terms only: a scene with nbody or springs cannot have them");
   }
@@ -450,7 +453,11 @@ bool advance_timed(World<T>& world, const Scene& scene, const std::optional<Tole
   };
   bool whole = true;
   if (tolerances) {
-    whole = advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive, checkpoints, timed_save);
+    const double start = world.time();
+    whole = advance_adaptive(world, double(s.done + n) * scene.dt, *tolerances, s.adaptive, checkpoints, timed_save,
+                             [&] { record_events(world, scene, s); });
+    // A stop event: the steps of dt begun, the last one cut at the event.
+    if (s.stop_event) s.done += std::uint64_t(std::ceil((world.time() - start) / scene.dt - 1e-9));
   } else {
     const std::uint64_t taken = world.advance(T(scene.dt), n, interrupt_request());
     record_events(world, scene, s);
