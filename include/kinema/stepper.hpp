@@ -200,8 +200,9 @@ class Stepper {
   // path the kernels run the sign test themselves, elsewhere each step is scanned; only the
   // bodies that crossed are located. A call that cannot watch them (rigid bodies, a model
   // with callbacks or coupled terms) throws kinema::Error before any body moves. Under
-  // advance_to a stop event ends the call at the event (the set and time() there), and a
-  // throwing event function takes back the step it scanned. An empty list watches nothing.
+  // advance_to a stop event ends the call at the event (the set and time() there; the next
+  // call starts its step sizes afresh, as a first call does), and a throwing event function
+  // takes back the step it scanned and its hits. An empty list watches nothing.
   // Throws kinema::Error for an invalid event (its index and field named).
   void set_events(EventOptions<T> events);
   // The hits of the last step(), advance() or advance_to() call, ordered by time, body and

@@ -136,6 +136,7 @@ class AdaptiveRun {
     const std::array<const T*, 6> before = staged_.attempt_start();
     T* const after[6] = {bodies_.px(), bodies_.py(), bodies_.pz(), bodies_.vx(), bodies_.vy(), bodies_.vz()};
     const double t0 = start.time(), h = double(c.h);
+    const std::size_t kept = events_.watch->hits().size();
     try {
       for_each_block(workers_, bodies_.padded_size(), [&](Block block) {
         for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
@@ -147,15 +148,16 @@ class AdaptiveRun {
     } catch (...) {
       staged_.take_back(c);
       core_.clock = start;
+      events_.watch->rollback(kept);  // the step's hits go with it, a stop among them too
       throw;
     }
     const auto stop = events_.watch->first_stop();
     if (!stop) return false;
     if (stop->theta < 1) {
       events_.watch->settle(workers_, bodies_, events_.call, before.data(), *stop, h);
-      core_.clock.set(stop->time);
       kept_scale_ = 0;  // the kept stage was the step's end
     }
+    core_.clock.set(stop->time);  // the hit's own time, also at a last step's end
     return true;
   }
 

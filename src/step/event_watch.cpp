@@ -182,7 +182,8 @@ template <class T>
 void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
   if (slice.first >= call.size || (slice.batches != nullptr && slice.batch_count == 0)) return;
   const std::size_t real = std::min(slice.count, call.size - slice.first);
-  std::uint32_t found[kEventSliceBodies<T>];
+  // A slice is at most a block (the kernels' own test) and every body of it may cross.
+  std::uint32_t found[std::max(kBlockBodies, kEventSliceBodies<T>)];
   for (std::size_t e = 0; e < events_.size(); ++e) {
     const std::size_t n = candidates(int(e), call, slice, real, t0, h, found);
     for (std::size_t k = 0; k < n && found[k] < real; ++k) locate(int(e), call, slice, found[k], t0, h);

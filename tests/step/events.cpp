@@ -185,6 +185,33 @@ TEST_CASE("every body falling through a plane is found once, at its analytic tim
   CHECK(worst < 2e-5);
 }
 
+namespace {
+
+// Every body of several blocks crossing in the same step: the kernels list whole blocks.
+template <class T>
+void check_all_land_together() {
+  const std::size_t n = 3 * kBlockBodies + 5;
+  ParticleSet<T> b;
+  for (std::size_t i = 0; i < n; ++i) b.add({T(i % 13), T(1), T(0)}, {T(0), T(-4), T(0)}, T(1));
+  ForceModel<T> f;
+  f.add(Gravity{{0, -kG, 0}});
+  Stepper<T> s(f, rk4, test::serial_options());
+  s.set_events({{{PlaneEvent{{0, 1, 0}, 0}, Crossing::down}}});
+  s.advance(b, T(0.05), 6);  // lands at 0.2 s, in the fourth step
+  REQUIRE(s.event_hits().size() == n);
+  for (std::size_t i = 0; i < n; ++i) {
+    CHECK(s.event_hits()[i].body == i);  // one time for all: in body order
+    CHECK(std::abs(s.event_hits()[i].time - landing_time(1, -4)) < (sizeof(T) == 4 ? 1e-5 : 1e-12));
+  }
+}
+
+}  // namespace
+
+TEST_CASE("a whole set crossing in one step is found body by body, none lost", "[events]") {
+  check_all_land_together<float>();
+  check_all_land_together<double>();
+}
+
 TEST_CASE("a stop event ends the call at its time, every body on the dense output there", "[events]") {
   const double h = 0.1;
   Stepper<double> s(falling(), rk4, test::serial_options());
@@ -374,6 +401,18 @@ TEST_CASE("advance_to watches events on its own steps: crossings to its toleranc
   CHECK(t.time() <= 0.5);
   CHECK(t.time() > 0.3);
   CHECK(std::abs(thrown.position(7)[1] - drag_height(5.5, 0.65, k, t.time())) < 1e-8);
+  // The step taken back keeps none of its hits: not the stop the floor found before the throw.
+  const double landing = drag_landing(2, 1, k);
+  ParticleSet<double> again = b;
+  Stepper<double> u(f, dopri5, test::serial_options());
+  u.set_events({{floor_event(EventAction::stop), {EventFunction<double>([&](const EventBlock<double>& block, double* value) {
+                   if (block.t > landing) throw std::runtime_error("the game's event failed");
+                   for (std::size_t i = 0; i < block.count; ++i) value[i] = 1;
+                 })}}});
+  CHECK_THROWS_WITH(u.advance_to(again, 5, {1e-10, 1e-10}), "the game's event failed");
+  CHECK(u.time() < landing);
+  CHECK(u.event_hits().empty());
+  CHECK_FALSE(u.stopped_at_event());
 }
 
 TEST_CASE("events are refused where they cannot be watched, and checked when set", "[events]") {
