@@ -46,25 +46,37 @@ EventOptions<T> watched(Watch w) {
   return o;
 }
 
+// The falling bodies, their start kept for restore, and a stepper under gravity watching w.
+template <class T>
+struct Falling {
+  const ParticleSet<T>& initial;
+  ParticleSet<T> bodies;
+  Stepper<T> stepper;
+  Falling(std::size_t n, Watch w, const Method& method)
+      : initial(falling_bodies<T>(n)), bodies(initial), stepper(gravity(), method, on_calling_thread()) {
+    stepper.set_events(watched<T>(w));
+  }
+  static ForceModel<T> gravity() {
+    ForceModel<T> f;
+    f.add(Gravity{{0, kGravity, 0}});
+    return f;
+  }
+};
+
 template <class T>
 void falling_step(benchmark::State& state, Watch w, const Method& method) {
   const auto n = std::size_t(state.range(0));
-  const ParticleSet<T>& initial = falling_bodies<T>(n);
-  ParticleSet<T> bodies = initial;
-  ForceModel<T> gravity;
-  gravity.add(Gravity{{0, kGravity, 0}});
-  Stepper<T> stepper(gravity, method, on_calling_thread());
-  stepper.set_events(watched<T>(w));
-  stepper.step(bodies, T(kDt));
+  Falling<T> run(n, w, method);
+  run.stepper.step(run.bodies, T(kDt));
   std::int64_t k = 0;
   double hits = 0;
   for (auto _ : state) {
-    if (++k % kRestoreSteps == 0) restore(bodies, initial);
-    stepper.step(bodies, T(kDt));
-    hits += double(stepper.event_hits().size());
+    if (++k % kRestoreSteps == 0) restore(run.bodies, run.initial);
+    run.stepper.step(run.bodies, T(kDt));
+    hits += double(run.stepper.event_hits().size());
     benchmark::ClobberMemory();
   }
-  require_finite(state, bodies);
+  require_finite(state, run.bodies);
   report_body_steps(state, double(n), particle_step_bytes<T>());
   state.counters["hits_per_step"] = hits / double(state.iterations());
 }
@@ -74,23 +86,18 @@ void falling_step(benchmark::State& state, Watch w, const Method& method) {
 template <class T>
 void falling_adaptive(benchmark::State& state, Watch w) {
   const auto n = std::size_t(state.range(0));
-  const ParticleSet<T>& initial = falling_bodies<T>(n);
-  ParticleSet<T> bodies = initial;
-  ForceModel<T> gravity;
-  gravity.add(Gravity{{0, kGravity, 0}});
-  Stepper<T> stepper(gravity, dopri5, on_calling_thread());
-  stepper.set_events(watched<T>(w));
+  Falling<T> run(n, w, dopri5);
   const Tolerances tol{1e-6, 1e-6};
-  stepper.advance_to(bodies, kDt, tol);
+  run.stepper.advance_to(run.bodies, kDt, tol);
   std::int64_t k = 0;
   double hits = 0, accepted = 0;
   for (auto _ : state) {
-    if (++k % kRestoreSteps == 0) restore(bodies, initial), stepper.set_time(0);
-    accepted += double(stepper.advance_to(bodies, stepper.time() + kDt, tol).accepted);
-    hits += double(stepper.event_hits().size());
+    if (++k % kRestoreSteps == 0) restore(run.bodies, run.initial), run.stepper.set_time(0);
+    accepted += double(run.stepper.advance_to(run.bodies, run.stepper.time() + kDt, tol).accepted);
+    hits += double(run.stepper.event_hits().size());
     benchmark::ClobberMemory();
   }
-  require_finite(state, bodies);
+  require_finite(state, run.bodies);
   report_body_steps(state, double(n) * accepted / double(state.iterations()), particle_step_bytes<T>());
   state.counters["hits_per_step"] = hits / std::max(accepted, 1.0);
 }
