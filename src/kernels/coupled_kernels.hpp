@@ -87,7 +87,7 @@ template <bool Fast, class V>
 void nbody_sums(const NBodyJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   using T = value_t<V>;
   constexpr std::size_t W = Lane<V>::width;
-  constexpr int U = 4;
+  constexpr int U = 4;  // target groups in registers: enough to hide the divider's latency
   assert(end - begin <= kMaxNBodyTargets);
   alignas(64) T sum_x[kMaxNBodyTargets]{}, sum_y[kMaxNBodyTargets]{}, sum_z[kMaxNBodyTargets]{};
   T* sum[3] = {sum_x, sum_y, sum_z};
