@@ -138,13 +138,7 @@ class AdaptiveRun {
     const double t0 = start.time(), h = double(c.h);
     const std::size_t kept = events_.watch->hits().size();
     try {
-      for_each_block(workers_, bodies_.padded_size(), [&](Block block) {
-        for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
-          SliceEnds<T> ends{{}, {}, s, std::min(kEventSliceBodies<T>, block.end - s)};
-          for (int a = 0; a < 6; ++a) ends.before[a] = before[a] + s, ends.after[a] = after[a] + s;
-          events_.watch->scan(events_.call, ends, t0, h);
-        }
-      });
+      events_.watch->scan_blocks(workers_, events_.call, before.data(), after, bodies_.padded_size(), t0, h);
     } catch (...) {
       staged_.take_back(c);
       core_.clock = start;

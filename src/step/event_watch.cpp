@@ -190,6 +190,18 @@ void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, do
   }
 }
 
+template <class T>
+void EventWatch<T>::scan_blocks(const Workers& workers, const EventCall<T>& call, const T* const before[6],
+                                const T* const after[6], std::size_t padded, double t0, double h) {
+  for_each_block(workers, padded, [&](Block block) {
+    for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
+      SliceEnds<T> ends{{}, {}, s, std::min(kEventSliceBodies<T>, block.end - s)};
+      for (int a = 0; a < 6; ++a) ends.before[a] = before[a] + s, ends.after[a] = after[a] + s;
+      scan(call, ends, t0, h);
+    }
+  });
+}
+
 namespace {
 
 // The built-in event's test over the slice's bodies from `from`, `count` of them.

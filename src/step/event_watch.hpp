@@ -65,6 +65,10 @@ class EventWatch {
   // The slice's bodies that crossed over the step [t0, t0 + h]: located and recorded. May be
   // called for different slices concurrently.
   void scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h);
+  // Every slice of the set's `padded` bodies, `before` and `after` holding both ends of the
+  // step in full, blocks spread over the workers.
+  void scan_blocks(const Workers& workers, const EventCall<T>& call, const T* const before[6],
+                   const T* const after[6], std::size_t padded, double t0, double h);
   // Forgets the hits recorded after the first `kept` (steps taken back).
   void rollback(std::size_t kept);
   // The earliest stop hit recorded, if any: its time and the fraction of its step.

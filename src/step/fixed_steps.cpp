@@ -361,20 +361,16 @@ void FixedSteps<T>::run_staged_watched(StepContext<T>& c, std::uint64_t steps, G
   const EventCall<T> call = event_call(b);
   const bool clamps = guard && guard->clamp;
   T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  const T* const before[6] = {previous_[0].data(), previous_[1].data(), previous_[2].data(),
+                              previous_[3].data(), previous_[4].data(), previous_[5].data()};
   run_steps(c.workers, b, steps, guard, [&](double t0) {
     for_each_block(c.workers, b.padded_size(), [&](Block block) {
       for (int a = 0; a < 6; ++a) std::copy(state[a] + block.begin, state[a] + block.end, previous_[a].data() + block.begin);
     });
     c.t0 = t0;
     staged.step(c);
-    for_each_block(c.workers, b.padded_size(), [&](Block block) {
-      if (clamps) clamp(b, block);
-      for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
-        SliceEnds<T> ends{{}, {}, s, std::min(kEventSliceBodies<T>, block.end - s)};
-        for (int a = 0; a < 6; ++a) ends.before[a] = previous_[a].data() + s, ends.after[a] = state[a] + s;
-        events_.scan(call, ends, t0, double(c.h));
-      }
-    });
+    if (clamps) for_each_block(c.workers, b.padded_size(), [&](Block block) { clamp(b, block); });
+    events_.scan_blocks(c.workers, call, before, state, b.padded_size(), t0, double(c.h));
   });
 }
 
