@@ -2,7 +2,9 @@
 // Integration methods as data.
 //
 // An explicit Runge-Kutta method is its Butcher tableau (a, b, c). A symplectic method is a
-// sequence of kicks (v += w h a(x, v, t0 + c h)) and drifts (x += w h v). Adding a method
+// sequence of kicks (v += w h a(x, v, t0 + c h)) and drifts (x += w h v). A linearly
+// implicit method (Rosenbrock-W) solves a linear system per stage with the springs'
+// Jacobian (see RosenbrockScheme). Adding a method
 // means adding a constant here (and listing it in `builtin_methods` to get the fused
 // kernel, or in `staged_methods`); no kernel is written for it. An embedded pair also gives
 // the weights of a second, lower-order solution: their difference estimates the error.
@@ -42,7 +44,21 @@ struct KickDriftScheme {
   std::array<KickDriftOp, kMaxStages> ops{};
 };
 
-enum class MethodKind { runge_kutta, kick_drift };
+// For stiff springs: with y = (x, v), F(t, y) = (v, a) and J the springs' Jacobian of F,
+// each stage solves (I - gamma h J) k_s = F(t0 + time_s h, y0 + h sum_j a_sj k_j) + sum_j c_sj k_j
+// and y1 = y0 + h sum_s m_s k_s. Every other force (local terms, callbacks, applied forces,
+// N-body gravity) is explicit in F: an IMEX step. A W-method keeps its order with any J, so
+// J may leave out the damping's dependence on positions and, under compression, the
+// springs' geometric stiffness (src/step/README.md).
+inline constexpr int kMaxRosenbrockStages = 2;
+struct RosenbrockScheme {
+  int stages = 0;
+  double gamma = 0;
+  std::array<std::array<double, kMaxRosenbrockStages>, kMaxRosenbrockStages> a{}, c{};  // strictly lower
+  std::array<double, kMaxRosenbrockStages> m{}, time{};
+};
+
+enum class MethodKind { runge_kutta, kick_drift, linearly_implicit };
 
 struct Method {
   std::string_view name;
@@ -51,10 +67,12 @@ struct Method {
   ButcherTableau tableau{};
   KickDriftScheme scheme{};
   int embedded_order = 0;  // order of the b_hat solution; 0: no embedded pair
+  RosenbrockScheme rosenbrock{};
 
-  // Force evaluations per step.
+  // Force evaluations per step (an implicit method's linear solves come besides).
   constexpr int evaluations() const {
     if (kind == MethodKind::runge_kutta) return tableau.stages;
+    if (kind == MethodKind::linearly_implicit) return rosenbrock.stages;
     int kicks = 0;
     for (int i = 0; i < scheme.count; ++i) kicks += scheme.ops[i].kind == OpKind::kick;
     return kicks;
@@ -143,11 +161,30 @@ inline constexpr Method rk6{"rk6",
                              {0, 1.0 / 3, 2.0 / 3, 1.0 / 3, 0.5, 0.5, 1}},
                             {}};
 
+// Linearly implicit Euler, the step cloth simulators take since Baraff and Witkin: one
+// linear solve, (I - h J) k = F(y0), y1 = y0 + h k. Backward Euler exactly for linear
+// springs: stable at any step, damping every mode (the more, the larger h |lambda|).
+inline constexpr Method implicit_euler{
+    "implicit_euler", MethodKind::linearly_implicit, 1, {}, {}, 0, {1, 1, {}, {}, {1}, {0}}};
+
+// ROS2 (Verwer, Spee, Blom and Hundsdorfer, 1999): second order for any J (a W-method),
+// L-stable with gamma = 1 + 1/sqrt(2): stiff modes are damped out, resolved ones keep their
+// energy to O(h^2). Two solves with the same matrix per step.
+inline constexpr Method ros2{"ros2",
+                             MethodKind::linearly_implicit,
+                             2,
+                             {},
+                             {},
+                             0,
+                             {2, 1.7071067811865475, {{{}, {1}}}, {{{}, {-2}}}, {1.5, 0.5}, {0, 1}}};
+
 // The methods with a compiled fused kernel, in a fixed order (their index is stable).
 inline constexpr std::array<const Method*, 6> builtin_methods = {
     &euler, &midpoint, &heun, &rk4, &symplectic_euler, &velocity_verlet};
 // Named methods without one: they take the staged path.
 inline constexpr std::array<const Method*, 3> staged_methods = {&bs3, &dopri5, &rk6};
+// Linearly implicit methods: particle sets, fixed steps (src/step/implicit_path.hpp).
+inline constexpr std::array<const Method*, 2> implicit_methods = {&implicit_euler, &ros2};
 
 // The built-in or staged method of that name; throws kinema::Error listing the known names.
 const Method& method_by_name(std::string_view name);
@@ -155,8 +192,8 @@ const Method& method_by_name(std::string_view name);
 // Index of `method` in builtin_methods when its coefficients equal a built-in's, else -1.
 int builtin_index(const Method& method);
 
-// Throws kinema::Error when the method is not a valid explicit method (stages out of
-// range, a not strictly lower triangular, non-finite coefficients).
+// Throws kinema::Error when the method is not valid (stages out of range, a not strictly
+// lower triangular, non-finite coefficients, gamma not positive).
 void validate(const Method& method);
 
 }  // namespace kinema

@@ -80,6 +80,12 @@ struct StepperOptions {
   // how a method lets |q| drift.
   bool renormalize_quaternions = true;
   FiniteGuard guard = FiniteGuard::off;
+  // Implicit methods (implicit_euler, ros2): each stage's linear system is solved by
+  // conjugate gradients until the residual is at most implicit_tolerance times the right
+  // side's (0: 1e-5 for float, 1e-10 for double) or implicit_max_iterations have run (the
+  // solve then stops where it is and ImplicitStats::unconverged counts it).
+  double implicit_tolerance = 0;
+  int implicit_max_iterations = 1000;
   double max_speed = 500;          // clamp: length units per second, finite and > 0
   double max_angular_speed = 50;   // clamp, rigid bodies: radians per second, finite and > 0
 };
@@ -92,6 +98,14 @@ struct StepperClock {
   std::uint64_t steps = 0;
   double h = 0;  // the last step size, a value of T
   double proposed_step = 0;
+};
+
+// What the last step() or advance() call of an implicit method solved.
+struct ImplicitStats {
+  std::uint64_t solves = 0;      // linear systems (one per stage per step)
+  std::uint64_t iterations = 0;  // conjugate-gradient iterations over all of them
+  int max_iterations = 0;        // the most one solve took
+  std::uint64_t unconverged = 0; // solves stopped by implicit_max_iterations
 };
 
 // `options` with every step run on the calling thread: no worker thread is involved.
@@ -210,6 +224,9 @@ class Stepper {
   const std::vector<EventHit<T>>& event_hits() const;
   // Whether the last call ended at a stop event: the set and time() are at its time.
   bool stopped_at_event() const;
+  // An implicit method's linear solves in the last step() or advance() call (all zero for
+  // other methods).
+  const ImplicitStats& implicit_stats() const;
 
   // Simulated time: origin + steps_since_origin * h. Changing h moves the origin.
   double time() const;

@@ -17,9 +17,34 @@ namespace {
 
 using Matrix = std::array<std::array<double, 2>, 2>;
 
+// A linearly implicit step on the mode, its Jacobian exact: the mode stands for the springs'.
+std::array<double, 2> rosenbrock_step(const RosenbrockScheme& r, double h, double a, double b, std::array<double, 2> y) {
+  const auto f = [&](const std::array<double, 2>& s) { return std::array<double, 2>{s[1], a * s[0] + b * s[1]}; };
+  const double g = r.gamma * h;
+  // W = I - g J, J = [[0, 1], [a, b]]; k = W^-1 r by Cramer's rule.
+  const double w00 = 1, w01 = -g, w10 = -g * a, w11 = 1 - g * b, det = w00 * w11 - w01 * w10;
+  std::array<std::array<double, 2>, kMaxRosenbrockStages> k{};
+  for (int s = 0; s < r.stages; ++s) {
+    std::array<double, 2> stage = y;
+    for (int j = 0; j < s; ++j) {
+      for (int d = 0; d < 2; ++d) stage[d] += h * r.a[s][j] * k[j][d];
+    }
+    std::array<double, 2> rhs = f(stage);
+    for (int j = 0; j < s; ++j) {
+      for (int d = 0; d < 2; ++d) rhs[d] += r.c[s][j] * k[j][d];
+    }
+    k[s] = {(rhs[0] * w11 - w01 * rhs[1]) / det, (w00 * rhs[1] - w10 * rhs[0]) / det};
+  }
+  for (int s = 0; s < r.stages; ++s) {
+    for (int d = 0; d < 2; ++d) y[d] += h * r.m[s] * k[s][d];
+  }
+  return y;
+}
+
 // One step of size h of `m` on x' = v, v' = a x + b v, from (x, v).
 std::array<double, 2> one_step(const Method& m, double h, double a, double b, std::array<double, 2> y) {
   const auto f = [&](const std::array<double, 2>& s) { return std::array<double, 2>{s[1], a * s[0] + b * s[1]}; };
+  if (m.kind == MethodKind::linearly_implicit) return rosenbrock_step(m.rosenbrock, h, a, b, y);
   if (m.kind == MethodKind::kick_drift) {
     for (int i = 0; i < m.scheme.count; ++i) {
       const KickDriftOp& op = m.scheme.ops[i];

@@ -10,7 +10,8 @@ namespace kinema {
 
 const Method& method_by_name(std::string_view name) {
   std::string known;
-  for (const auto& list : {std::span<const Method* const>(builtin_methods), std::span<const Method* const>(staged_methods)}) {
+  for (const auto& list : {std::span<const Method* const>(builtin_methods), std::span<const Method* const>(staged_methods),
+                           std::span<const Method* const>(implicit_methods)}) {
     for (const Method* m : list) {
       if (m->name == name) return *m;
       known += (known.empty() ? "" : ", ") + std::string(m->name);
@@ -27,6 +28,10 @@ bool same_coefficients(const Method& a, const Method& b) {
     return a.tableau.stages == b.tableau.stages && a.tableau.a == b.tableau.a &&
            a.tableau.b == b.tableau.b && a.tableau.c == b.tableau.c && a.tableau.b_hat == b.tableau.b_hat;
   }
+  if (a.kind == MethodKind::linearly_implicit) {
+    const auto &x = a.rosenbrock, &y = b.rosenbrock;
+    return x.stages == y.stages && x.gamma == y.gamma && x.a == y.a && x.c == y.c && x.m == y.m && x.time == y.time;
+  }
   if (a.scheme.count != b.scheme.count) return false;
   for (int i = 0; i < a.scheme.count; ++i) {
     const auto &x = a.scheme.ops[i], &y = b.scheme.ops[i];
@@ -37,6 +42,22 @@ bool same_coefficients(const Method& a, const Method& b) {
 
 void check(bool ok, const Method& m, const std::string& what) {
   if (!ok) throw Error("method '" + std::string(m.name) + "': " + what);
+}
+
+void validate_rosenbrock(const Method& m) {
+  const RosenbrockScheme& r = m.rosenbrock;
+  check(r.stages >= 1 && r.stages <= kMaxRosenbrockStages, m,
+        "a Rosenbrock scheme has 1.." + std::to_string(kMaxRosenbrockStages) + " stages");
+  check(std::isfinite(r.gamma) && r.gamma > 0, m, "gamma must be finite and > 0");
+  check(m.embedded_order == 0, m, "a Rosenbrock scheme here has no embedded pair");
+  for (int i = 0; i < kMaxRosenbrockStages; ++i) {
+    check(std::isfinite(r.m[i]) && std::isfinite(r.time[i]), m, "non-finite coefficient");
+    check(i < r.stages || (r.m[i] == 0 && r.time[i] == 0), m, "coefficients beyond the last stage");
+    for (int j = 0; j < kMaxRosenbrockStages; ++j) {
+      check(std::isfinite(r.a[i][j]) && std::isfinite(r.c[i][j]), m, "non-finite coefficient");
+      check(j < i || (r.a[i][j] == 0 && r.c[i][j] == 0), m, "a and c must be strictly lower triangular");
+    }
+  }
 }
 
 }  // namespace
@@ -68,6 +89,7 @@ void validate(const Method& m) {
     check(m.embedded_order >= 0 && m.embedded_order < m.order + 1, m, "embedded_order out of range");
     return;
   }
+  if (m.kind == MethodKind::linearly_implicit) return validate_rosenbrock(m);
   const auto& s = m.scheme;
   check(s.count >= 1 && s.count <= kMaxStages, m, "a scheme has 1.." + std::to_string(kMaxStages) + " operations");
   check(m.embedded_order == 0, m, "a kick-drift scheme has no embedded pair");

@@ -65,6 +65,9 @@ template <class Set>
 void FixedSteps<T>::check_events(const Set& b) const {
   if constexpr (!std::is_same_v<Set, ParticleSet<T>>) {
     throw Error("events are watched on particle sets only: step rigid bodies with a stepper without events");
+  } else if (core_.paths.implicit) {
+    throw Error("events are not watched under an implicit method (" + std::string(core_.method.name) +
+                "): use an explicit one, or a stepper without events");
   } else if (core_.paths.block || (core_.paths.fused_for(reads_per_body(b)) == nullptr && !core_.forces().fusable())) {
     throw Error("events are watched with built-in local terms only (any method): this model takes the " +
                 std::string(core_.paths.block ? "block" : "staged") + " path for its callbacks or coupled terms");
@@ -234,6 +237,10 @@ void FixedSteps<T>::run_block(Set& b, Block block, std::uint64_t steps, Guard* g
 
 template <class T>
 void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard) {
+  if (core_.paths.implicit) {
+    throw Error("implicit methods (" + std::string(core_.method.name) +
+                ") step particle sets only: step rigid bodies with an explicit method");
+  }
   const kernels::RigidFn<T> rigid_fn = core_.paths.rigid;
   const LoweredForces<T>& lowered = core_.lowered();
   core_.begin(h, lowered.rigid, b.parameters());
@@ -266,6 +273,14 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   StepContext<T> c = core_.start(b, h, lowered.particle, w);
   c.stop = stop_;
   const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(reads_per_body(b));
+  if (core_.paths.implicit) {
+    ImplicitPath<T>& path = *core_.paths.implicit;
+    path.reset_stats();
+    return run_steps(w, b, steps, guard, [&](double t0) {
+      c.t0 = t0;
+      path.step(c);
+    });
+  }
   if (core_.paths.block) {
     BlockPath<T>& path = *core_.paths.block;
     path.reserve(b.padded_size());

@@ -29,6 +29,12 @@ void check_reach(const CoupledForces<T>& coupled, const ParticleSet<T>& bodies) 
 
 template <class T>
 void check_clamp_limits(const StepperOptions& o) {
+  if (!(o.implicit_tolerance >= 0 && o.implicit_tolerance < 1)) {
+    throw Error("stepper options: implicit_tolerance must be in [0, 1), got " + shortest_text(o.implicit_tolerance));
+  }
+  if (o.implicit_max_iterations < 1) {
+    throw Error("stepper options: implicit_max_iterations must be >= 1, got " + std::to_string(o.implicit_max_iterations));
+  }
   if (o.guard != FiniteGuard::clamp) return;
   for (const auto& [name, value] : {std::pair{"max_speed", o.max_speed},
                                     std::pair{"max_angular_speed", o.max_angular_speed}}) {

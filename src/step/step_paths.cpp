@@ -7,7 +7,7 @@ namespace kinema {
 
 template <class T>
 std::size_t StepPaths<T>::particle_capacity() const {
-  return staged ? staged->capacity() : block ? block->capacity() : 0;
+  return staged ? staged->capacity() : block ? block->capacity() : implicit ? implicit->capacity() : 0;
 }
 
 // A point spring's force turns with the body: the fused rigid kernels, which step the centre
@@ -20,11 +20,17 @@ bool has_point_springs(const ForceModel<T>& f) {
 
 template <class T>
 StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const kernels::KernelTable<T>& table,
-                         bool force_staged, PathCapacity capacity) {
+                         const StepperOptions& options, PathCapacity capacity) {
   StepPaths<T> paths;
   paths.lowered = std::make_unique<LoweredForces<T>>(lower_forces<T>(f.local_terms()));
   paths.lowered->coupled = lower_coupled<T>(f);
   const LoweredForces<T>& l = *paths.lowered;
+  if (method.kind == MethodKind::linearly_implicit) {  // particles only: rigid sets are refused
+    paths.implicit = std::make_unique<ImplicitPath<T>>(f, method, table, l, options);
+    paths.implicit->reserve(capacity.particles);
+    return paths;
+  }
+  const bool force_staged = options.force_staged;
   const int quad = l.particle.has_quadratic();
   const int builtin = builtin_index(method);
   // Rigid bodies ignore particle callbacks, as particles ignore rigid ones (and point springs
@@ -52,8 +58,8 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
 
 #define KINEMA_STEP_PATHS(T)                                                                                    \
   template struct StepPaths<T>;                                                                                \
-  template StepPaths<T> build_paths(const ForceModel<T>&, const Method&, const kernels::KernelTable<T>&, bool,  \
-                                    PathCapacity);
+  template StepPaths<T> build_paths(const ForceModel<T>&, const Method&, const kernels::KernelTable<T>&,        \
+                                    const StepperOptions&, PathCapacity);
 KINEMA_STEP_PATHS(float)
 KINEMA_STEP_PATHS(double)
 #undef KINEMA_STEP_PATHS

@@ -13,6 +13,7 @@
 #include "kinema/forces.hpp"
 #include "kinema/methods.hpp"
 #include "step/block_path.hpp"
+#include "step/implicit_path.hpp"
 #include "step/rigid_block_path.hpp"
 #include "step/staged_path.hpp"
 
@@ -26,6 +27,7 @@ struct StepPaths {
   std::unique_ptr<BlockPath<T>> block;        // particles: callbacks, a built-in method, no coupling
   std::unique_ptr<StagedPath<T>> staged;      // particles otherwise
   std::unique_ptr<StagedPath<T>> probe;       // evaluates accelerations alone (made on demand)
+  std::unique_ptr<ImplicitPath<T>> implicit;  // particles under an implicit method
   kernels::RigidFn<T> rigid = nullptr;        // rigid bodies, when the fused path applies
   std::unique_ptr<RigidBlockPath<T>> rigid_block;  // rigid bodies otherwise
   std::unique_ptr<RigidBlockPath<T>> rigid_probe;  // evaluates rigid rates alone (made on demand)
@@ -46,6 +48,6 @@ struct PathCapacity {
 // parameters that overflow T.
 template <class T>
 StepPaths<T> build_paths(const ForceModel<T>& forces, const Method& method, const kernels::KernelTable<T>& table,
-                         bool force_staged, PathCapacity capacity);
+                         const StepperOptions& options, PathCapacity capacity);
 
 }  // namespace kinema

@@ -19,7 +19,7 @@
 namespace kinema {
 
 // Kinds of call that cost differently per body-step: each has its own worker timings.
-enum class StepperCall : std::uint64_t { fused, staged, rigid, adaptive, accelerations };
+enum class StepperCall : std::uint64_t { fused, staged, rigid, adaptive, accelerations, implicit };
 
 template <class T>
 struct Stepper<T>::Impl {
@@ -30,6 +30,7 @@ struct Stepper<T>::Impl {
         fixed(core) {}
 
   StepperCall kind_of(const ParticleSet<T>&) const {
+    if (core.paths.implicit) return StepperCall::implicit;
     return core.paths.fused ? StepperCall::fused : StepperCall::staged;
   }
   StepperCall kind_of(const RigidBodySet<T>&) const { return StepperCall::rigid; }
@@ -286,6 +287,7 @@ void Stepper<T>::reserve(std::size_t bodies) {
   if (impl_->core.paths.staged) impl_->core.paths.staged->reserve(padded_count<T>(bodies));
   if (impl_->core.paths.rigid_block) impl_->core.paths.rigid_block->reserve(padded_count<T>(bodies));
   if (impl_->core.paths.block) impl_->core.paths.block->reserve(padded_count<T>(bodies));
+  if (impl_->core.paths.implicit) impl_->core.paths.implicit->reserve(padded_count<T>(bodies));
   impl_->fixed.reserve_blocks(padded_count<T>(bodies));
 }
 
@@ -296,7 +298,8 @@ std::size_t Stepper<T>::scratch_bytes() const {
   const std::size_t probe = core.paths.probe ? core.paths.probe->bytes() : 0;
   const std::size_t rigid = (core.paths.rigid_block ? core.paths.rigid_block->bytes() : 0) +
                             (core.paths.rigid_probe ? core.paths.rigid_probe->bytes() : 0);
-  const std::size_t block = core.paths.block ? core.paths.block->bytes() : 0;
+  const std::size_t block = (core.paths.block ? core.paths.block->bytes() : 0) +
+                            (core.paths.implicit ? core.paths.implicit->bytes() : 0);
   return staged + probe + rigid + block + core.lowered().coupled.springs.bytes() + impl_->fixed.checkpoint_bytes();
 }
 
@@ -319,6 +322,13 @@ const std::vector<EventHit<T>>& Stepper<T>::event_hits() const {
 template <class T>
 bool Stepper<T>::stopped_at_event() const {
   return impl_->fixed.events().stop_time().has_value();
+}
+
+template <class T>
+const ImplicitStats& Stepper<T>::implicit_stats() const {
+  static const ImplicitStats none;
+  const auto& implicit = impl_->core.paths.implicit;
+  return implicit ? implicit->stats() : none;
 }
 
 template <class T>

@@ -19,7 +19,7 @@ template <class T>
 void StepperCore<T>::use(std::shared_ptr<const ForceModel<T>> f) {
   if (!f) throw Error("stepper: null force model");
   const PathCapacity capacity{paths.particle_capacity(), paths.rigid_capacity()};
-  StepPaths<T> fresh = build_paths(*f, method, *table, options.force_staged, capacity);
+  StepPaths<T> fresh = build_paths(*f, method, *table, options, capacity);
   paths = std::move(fresh);
   forces_ = std::move(f);
 }

@@ -1,0 +1,233 @@
+// Implicit methods: backward Euler to round-off on a linear spring, orders 1 and 2 on a spring
+// chain's normal mode and under an explicit drag, stability far past the explicit limits,
+// the same bits on every thread count and ISA, a throw taken back, and refused uses.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+#include <vector>
+
+#include "kinema/stability.hpp"
+#include "support.hpp"
+#include "thread_pool.hpp"
+
+using namespace kinema;
+
+namespace {
+
+StepperOptions tight(double tolerance = 1e-13) {
+  StepperOptions o = test::serial_options();
+  o.implicit_tolerance = tolerance;
+  return o;
+}
+
+// n free bodies of mass m on the x axis between two fixed ends, springs k of rest length 1;
+// mode `mode` displaced by `amplitude`, at rest. Motion stays on the axis, where the springs
+// are exactly linear.
+struct Chain {
+  ParticleSet<double> bodies;
+  ForceModel<double> forces;
+  std::uint32_t n;
+  double omega, amplitude;
+  int mode;
+
+  double shape(std::uint32_t i) const {
+    return std::sin(double(i) * mode * std::numbers::pi / double(n + 1));
+  }
+  // Body i's exact position at time t (undamped).
+  double exact(std::uint32_t i, double t) const { return double(i) + amplitude * shape(i) * std::cos(omega * t); }
+};
+
+Chain chain(std::uint32_t n, double k, double m, int mode, double amplitude, double drag = 0) {
+  Chain c{{}, {}, n, 2 * std::sqrt(k / m) * std::sin(mode * std::numbers::pi / (2.0 * (n + 1))), amplitude, mode};
+  c.bodies.add_kinematic({0, 0, 0});
+  Springs springs;
+  for (std::uint32_t i = 1; i <= n; ++i) {
+    c.bodies.add({double(i) + amplitude * c.shape(i), 0, 0}, {0, 0, 0}, m);
+    springs.pairs.push_back({i - 1, i, 1, k, 0});
+  }
+  c.bodies.add_kinematic({double(n + 1), 0, 0});
+  springs.pairs.push_back({n, n + 1, 1, k, 0});
+  c.forces.add(springs);
+  if (drag > 0) c.forces.add(LinearDrag{drag});
+  return c;
+}
+
+double worst_error(const ParticleSet<double>& got, const std::vector<double>& want) {
+  double worst = 0;
+  for (std::size_t i = 0; i < want.size(); ++i) worst = std::max(worst, std::abs(got.position(i)[0] - want[i]));
+  return worst;
+}
+
+// The chain's error at t_end against the normal mode, for each step count.
+std::vector<double> mode_errors(const Method& method, const std::vector<int>& counts, double t_end) {
+  std::vector<double> errors;
+  for (int steps : counts) {
+    Chain c = chain(8, 100, 1, 2, 0.01);
+    Stepper<double> s(c.forces, method, tight());
+    s.advance(c.bodies, t_end / steps, std::uint64_t(steps));
+    std::vector<double> want;
+    for (std::uint32_t i = 0; i < c.bodies.size(); ++i) want.push_back(c.bodies.inv_mass()[i] == 0 ? c.bodies.position(i)[0] : c.exact(i, t_end));
+    errors.push_back(worst_error(c.bodies, want));
+  }
+  return errors;
+}
+
+std::vector<double> step_sizes(const std::vector<int>& counts, double t_end) {
+  std::vector<double> h;
+  for (int n : counts) h.push_back(t_end / n);
+  return h;
+}
+
+}  // namespace
+
+TEST_CASE("implicit_euler is backward Euler on a linear spring, to round-off", "[implicit]") {
+  // A zero-rest-length spring pulls with k d in every direction: the step is the solution of
+  // v1 = v0 - h k/m x1, x1 = x0 + h v1.
+  const double k = 400, m = 2, h = 0.1;  // h sqrt(k/m) = 1.4: past Euler's limit
+  ParticleSet<double> b;
+  b.add_kinematic({0, 0, 0});
+  b.add({0.3, -0.2, 0.5}, {1, 2, -0.5}, m);
+  ForceModel<double> f;
+  f.add(Springs{{{0, 1, 0, k, 0}}});
+  Stepper<double> s(f, implicit_euler, tight());
+  double x[3] = {0.3, -0.2, 0.5}, v[3] = {1, 2, -0.5};
+  for (int step = 0; step < 20; ++step) {
+    s.step(b, h);
+    for (int d = 0; d < 3; ++d) {
+      x[d] = (x[d] + h * v[d]) / (1 + h * h * k / m);
+      v[d] = v[d] - h * k / m * x[d];
+      CHECK(b.position(1)[d] == Approx(x[d]).epsilon(1e-12).margin(1e-15));
+      CHECK(b.velocity(1)[d] == Approx(v[d]).epsilon(1e-12).margin(1e-15));
+    }
+  }
+  CHECK(s.implicit_stats().solves == 1);
+  CHECK(s.implicit_stats().unconverged == 0);
+}
+
+TEST_CASE("implicit methods converge at their orders on a spring chain's normal mode", "[implicit]") {
+  const std::vector<int> counts{200, 400, 800, 1600};
+  const double t_end = 1;
+  const auto h = step_sizes(counts, t_end);
+  CHECK(test::fitted_order(h, mode_errors(implicit_euler, counts, t_end)) == Approx(1).margin(0.1));
+  CHECK(test::fitted_order(h, mode_errors(ros2, counts, t_end)) == Approx(2).margin(0.1));
+}
+
+TEST_CASE("implicit methods keep their orders with an explicit drag beside the springs", "[implicit]") {
+  // The drag is left out of the Jacobian: ROS2 is a W-method and stays second order.
+  const double t_end = 1;
+  Chain ref = chain(8, 100, 1, 2, 0.01, 0.7);
+  Stepper<double>(ref.forces, rk4, test::serial_options()).advance(ref.bodies, 1e-4, 10000);
+  std::vector<double> want;
+  for (std::size_t i = 0; i < ref.bodies.size(); ++i) want.push_back(ref.bodies.position(i)[0]);
+  const std::vector<int> counts{200, 400, 800, 1600};
+  for (const Method* m : {&implicit_euler, &ros2}) {
+    std::vector<double> errors;
+    for (int steps : counts) {
+      Chain c = chain(8, 100, 1, 2, 0.01, 0.7);
+      Stepper<double>(c.forces, *m, tight()).advance(c.bodies, t_end / steps, std::uint64_t(steps));
+      errors.push_back(worst_error(c.bodies, want));
+    }
+    CHECK(test::fitted_order(step_sizes(counts, t_end), errors) == Approx(m->order).margin(0.1));
+  }
+}
+
+TEST_CASE("implicit methods hold far past the explicit stability limit", "[implicit]") {
+  // h omega_max = 39: rk4 (limit 2.83) blows up; both implicit methods lose energy.
+  Chain start = chain(16, 1e6, 1, 1, 0.01);
+  const double h = 0.02;
+  CHECK(std::isinf(largest_stable_step(implicit_euler, {2 * std::sqrt(1e6), std::numbers::pi / 2})));
+  CHECK(std::isinf(stability_limits(ros2).imaginary_axis));
+  CHECK(std::isinf(stability_limits(ros2).real_axis));
+  {
+    Chain c = start;
+    Stepper<double>(c.forces, rk4, test::serial_options()).advance(c.bodies, h, 50);
+    CHECK_FALSE(all_finite(c.bodies));
+  }
+  for (const Method* m : {&implicit_euler, &ros2}) {
+    Chain c = start;
+    Stepper<double> s(c.forces, *m, test::serial_options());
+    double worst = 0;
+    for (int k = 0; k < 100; ++k) {
+      s.step(c.bodies, h);
+      for (std::uint32_t i = 1; i <= 16; ++i) worst = std::max(worst, std::abs(c.bodies.position(i)[0] - i));
+    }
+    CHECK(worst <= 0.01 * 1.0000001);
+  }
+}
+
+TEST_CASE("implicit steps of a cloth are the same bits on every thread count, job system and ISA", "[implicit]") {
+  const Scene scene = load_scene(std::string(KINEMA_SCENES) + "/cloth.json");
+  const ForceModel<float> forces = make_forces<float>(scene);
+  const auto run = [&](const Method& m, StepperOptions o) {
+    ParticleSet<float> b = make_particles<float>(scene);
+    Stepper<float> s(forces, m, o);
+    s.advance(b, 1.0f / 60, 12);
+    CHECK(all_finite(b));
+    CHECK(s.implicit_stats().solves == std::uint64_t(12 * m.rosenbrock.stages));
+    CHECK(s.implicit_stats().unconverged == 0);
+    return test::state_hash(b);
+  };
+  for (const Method* m : {&implicit_euler, &ros2}) {
+    const std::uint64_t serial = run(*m, test::serial_options());
+    test::ThreadPool pool(2);
+    StepperOptions pooled;
+    pooled.jobs = &pool;
+    pooled.workers = WorkerChoice::all;
+    CHECK(run(*m, pooled) == serial);
+    StepperOptions tbb;
+    tbb.threads = 2;
+    tbb.workers = WorkerChoice::all;
+    CHECK(run(*m, tbb) == serial);
+    for (Isa isa : {Isa::scalar, Isa::sse2}) CHECK(run(*m, test::serial_options(isa)) == serial);
+  }
+}
+
+TEST_CASE("a throw inside an implicit step leaves the set as before that step", "[implicit]") {
+  Chain c = chain(8, 100, 1, 2, 0.01);
+  int calls = 0;
+  c.forces.add(ForceCallback<double>([&](const ParticleBlock<double>&) {
+    if (++calls == 4) throw std::runtime_error("boom");  // step 2's second stage
+  }));
+  Stepper<double> s(c.forces, ros2, test::serial_options());
+  s.step(c.bodies, 0.01);
+  const std::uint64_t before = test::state_hash(c.bodies);
+  CHECK_THROWS_WITH(s.advance(c.bodies, 0.01, 3), "boom");
+  CHECK(test::state_hash(c.bodies) == before);
+  CHECK(s.time() == Approx(0.01));
+}
+
+TEST_CASE("kinematic bodies move on their own under an implicit method", "[implicit]") {
+  Chain c = chain(4, 100, 1, 1, 0.01);
+  c.bodies.set_velocity(0, {0.5, 0, 0});
+  Stepper<double> s(c.forces, implicit_euler, test::serial_options());
+  s.advance(c.bodies, 0.1, 10);
+  CHECK(c.bodies.position(0)[0] == Approx(0.5).epsilon(1e-15));
+  CHECK(c.bodies.velocity(0)[0] == 0.5);
+  CHECK(c.bodies.position(5)[0] == 5);
+}
+
+TEST_CASE("implicit methods refuse rigid bodies, events and bad options", "[implicit]") {
+  ForceModel<float> f;
+  f.add(Gravity{{0, -9.81, 0}});
+  Stepper<float> s(f, ros2, test::serial_options());
+  RigidBodySet<float> rigid;
+  rigid.add(RigidBodyDesc<float>{});
+  CHECK_THROWS_WITH(s.step(rigid, 0.01f), Catch::Contains("particle sets only"));
+  ParticleSet<float> b;
+  b.add({0, 1, 0}, {0, 0, 0}, 1);
+  EventOptions<float> events;
+  events.events.push_back(Event<float>{});  // the plane y = 0
+  s.set_events(events);
+  CHECK_THROWS_WITH(s.step(b, 0.01f), Catch::Contains("implicit method"));
+  CHECK(b.position(0)[1] == 1);
+  StepperOptions bad;
+  bad.implicit_max_iterations = 0;
+  CHECK_THROWS_WITH(Stepper<float>(f, ros2, bad), Catch::Contains("implicit_max_iterations"));
+  bad = {};
+  bad.implicit_tolerance = 1;
+  CHECK_THROWS_WITH(Stepper<float>(f, ros2, bad), Catch::Contains("implicit_tolerance"));
+  CHECK(&method_by_name("implicit_euler") == &implicit_euler);
+  CHECK(&method_by_name("ros2") == &ros2);
+}
