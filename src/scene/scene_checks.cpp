@@ -205,6 +205,10 @@ RunBytes run_bytes(const Scene& scene) {
     for (const Springs& network : scene.springs) pairs += double(network.pairs.size());
     pairs += 2 * double(scene.body_springs.springs.size());
     r.springs = pairs * (kSpringCopies + 2 * 1.5 * (4 + 3 * sizeof(T)) + 2 * 1.5 * (4 + 3 * sizeof(double)));
+    if (method.kind == MethodKind::linearly_implicit) {  // ImplicitPath: 46 arrays a body, 5 a slot
+      r.scratch += n * 46 * sizeof(T);
+      r.springs += pairs * 2 * 1.5 * 5 * sizeof(T);
+    }
   }
   r.state *= kMargin, r.scratch *= kMargin, r.springs *= kMargin;
   return r;
@@ -224,6 +228,11 @@ void check_scene(const Scene& scene) {
   const ForceModel<T> forces = make_forces<T>(scene);
   // Lowering the forces to T checks their sums; auto picks its own dt later.
   const Method& method = scene.method == "auto" ? rk4 : method_by_name(scene.method);
+  const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
+  if (method.kind == MethodKind::linearly_implicit && (rigid || !scene.events.empty())) {
+    throw Error("method: " + std::string(method.name) + " (implicit) steps particles without events: this scene has " +
+                (rigid ? "rigid bodies" : "events"));
+  }
   std::optional<Stepper<T>> stepper;
   try {
     stepper.emplace(forces, method, on_calling_thread());

@@ -651,3 +651,20 @@ TEST_CASE("run writes the scene's events to events.csv beside the trajectory; a 
   CHECK(bad.code != 0);
   CHECK(bad.err.find("events[0].normal") != std::string::npos);
 }
+
+TEST_CASE("run: the cloth at 60 Hz blows up under rk4, which names the implicit methods, and holds under them",
+          "[cli][implicit]") {
+  const std::string at_60_hz = " -q --dt 0.016666666666666666 --steps 30";
+  const Result explicit_run = kinema_cli("run " + scene("cloth.json") + at_60_hz + " --method rk4");
+  CHECK(explicit_run.code == 3);
+  CHECK(explicit_run.err.find("past the largest stable step of rk4") != std::string::npos);
+  CHECK(explicit_run.err.find("--method implicit_euler or ros2") != std::string::npos);
+  for (const char* method : {"implicit_euler", "ros2"}) {
+    const Result r = kinema_cli("run " + scene("cloth.json") + at_60_hz + " --method " + method);
+    CHECK(r.code == 0);
+    CHECK(r.err.empty());  // no warning: the method holds at this step
+  }
+  const Result rigid = kinema_cli("run " + scene("box_chain.json") + " -q --steps 2 --method ros2");
+  CHECK(rigid.code != 0);
+  CHECK(rigid.err.find("ros2 (implicit) steps particles without events: this scene has rigid bodies") != std::string::npos);
+}

@@ -193,12 +193,17 @@ void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessE
   if (!(scene.dt > stable)) return;
   const double log_growth = double(scene.steps) * std::log(growth_per_step(method_by_name(scene.method), e, scene.dt));
   if (!(log_growth > std::log(2.0))) return;
-  char text[400];
+  // Springs are what the implicit methods take implicitly: name them where they would hold.
+  const bool springs = !scene.springs.empty() && scene.rigid_bodies.empty();
+  char text[500];
   std::snprintf(text, sizeof text,
                 "dt %g is past the largest stable step of %s on this scene, %.3g: its fastest mode (%s at "
-                "|lambda| = %.4g /s) grows %.3g-fold over the run",
+                "|lambda| = %.4g /s) grows %.3g-fold over the run%s",
                 scene.dt, scene.method.c_str(), stable, mode_name(e).c_str(), e.magnitude,
-                std::exp(std::min(log_growth, 700.0)));
+                std::exp(std::min(log_growth, 700.0)),
+                springs ? " (an implicit method holds at this step where the springs are the stiff part: "
+                          "--method implicit_euler or ros2)"
+                        : "");
   if (o.strict) throw Error(o.scene_path + ": " + text + " (--strict)");
   // Not silenced by --quiet: it says the result may be worthless.
   std::fprintf(stderr, "kinema: warning: %s\n", printable(text).c_str());
