@@ -44,6 +44,30 @@ void print_cloth_line(const Results& results, Noise& noise) {
               results.value(cloth + "2/512/real_time", "ns_per_spring", "%.3f").c_str());
 }
 
+// Implicit frames of the 256 x 256 cloth against Verlet at its stable step, and one CG
+// iteration against in-place streaming over its working set.
+void print_implicit_lines(const Results& results, Noise& noise) {
+  const auto run = [](const std::string& m) { return "implicit/cloth/" + m + "/256/real_time"; };
+  const auto verlet = results.find(run("velocity_verlet"), "s_per_simulated_s");
+  if (!verlet) return;
+  noise.add(verlet->cv);
+  std::printf("Stiff cloth 256 x 256 (|lambda| ~ 1790/s), float, 1 thread, seconds per simulated second: "
+              "velocity Verlet at its stable step %.3f (%s steps a frame)",
+              verlet->median, results.value(run("velocity_verlet"), "steps_per_frame", "%.0f").c_str());
+  for (const std::string m : {"implicit_euler", "ros2"}) {
+    const auto frames = results.find(run(m), "s_per_simulated_s");
+    if (!frames) continue;
+    noise.add(frames->cv);
+    const auto bw = ratio(results.find(run(m), "GB_per_s"), results.find(stream_run(702171, 1), "GB_per_s"));
+    std::printf("; %s at dt 1/60 %.3f (%s, %s CG iterations a frame, one at %s ns a body, %s of in-place "
+                "streaming over its 19.7 MB)",
+                m.c_str(), frames->median, cell(ratio(frames, verlet), "%.1fx").c_str(),
+                results.value(run(m), "cg_per_frame", "%.0f").c_str(),
+                results.value(run(m), "ns_per_body_iteration", "%.1f").c_str(), cell(percent(bw), "%.0f%%").c_str());
+  }
+  std::printf("\n");
+}
+
 }  // namespace
 
 void print_coupled_table(const Results& results, Noise& noise) {
@@ -59,6 +83,7 @@ void print_coupled_table(const Results& results, Noise& noise) {
               "%s / %s the exact float kernel's interactions per second (N = 4096 / 16384, 1 thread).\n",
               fast_ratio(results, 4096).c_str(), fast_ratio(results, 16384).c_str());
   print_cloth_line(results, noise);
+  print_implicit_lines(results, noise);
 }
 
 }  // namespace kinema::bench::report

@@ -100,7 +100,7 @@ struct StepperClock {
   double proposed_step = 0;
 };
 
-// What the last step() or advance() call of an implicit method solved.
+// What an implicit method's steps solved since the stepper was made (or took a new model).
 struct ImplicitStats {
   std::uint64_t solves = 0;      // linear systems (one per stage per step)
   std::uint64_t iterations = 0;  // conjugate-gradient iterations over all of them
@@ -224,8 +224,8 @@ class Stepper {
   const std::vector<EventHit<T>>& event_hits() const;
   // Whether the last call ended at a stop event: the set and time() are at its time.
   bool stopped_at_event() const;
-  // An implicit method's linear solves in the last step() or advance() call (all zero for
-  // other methods).
+  // An implicit method's linear solves since the stepper was made or took a new model (all
+  // zero for other methods).
   const ImplicitStats& implicit_stats() const;
 
   // Simulated time: origin + steps_since_origin * h. Changing h moves the origin.

@@ -275,7 +275,6 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
   const kernels::FusedFn<T> fused_fn = core_.paths.fused_for(reads_per_body(b));
   if (core_.paths.implicit) {
     ImplicitPath<T>& path = *core_.paths.implicit;
-    path.reset_stats();
     return run_steps(w, b, steps, guard, [&](double t0) {
       c.t0 = t0;
       path.step(c);

@@ -41,9 +41,8 @@ class ImplicitPath {
   std::size_t bytes() const;
   // One step. Whatever throws (a callback, a stop request) leaves the bodies as they were.
   void step(const StepContext<T>& c);
-  // Counts since the last reset (a call starts).
+  // Counts since the path was made.
   const ImplicitStats& stats() const { return stats_; }
-  void reset_stats() { stats_ = {}; }
 
  private:
   using Vec3s = std::array<AlignedArray<T>, 3>;

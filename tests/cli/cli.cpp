@@ -659,11 +659,29 @@ TEST_CASE("run: the cloth at 60 Hz blows up under rk4, which names the implicit 
   CHECK(explicit_run.code == 3);
   CHECK(explicit_run.err.find("past the largest stable step of rk4") != std::string::npos);
   CHECK(explicit_run.err.find("--method implicit_euler or ros2") != std::string::npos);
-  for (const char* method : {"implicit_euler", "ros2"}) {
-    const Result r = kinema_cli("run " + scene("cloth.json") + at_60_hz + " --method " + method);
+  const fs::path summary = work_dir() / "implicit_summary.json";
+  for (const std::string method : {"implicit_euler", "ros2"}) {
+    const Result r = kinema_cli("run " + scene("cloth.json") + at_60_hz + " --method " + method + " --summary " +
+                                summary.string());
     CHECK(r.code == 0);
     CHECK(r.err.empty());  // no warning: the method holds at this step
+    const auto j = nlohmann::json::parse(read(summary));
+    CHECK(j["linear_solves"] == (method == "ros2" ? 60 : 30));
+    CHECK(j["cg_iterations"].get<int>() >= j["linear_solves"].get<int>());  // a solve takes one at least
+    CHECK(j["cg_unconverged"] == 0);
+    CHECK(j["finite"] == true);
   }
+  // A looser solve: fewer iterations, other bits.
+  const auto crc = [&](const std::string& options) {
+    REQUIRE(kinema_cli("run " + scene("cloth.json") + at_60_hz + " --method ros2 --summary " + summary.string() +
+                       options).code == 0);
+    const auto j = nlohmann::json::parse(read(summary));
+    return std::pair(j["state_crc32c"].get<std::string>(), j["cg_iterations"].get<int>());
+  };
+  const auto tight = crc(""), loose = crc(" --implicit-tolerance 1e-2");
+  CHECK(loose.first != tight.first);
+  CHECK(loose.second < tight.second);
+  CHECK(crc(" --implicit-iterations 5").second == 5 * 60);
   const Result rigid = kinema_cli("run " + scene("box_chain.json") + " -q --steps 2 --method ros2");
   CHECK(rigid.code != 0);
   CHECK(rigid.err.find("ros2 (implicit) steps particles without events: this scene has rigid bodies") != std::string::npos);

@@ -110,6 +110,13 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_option("--threads", o.threads,
                   "Worker threads (0: all cores; more than the machine has are not started)")
       ->transform(decimal(0, 1024));
+  run->add_option("--implicit-tolerance", o.implicit_tolerance,
+                  "Implicit methods: each linear solve stops at this residual relative to its right side "
+                  "(default 1e-5 in float, 1e-10 in double)")
+      ->check(CLI::Range(1e-300, 0.5));
+  run->add_option("--implicit-iterations", o.implicit_iterations,
+                  "Implicit methods: the most conjugate-gradient iterations a solve takes (default 1000)")
+      ->check(CLI::Range(1, 1 << 30));
   run->add_flag("--relaxed-fma", o.relaxed_fma,
                 "Scalar and SSE2 paths: multiply then add instead of an exact fused "
                 "multiply-add (faster without an FMA unit; results then differ in the last "

@@ -220,6 +220,8 @@ StepperOptions stepper_options(const RunOptions& o) {
   // More threads than the machine has would only wait on each other (and make oneTBB warn).
   options.threads = std::min(o.threads == 0 ? hardware_threads() : o.threads, hardware_threads());
   options.relaxed_fma = o.relaxed_fma;
+  options.implicit_tolerance = o.implicit_tolerance.value_or(options.implicit_tolerance);
+  options.implicit_max_iterations = o.implicit_iterations.value_or(options.implicit_max_iterations);
   return options;
 }
 
@@ -376,14 +378,24 @@ std::optional<double> final_energy(const World<T>& world) {
   }
 }
 
+// The implicit solves' options where given (older runs' fingerprints stay as they were).
+std::string implicit_fingerprint(const RunOptions& o) {
+  if (!o.implicit_tolerance && !o.implicit_iterations) return "";
+  char text[100];
+  std::snprintf(text, sizeof text, " implicit_tolerance=%a implicit_iterations=%d", o.implicit_tolerance.value_or(0),
+                o.implicit_iterations.value_or(0));
+  return text;
+}
+
 // What the run's results depend on beyond the bodies: the scene file and the options that
 // change them (not --threads or --isa: every count and instruction set gives the same bits).
 std::string run_fingerprint(const RunOptions& o, const Scene& scene) {
-  char text[400];
+  char text[500];
   std::snprintf(text, sizeof text, "method=%s dt=%a steps=%llu precision=%d rtol=%a atol=%a tolerance=%a every=%llu "
-                "trajectory=%d relaxed=%d", scene.method.c_str(), scene.dt, static_cast<unsigned long long>(scene.steps),
+                "trajectory=%d relaxed=%d%s", scene.method.c_str(), scene.dt, static_cast<unsigned long long>(scene.steps),
                 int(scene.precision), scene.rtol.value_or(-1), scene.atol.value_or(-1), scene.tolerance.value_or(-1),
-                static_cast<unsigned long long>(o.every), int(!o.trajectory_path.empty()), int(o.relaxed_fma));
+                static_cast<unsigned long long>(o.every), int(!o.trajectory_path.empty()), int(o.relaxed_fma),
+                implicit_fingerprint(o).c_str());
   return fingerprint_of(o.scene_path, text);
 }
 
@@ -598,6 +610,13 @@ void describe_cost(nlohmann::ordered_json& summary, const World<T>& world, const
                    double initial_energy, Precision p) {
   summary["force_evaluations"] = plan.tolerances ? s.adaptive.evaluations
                                                  : s.done * std::uint64_t(world.main_stepper().method().evaluations());
+  const ImplicitStats& implicit = world.main_stepper().implicit_stats();
+  if (world.main_stepper().method().kind == MethodKind::linearly_implicit) {
+    summary["linear_solves"] = implicit.solves;
+    summary["cg_iterations"] = implicit.iterations;
+    summary["cg_iterations_max"] = implicit.max_iterations;
+    summary["cg_unconverged"] = implicit.unconverged;
+  }
   summary["stiffness"] = plan.estimated ? number(measured(plan.stiffness.magnitude)) : nlohmann::ordered_json();
   if (std::isfinite(plan.stable_step)) summary["largest_stable_step"] = number(measured(plan.stable_step));
   summary["wall_seconds"] = number(measured(s.wall_seconds));

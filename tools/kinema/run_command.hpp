@@ -25,6 +25,8 @@ struct RunOptions {
   Isa isa = Isa::automatic;
   unsigned threads = 0;         // 0: all hardware threads
   bool relaxed_fma = false;     // scalar and SSE2 paths: multiply then add
+  std::optional<double> implicit_tolerance;  // implicit methods' linear solves (StepperOptions)
+  std::optional<int> implicit_iterations;
   bool quiet = false;
   bool strict = false;          // a dt past the largest stable step is an error, not a warning
   CheckpointOptions checkpoint;
