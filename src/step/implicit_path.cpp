@@ -138,41 +138,24 @@ void ImplicitPath<T>::build_jacobian(const StepContext<T>& c) {
   });
 }
 
-// Slice by slice, the slice's own values and sums in local arrays and each entry's other
-// ends gathered into one: loops over the lanes that the compiler can vectorize (the same
-// operations in the same order per body as one at a time, so the same bits).
 template <class T>
-void ImplicitPath<T>::product(Block b, const T* const p[3], T* const out[3], T cm, T sc, T sk) const {
-  for (std::size_t first = b.begin; first < b.end; first += kSpringSlice) {
-    const std::size_t lanes = std::min(kSpringSlice, b.end - first);
-    alignas(64) T own[3][kSpringSlice], sum[3][kSpringSlice], other[3][kSpringSlice];
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t l = 0; l < lanes; ++l) own[d][l] = p[d][first + l], sum[d][l] = cm * mass_[first + l] * own[d][l];
-    }
-    const std::size_t slice = first / kSpringSlice;
-    const std::size_t entries_end = first < net_.covered ? net_.slice_offset[slice + 1] : 0;
-    for (std::size_t e = first < net_.covered ? net_.slice_offset[slice] : 0; e < entries_end; ++e) {
-      // An empty slot joins a body to itself with no stiffness: it adds nothing.
-      const std::size_t at = e * kSpringSlice;
-      for (std::size_t l = 0; l < lanes; ++l) {
-        const std::size_t j = std::size_t(net_.neighbor[at + l]);
-        for (int d = 0; d < 3; ++d) other[d][l] = p[d][j];
-      }
-      const T *ux = unit_[0].data() + at, *uy = unit_[1].data() + at, *uz = unit_[2].data() + at;
-      const T *damping = net_.damping.data() + at, *along_k = k_along_.data() + at, *across_k = k_across_.data() + at;
-      for (std::size_t l = 0; l < lanes; ++l) {
-        const T dx = other[0][l] - own[0][l], dy = other[1][l] - own[1][l], dz = other[2][l] - own[2][l];
-        const T along = ux[l] * dx + uy[l] * dy + uz[l] * dz;
-        const T s = (sc * damping[l] + sk * along_k[l]) * along, across = sk * across_k[l];
-        sum[0][l] += s * ux[l] + across * dx;
-        sum[1][l] += s * uy[l] + across * dy;
-        sum[2][l] += s * uz[l] + across * dz;
-      }
-    }
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t l = 0; l < lanes; ++l) out[d][first + l] = mass_[first + l] == 0 ? T(0) : sum[d][l];
-    }
-  }
+double ImplicitPath<T>::product(Block b, const T* const p[3], T* const out[3], T cm, T sc, T sk) const {
+  const kernels::SpringProductJob<T> job{{p[0], p[1], p[2]},
+                                         {out[0], out[1], out[2]},
+                                         mass_.data(),
+                                         net_.covered,
+                                         net_.slice_offset.data(),
+                                         net_.neighbor.data(),
+                                         net_.contiguous.data(),
+                                         net_.rest.data(),
+                                         {unit_[0].data(), unit_[1].data(), unit_[2].data()},
+                                         net_.damping.data(),
+                                         k_along_.data(),
+                                         k_across_.data(),
+                                         cm,
+                                         sc,
+                                         sk};
+  return kernels::spring_product(job, b.begin, b.end);
 }
 
 // The stage's state (the step's start moved by the earlier stages), the forces there, and
@@ -283,21 +266,15 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
       break;
     }
     if (c.stop != nullptr && (*c.stop)()) throw Stopped();
-    const double pq = sum_blocks(c, [&](Block b, double* sums) {
-      product(b, p, q, T(1), sc, sk);
-      for (std::size_t i = b.begin; i < b.end; ++i) {
-        for (int d = 0; d < 3; ++d) sums[0] += double(p_[d][i]) * double(q_[d][i]);
-      }
-    })[0];
-    const T alpha = T(rz / pq);
-    const auto [rz_next, rr_next] = sum_blocks(c, [&](Block b, double* sums) {
-      for (std::size_t i = b.begin; i < b.end; ++i) {
-        for (int d = 0; d < 3; ++d) {
-          x[d][i] += alpha * p_[d][i], r_[d][i] -= alpha * q_[d][i], z_[d][i] = inv_diag_[d][i] * r_[d][i];
-          sums[0] += double(r_[d][i]) * double(z_[d][i]), sums[1] += double(r_[d][i]) * double(r_[d][i]);
-        }
-      }
-    });
+    const double pq = sum_blocks(c, [&](Block b, double* sums) { sums[0] = product(b, p, q, T(1), sc, sk); })[0];
+    const kernels::CgUpdateJob<T> update{{x[0].data(), x[1].data(), x[2].data()},
+                                         {r_[0].data(), r_[1].data(), r_[2].data()},
+                                         {z_[0].data(), z_[1].data(), z_[2].data()},
+                                         {p[0], p[1], p[2]},
+                                         {q[0], q[1], q[2]},
+                                         {inv_diag_[0].data(), inv_diag_[1].data(), inv_diag_[2].data()},
+                                         T(rz / pq)};
+    const auto [rz_next, rr_next] = sum_blocks(c, [&](Block b, double* sums) { kernels::cg_update(update, b.begin, b.end, sums); });
     const T beta = T(rz_next / rz);
     rz = rz_next, rr = rr_next;
     if (rr <= goal) {

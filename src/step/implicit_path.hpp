@@ -19,6 +19,7 @@
 
 #include "forces/coupled_forces.hpp"
 #include "forces/force_lowering.hpp"
+#include "kernels/implicit_kernels.hpp"
 #include "kinema/bodies.hpp"
 #include "kinema/forces.hpp"
 #include "kinema/methods.hpp"
@@ -54,9 +55,9 @@ class ImplicitPath {
   void evaluate_stage(const StepContext<T>& c, int s);
   void solve_stage(const StepContext<T>& c, int s);
   void finish(const StepContext<T>& c);
-  // out = cm M p + sum over each body's springs of (sc damping + sk k_uu) u (u . dp) + sk k_I dp,
-  // dp = p_j - p_i; rows of bodies with inv_mass 0 get cm p.
-  void product(Block b, const T* const p[3], T* const out[3], T cm, T sc, T sk) const;
+  // The product out = (cm M + sc D + sk K) p over a block (kernels/implicit_kernels.hpp);
+  // returns p . out over the block.
+  double product(Block b, const T* const p[3], T* const out[3], T cm, T sc, T sk) const;
   void conjugate_gradients(const StepContext<T>& c, Vec3s& x);
   // Runs pass(block, sums) over every block, each adding two partial sums; returns their
   // totals, added in block order.

@@ -69,9 +69,29 @@ TEST_CASE("methods are found by name, and unknown names list the known ones", "[
     CHECK(builtin_index(*m) == -1);
     CHECK_NOTHROW(validate(*m));
   }
+  for (const Method* m : implicit_methods) {
+    CHECK(&method_by_name(m->name) == m);
+    CHECK(builtin_index(*m) == -1);
+    CHECK_NOTHROW(validate(*m));
+  }
   CHECK_THROWS_WITH(method_by_name("rk5"),
                     "unknown method 'rk5' (known: euler, midpoint, heun, rk4, "
-                    "symplectic_euler, velocity_verlet, bs3, dopri5, rk6)");
+                    "symplectic_euler, velocity_verlet, bs3, dopri5, rk6, implicit_euler, ros2)");
+}
+
+TEST_CASE("invalid Rosenbrock schemes are refused", "[methods][errors][implicit]") {
+  Method m = ros2;
+  m.rosenbrock.gamma = 0;
+  CHECK_THROWS_WITH(validate(m), Catch::Contains("gamma must be finite and > 0"));
+  m = ros2;
+  m.rosenbrock.c[0][1] = 1;
+  CHECK_THROWS_WITH(validate(m), Catch::Contains("strictly lower triangular"));
+  m = implicit_euler;
+  m.rosenbrock.m[1] = 0.5;
+  CHECK_THROWS_WITH(validate(m), Catch::Contains("beyond the last stage"));
+  m = ros2;
+  m.rosenbrock.stages = 3;
+  CHECK_THROWS_WITH(validate(m), Catch::Contains("1..2 stages"));
 }
 
 TEST_CASE("invalid user methods are refused", "[methods][errors]") {

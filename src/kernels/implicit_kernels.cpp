@@ -1,0 +1,132 @@
+// The implicit path's passes of implicit_kernels.hpp, cloned per instruction set with the
+// same operations in each (the library builds with -ffp-contract=off: no fused multiply-add
+// is formed, so every clone rounds as the baseline one does).
+#include "kernels/implicit_kernels.hpp"
+
+#include <algorithm>
+
+#include "kernels/cloned.hpp"
+#include "kernels/kernels.hpp"
+
+namespace kinema::kernels {
+namespace {
+
+constexpr std::size_t kLanes = kSpringSlice;
+
+// The other ends of one entry's lanes: consecutive bodies (read where they are), or gathered
+// into `gathered`. A masked run's empty lanes take the body itself, as the gathered layout
+// does (its slot's neighbour is the body): the same values either way.
+template <bool Full, class T>
+[[gnu::always_inline]] inline void other_ends(const SpringProductJob<T>& job, std::size_t entry, std::size_t lanes,
+                                              const T (&own)[3][kLanes], T (&gathered)[3][kLanes],
+                                              const T* (&other)[3]) {
+  const std::size_t n = Full ? kLanes : lanes;
+  const std::int32_t code = job.contiguous[entry];
+  const std::size_t at = entry * kLanes;
+  for (int d = 0; d < 3; ++d) other[d] = gathered[d];
+  if (code >= 0) {
+    for (int d = 0; d < 3; ++d) other[d] = job.p[d] + code;
+  } else if (code < -1) {
+    const std::size_t first = std::size_t(-code - 2);
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t l = 0; l < n; ++l) gathered[d][l] = job.rest[at + l] < 0 ? own[d][l] : job.p[d][first + l];
+    }
+  } else {
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t l = 0; l < n; ++l) gathered[d][l] = job.p[d][std::size_t(job.neighbor[at + l])];
+    }
+  }
+}
+
+template <bool Full, class T>
+[[gnu::always_inline]] inline void add_entry(const SpringProductJob<T>& job, std::size_t entry, std::size_t lanes,
+                                             const T (&own)[3][kLanes], const T* const (&other)[3],
+                                             T (&sum)[3][kLanes]) {
+  const std::size_t n = Full ? kLanes : lanes;
+  const std::size_t at = entry * kLanes;
+  const T *ux = job.unit[0] + at, *uy = job.unit[1] + at, *uz = job.unit[2] + at;
+  const T *damping = job.damping + at, *along_k = job.k_along + at, *across_k = job.k_across + at;
+  for (std::size_t l = 0; l < n; ++l) {
+    const T dx = other[0][l] - own[0][l], dy = other[1][l] - own[1][l], dz = other[2][l] - own[2][l];
+    const T along = ux[l] * dx + uy[l] * dy + uz[l] * dz;
+    const T s = (job.sc * damping[l] + job.sk * along_k[l]) * along, across = job.sk * across_k[l];
+    sum[0][l] += s * ux[l] + across * dx;
+    sum[1][l] += s * uy[l] + across * dy;
+    sum[2][l] += s * uz[l] + across * dz;
+  }
+}
+
+// One slice: its own values and sums in local arrays; p . out to a running sum per lane.
+template <bool Full, class T>
+[[gnu::always_inline]] inline void product_slice(const SpringProductJob<T>& job, std::size_t first, std::size_t lanes,
+                                                 double (&dots)[kLanes]) {
+  const std::size_t n = Full ? kLanes : lanes;
+  alignas(64) T own[3][kLanes], sum[3][kLanes], gathered[3][kLanes];
+  for (int d = 0; d < 3; ++d) {
+    for (std::size_t l = 0; l < n; ++l) own[d][l] = job.p[d][first + l], sum[d][l] = job.cm * job.mass[first + l] * own[d][l];
+  }
+  if (first < job.covered) {
+    const std::size_t slice = first / kLanes;
+    for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
+      const T* other[3];
+      other_ends<Full>(job, e, lanes, own, gathered, other);
+      add_entry<Full>(job, e, lanes, own, other, sum);
+    }
+  }
+  for (int d = 0; d < 3; ++d) {
+    for (std::size_t l = 0; l < n; ++l) {
+      const T value = job.mass[first + l] == 0 ? T(0) : sum[d][l];
+      job.out[d][first + l] = value;
+      dots[l] += double(own[d][l]) * double(value);
+    }
+  }
+}
+
+// Slice by slice (a set padded to less than a slice ends in a partial one); the lanes' sums
+// added in lane order at the end.
+template <class T>
+[[gnu::always_inline]] inline double product_of(const SpringProductJob<T>& job, std::size_t begin, std::size_t end) {
+  double dots[kLanes] = {};
+  std::size_t first = begin;
+  for (; first + kLanes <= end; first += kLanes) product_slice<true>(job, first, kLanes, dots);
+  if (first < end) product_slice<false>(job, first, end - first, dots);
+  double total = 0;
+  for (double x : dots) total += x;
+  return total;
+}
+
+template <class T>
+[[gnu::always_inline]] inline void update_of(const CgUpdateJob<T>& job, std::size_t begin, std::size_t end,
+                                             double sums[2]) {
+  double rz[kLanes] = {}, rr[kLanes] = {};
+  for (std::size_t first = begin; first < end; first += kLanes) {
+    const std::size_t lanes = std::min(kLanes, end - first);
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t l = 0; l < lanes; ++l) {
+        const std::size_t i = first + l;
+        job.x[d][i] += job.alpha * job.p[d][i];
+        const T r = job.r[d][i] - job.alpha * job.q[d][i], z = job.inv_diag[d][i] * r;
+        job.r[d][i] = r, job.z[d][i] = z;
+        rz[l] += double(r) * double(z), rr[l] += double(r) * double(r);
+      }
+    }
+  }
+  for (std::size_t l = 0; l < kLanes; ++l) sums[0] += rz[l], sums[1] += rr[l];
+}
+
+}  // namespace
+
+KINEMA_CLONED double spring_product(const SpringProductJob<float>& job, std::size_t begin, std::size_t end) {
+  return product_of(job, begin, end);
+}
+KINEMA_CLONED double spring_product(const SpringProductJob<double>& job, std::size_t begin, std::size_t end) {
+  return product_of(job, begin, end);
+}
+KINEMA_CLONED void cg_update(const CgUpdateJob<float>& job, std::size_t begin, std::size_t end, double sums[2]) {
+  update_of(job, begin, end, sums);
+}
+KINEMA_CLONED void cg_update(const CgUpdateJob<double>& job, std::size_t begin, std::size_t end, double sums[2]) {
+  update_of(job, begin, end, sums);
+}
+
+}  // namespace kinema::kernels

@@ -1,0 +1,52 @@
+#pragma once
+// The implicit path's passes over a block (src/step/implicit_path.hpp): the product with the
+// springs' system matrix and the conjugate-gradient update. Each is compiled once per
+// instruction set (kernels/cloned.hpp) from loops over a slice's lanes that every clone
+// vectorizes its own way with the same operations per body, so the bits are the same on
+// every CPU; sums stay in body order, in double.
+
+#include <cstddef>
+#include <cstdint>
+
+namespace kinema::kernels {
+
+// out_i = cm m_i p_i + sum over body i's spring slots (in layout order) of
+//   (sc damping + sk k_along) u (u . dp) + sk k_across dp,   dp = p_j - p_i,
+// and 0 for bodies of mass 0. The slots are the spring network's layout (kernels::SpringJob).
+template <class T>
+struct SpringProductJob {
+  const T* p[3];
+  T* out[3];
+  const T* mass;
+  std::size_t covered;
+  const std::uint32_t* slice_offset;
+  const std::int32_t* neighbor;
+  const std::int32_t* contiguous;
+  const T* rest;
+  const T* unit[3];
+  const T* damping;
+  const T* k_along;
+  const T* k_across;
+  T cm, sc, sk;
+};
+
+// Bodies [begin, end): begin a multiple of kSpringSlice. Returns sum of p_i . out_i (double).
+double spring_product(const SpringProductJob<float>& job, std::size_t begin, std::size_t end);
+double spring_product(const SpringProductJob<double>& job, std::size_t begin, std::size_t end);
+
+// x += alpha p, r -= alpha q, z = inv_diag r over [begin, end) of each of three arrays; adds
+// r . z and r . r (double, body order) to sums[0] and sums[1].
+template <class T>
+struct CgUpdateJob {
+  T* x[3];
+  T* r[3];
+  T* z[3];
+  const T* p[3];
+  const T* q[3];
+  const T* inv_diag[3];
+  T alpha;
+};
+void cg_update(const CgUpdateJob<float>& job, std::size_t begin, std::size_t end, double sums[2]);
+void cg_update(const CgUpdateJob<double>& job, std::size_t begin, std::size_t end, double sums[2]);
+
+}  // namespace kinema::kernels
