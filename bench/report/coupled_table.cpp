@@ -71,7 +71,7 @@ void print_implicit_lines(const Results& results, Noise& noise) {
 }  // namespace
 
 void print_coupled_table(const Results& results, Noise& noise) {
-  if (!results.find(nbody_run("float", results.isa(), 1, 4096), "interactions_per_s")) return;
+  if (!results.find(nbody_run("float", results.isa(), 1, 4096), "interactions_per_s")) return print_implicit_lines(results, noise);
   std::printf("\nN-body gravity, %s, one Euler step = n^2 interactions (20 flops each)\n", results.isa().c_str());
   std::printf("%-10s %6s | %13s %8s %9s | %13s %7s\n", "prec", "N", "1 thread", "FMA peak", "x scalar",
               "2 threads", "scaling");

@@ -125,13 +125,15 @@ std::vector<std::string> chart_files(const std::string& name) {
 MethodStyle method_style(std::string_view method) {
   // Colours far apart for the eye (and for colour-blind eyes as far as nine allow); the dash
   // tells the families apart: solid the classic Runge-Kutta methods, dashed the kick-drift
-  // ones and heun (whose stability region is midpoint's), dash-dot the embedded pairs.
+  // ones and heun (whose stability region is midpoint's), dash-dot the embedded pairs, long
+  // dashes the implicit ones.
   static constexpr std::pair<std::string_view, MethodStyle> styles[] = {
       {"euler", {"#D55E00", 1, 7}},           {"midpoint", {"#56B4E9", 1, 5}},
       {"heun", {"#0072B2", 2, 9}},            {"rk4", {"#000000", 1, 13}},
       {"symplectic_euler", {"#E69F00", 2, 6}}, {"velocity_verlet", {"#009E73", 2, 4}},
       {"bs3", {"#CC79A7", 4, 8}},             {"dopri5", {"#7B3294", 4, 12}},
-      {"rk6", {"#8C510A", 4, 11}},
+      {"rk6", {"#8C510A", 4, 11}},            {"implicit_euler", {"#999933", 5, 10}},
+      {"ros2", {"#882255", 5, 3}},
   };
   for (const auto& [name, style] : styles) {
     if (name == method) return style;

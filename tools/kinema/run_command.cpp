@@ -573,7 +573,7 @@ void describe_setup(nlohmann::ordered_json& summary, const World<T>& world, cons
   summary["rigid_bodies"] = world.rigid.size();
   summary["method"] = std::string(stepper.method().name);
   if (context.auto_choice) summary["auto"] = *context.auto_choice;
-  summary["path"] = stepper.fused() ? "fused" : "staged";
+  summary["path"] = stepper.fused() ? "fused" : stepper.method().kind == MethodKind::linearly_implicit ? "implicit" : "staged";
   summary["precision"] = std::string(precision_name(scene.precision));
   summary["isa"] = std::string(isa_name(stepper.isa()));
   summary["relaxed_fma"] = o.relaxed_fma;
