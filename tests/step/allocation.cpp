@@ -102,6 +102,17 @@ TEST_CASE("steps with coupled terms allocate nothing", "[allocation]") {
   }
 }
 
+TEST_CASE("implicit steps allocate nothing after the first", "[allocation][implicit]") {
+  for (bool tbb : {false, true}) {
+    for (const Method* m : implicit_methods) {
+      INFO(m->name << (tbb ? " on tbb" : " serial"));
+      CHECK(allocations_in_steps<float>(*m, coupled(with_callback(test::all_local_terms<float>()), 3000), false, tbb,
+                                        3000) == 0);
+      CHECK(allocations_in_steps<double>(*m, coupled(test::all_local_terms<double>(), 3000), false, tbb, 3000) == 0);
+    }
+  }
+}
+
 TEST_CASE("step and advance allocate nothing", "[allocation]") {
   for (bool tbb : {false, true}) {
     for (const Method* m : builtin_methods) {
