@@ -100,6 +100,10 @@ struct StepperClock {
   double proposed_step = 0;
 };
 
+// StepperOptions::implicit_tolerance 0 means this, in T.
+template <class T>
+inline constexpr double kDefaultImplicitTolerance = sizeof(T) == sizeof(float) ? 1e-5 : 1e-10;
+
 // What an implicit method's steps solved since the stepper was made (or took a new model).
 struct ImplicitStats {
   std::uint64_t solves = 0;      // linear systems (one per stage per step)

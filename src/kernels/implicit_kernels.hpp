@@ -3,7 +3,8 @@
 // springs' system matrix and the conjugate-gradient update. Each is compiled once per
 // instruction set (kernels/cloned.hpp) from loops over a slice's lanes that every clone
 // vectorizes its own way with the same operations per body, so the bits are the same on
-// every CPU; sums stay in body order, in double.
+// every CPU; dot products are summed in double, a running sum per lane of a slice over the
+// slices in order, then the lanes in order.
 
 #include <cstddef>
 #include <cstdint>
@@ -35,7 +36,7 @@ double spring_product(const SpringProductJob<float>& job, std::size_t begin, std
 double spring_product(const SpringProductJob<double>& job, std::size_t begin, std::size_t end);
 
 // x += alpha p, r -= alpha q, z = inv_diag r over [begin, end) of each of three arrays; adds
-// r . z and r . r (double, body order) to sums[0] and sums[1].
+// r . z and r . r (double, summed as spring_product sums) to sums[0] and sums[1].
 template <class T>
 struct CgUpdateJob {
   T* x[3];

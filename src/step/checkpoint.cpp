@@ -73,6 +73,12 @@ std::uint64_t method_fingerprint(const Method& m) {
   for (const auto* weights : {&m.tableau.b, &m.tableau.c, &m.tableau.b_hat}) for (double w : *weights) fnv.add(w);
   fnv.add(m.scheme.count);
   for (const KickDriftOp& op : m.scheme.ops) fnv.add(int(op.kind)), fnv.add(op.weight), fnv.add(op.time);
+  if (m.kind == MethodKind::linearly_implicit) {  // the others' fingerprints stay as they were
+    const RosenbrockScheme& r = m.rosenbrock;
+    fnv.add(r.stages), fnv.add(r.gamma);
+    for (const auto* rows : {&r.a, &r.c}) for (const auto& row : *rows) for (double v : row) fnv.add(v);
+    for (const auto* weights : {&r.m, &r.time}) for (double w : *weights) fnv.add(w);
+  }
   return fnv.value();
 }
 

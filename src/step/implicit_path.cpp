@@ -10,16 +10,6 @@ namespace kinema {
 
 using kernels::kSpringSlice;
 
-namespace {
-
-// The relative residual a solve stops at when the options leave it to T: well below the
-// error of a step, above what T can resolve.
-template <class T>
-double default_tolerance() {
-  return std::is_same_v<T, float> ? 1e-5 : 1e-10;
-}
-
-}  // namespace
 
 template <class T>
 ImplicitPath<T>::ImplicitPath(const ForceModel<T>& forces, const Method& method, const kernels::KernelTable<T>& table,
@@ -27,7 +17,7 @@ ImplicitPath<T>::ImplicitPath(const ForceModel<T>& forces, const Method& method,
     : method_(method),
       net_(lowered.coupled.springs),
       rates_(forces, euler, table, lowered.particle, lowered.coupled),
-      tolerance_(options.implicit_tolerance > 0 ? options.implicit_tolerance : default_tolerance<T>()),
+      tolerance_(options.implicit_tolerance > 0 ? options.implicit_tolerance : kDefaultImplicitTolerance<T>),
       max_iterations_(options.implicit_max_iterations) {}
 
 template <class T>
@@ -47,7 +37,7 @@ void ImplicitPath<T>::reserve(std::size_t padded) {
 
 template <class T>
 std::size_t ImplicitPath<T>::bytes() const {
-  std::size_t arrays = 11 * 3 + 4 * 3 + 1;
+  const std::size_t arrays = 9 * 3 + 4 * 3 + 1;  // x0 .. inv_diag, the stages' k, the masses
   return arrays * capacity_ * sizeof(T) + (k_along_.size() * 5) * sizeof(T) + rates_.bytes();
 }
 
@@ -61,6 +51,7 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
   }
   gh_ = T(method_.rosenbrock.gamma * double(c.h));
   save_start(c);
+  step_stats_ = {};
   try {
     build_jacobian(c);
     for (int s = 0; s < method_.rosenbrock.stages; ++s) {
@@ -72,6 +63,10 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
     restore_start(c);
     throw;
   }
+  // A step taken back (a throw, a stop) counts nothing; a step the guard takes again, twice.
+  stats_.solves += step_stats_.solves, stats_.iterations += step_stats_.iterations;
+  stats_.unconverged += step_stats_.unconverged;
+  stats_.max_iterations = std::max(stats_.max_iterations, step_stats_.max_iterations);
 }
 
 template <class T>
@@ -257,12 +252,13 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
       }
     }
   });
-  ++stats_.solves;
+  ++step_stats_.solves;
+  if (!std::isfinite(bb)) return not_finite(c, x);
   const double goal = tolerance_ * tolerance_ * bb;
   int iterations = 0;
   for (double rr = bb; rr > goal; ++iterations) {
     if (iterations == max_iterations_) {
-      ++stats_.unconverged;
+      ++step_stats_.unconverged;
       break;
     }
     if (c.stop != nullptr && (*c.stop)()) throw Stopped();
@@ -287,8 +283,21 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
       }
     });
   }
-  stats_.iterations += std::uint64_t(iterations);
-  stats_.max_iterations = std::max(stats_.max_iterations, iterations);
+  step_stats_.iterations += std::uint64_t(iterations);
+  step_stats_.max_iterations = std::max(step_stats_.max_iterations, iterations);
+}
+
+// A right side that is not finite (a force that was not): no iteration could converge, and
+// none is tried. Each body's answer is the preconditioner's, so what is not finite reaches
+// the state, where the finiteness guard (or the caller) sees it.
+template <class T>
+void ImplicitPath<T>::not_finite(const StepContext<T>& c, Vec3s& x) {
+  ++step_stats_.unconverged;
+  for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) {
+    for (std::size_t i = b.begin; i < b.end; ++i) {
+      for (int d = 0; d < 3; ++d) x[d][i] = z_[d][i];
+    }
+  });
 }
 
 template class ImplicitPath<float>;

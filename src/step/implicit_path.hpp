@@ -42,7 +42,7 @@ class ImplicitPath {
   std::size_t bytes() const;
   // One step. Whatever throws (a callback, a stop request) leaves the bodies as they were.
   void step(const StepContext<T>& c);
-  // Counts since the path was made.
+  // Counts since the path was made, of the steps completed.
   const ImplicitStats& stats() const { return stats_; }
 
  private:
@@ -59,6 +59,7 @@ class ImplicitPath {
   // returns p . out over the block.
   double product(Block b, const T* const p[3], T* const out[3], T cm, T sc, T sk) const;
   void conjugate_gradients(const StepContext<T>& c, Vec3s& x);
+  void not_finite(const StepContext<T>& c, Vec3s& x);
   // Runs pass(block, sums) over every block, each adding two partial sums; returns their
   // totals, added in block order.
   template <class Pass>
@@ -81,7 +82,7 @@ class ImplicitPath {
   Vec3s unit_;
   AlignedArray<T> k_along_, k_across_;
   std::vector<double> block_sums_[2];
-  ImplicitStats stats_;
+  ImplicitStats stats_, step_stats_;  // since the path was made; in the step under way
 };
 
 extern template class ImplicitPath<float>;

@@ -682,6 +682,12 @@ TEST_CASE("run: the cloth at 60 Hz blows up under rk4, which names the implicit 
   CHECK(loose.first != tight.first);
   CHECK(loose.second < tight.second);
   CHECK(crc(" --implicit-iterations 5").second == 5 * 60);
+  // What an implicit method steps explicitly can still break it: a stiff drag is euler's to it.
+  const fs::path drag = write("stiff_drag.json", R"({"precision": "double", "method": "implicit_euler", "dt": 0.01,
+      "steps": 100, "particles": [{"position": [0,0,0], "velocity": [1,0,0]}], "forces": [{"type": "linear_drag", "k": 300}]})");
+  const Result stiff = kinema_cli("run " + drag.string() + " -q");
+  CHECK(stiff.err.find("past the largest stable step of implicit_euler") != std::string::npos);
+  CHECK(stiff.err.find("--method implicit_euler or ros2") == std::string::npos);
   const Result rigid = kinema_cli("run " + scene("box_chain.json") + " -q --steps 2 --method ros2");
   CHECK(rigid.code != 0);
   CHECK(rigid.err.find("ros2 (implicit) steps particles without events: this scene has rigid bodies") != std::string::npos);

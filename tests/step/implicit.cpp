@@ -195,6 +195,8 @@ TEST_CASE("implicit steps of a cloth are the same bits on every thread count, jo
     tbb.threads = 2;
     tbb.workers = WorkerChoice::all;
     CHECK(run(*m, tbb) == serial);
+    // The ISA option picks the explicit forces' kernels; the solver's own (cloned) kernels are
+    // picked by the loader for this CPU, their bits across CPUs held by the stored hashes.
     for (Isa isa : {Isa::scalar, Isa::sse2}) CHECK(run(*m, test::serial_options(isa)) == serial);
   }
 }
@@ -211,6 +213,40 @@ TEST_CASE("a throw inside an implicit step leaves the set as before that step", 
   CHECK_THROWS_WITH(s.advance(c.bodies, 0.01, 3), "boom");
   CHECK(test::state_hash(c.bodies) == before);
   CHECK(s.time() == Approx(0.01));
+  CHECK(s.implicit_stats().solves == 2);  // the step taken back counts nothing
+}
+
+TEST_CASE("a force that is not finite reaches the state under an implicit method, and the guard names it",
+          "[implicit]") {
+  for (const Method* m : implicit_methods) {
+    Chain c = chain(8, 100, 1, 2, 0.01);
+    c.forces.add(Gravity{{0, -9.81, 0}});
+    c.forces.add(ForceCallback<double>([](const ParticleBlock<double>& b) {
+      for (std::size_t i = 0; i < b.count; ++i) {
+        if (b.begin + i == 3) b.fx[i] = NAN;
+      }
+    }));
+    StepperOptions o = test::serial_options();
+    o.guard = FiniteGuard::check;
+    Stepper<double> s(c.forces, *m, o);
+    const std::uint64_t before = test::state_hash(c.bodies);
+    try {
+      s.step(c.bodies, 0.01);
+      FAIL("no NonFiniteError");
+    } catch (const NonFiniteError& e) {
+      // ros2's second stage feels body 3 through its springs: body 2 is then the first.
+      CHECK(e.body == (m == &implicit_euler ? 3u : 2u));
+    }
+    CHECK(test::state_hash(c.bodies) == before);
+  }
+}
+
+TEST_CASE("an implicit method's explicit part is the Runge-Kutta method it is to the other forces", "[implicit]") {
+  // With J = 0 implicit_euler is euler and ros2 is heun: their stable steps bound the
+  // implicit methods' on the forces other than the springs (kinema run checks them so).
+  CHECK(builtin_index(explicit_part(implicit_euler)) == builtin_index(euler));
+  CHECK(builtin_index(explicit_part(ros2)) == builtin_index(heun));
+  CHECK(explicit_part(rk4).tableau.b == rk4.tableau.b);
 }
 
 TEST_CASE("kinematic bodies move on their own under an implicit method", "[implicit]") {

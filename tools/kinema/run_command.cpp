@@ -173,7 +173,11 @@ bool advance_adaptive(World<T>& world, double t, Tolerances tolerances, Adaptive
 // is then a system of its own, and the stiffest of a sample stands for the rest).
 // 40 Jacobian products (57 force evaluations) on the run's threads: a few tenths of a second
 // for the 4096-body cluster.
-StiffnessEstimate stiffness_at_start(const Scene& scene, const StepperOptions& options) {
+// An implicit method takes the springs implicitly: what can break it is the rest, so the
+// estimate leaves the springs out (their bodies stay).
+StiffnessEstimate stiffness_at_start(const Scene& full, const StepperOptions& options) {
+  Scene scene = full;
+  if (method_by_name(scene.method).kind == MethodKind::linearly_implicit) scene.springs.clear();
   const ForceModel<double> forces = make_forces<double>(scene);
   const bool sampled = forces.fusable() && !forces.couples_rigid();
   const Scene source = sampled ? sample_bodies(scene, 1024) : scene;
@@ -191,10 +195,14 @@ std::string mode_name(const StiffnessEstimate& e) {
 // on an oscillation, that a run never shows is left alone).
 void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessEstimate& e, double stable) {
   if (!(scene.dt > stable)) return;
-  const double log_growth = double(scene.steps) * std::log(growth_per_step(method_by_name(scene.method), e, scene.dt));
+  const Method method = explicit_part(method_by_name(scene.method));
+  const double log_growth = double(scene.steps) * std::log(growth_per_step(method, e, scene.dt));
   if (!(log_growth > std::log(2.0))) return;
-  // Springs are what the implicit methods take implicitly: name them where they would hold.
-  const bool springs = !scene.springs.empty() && scene.rigid_bodies.empty();
+  // Springs are what the implicit methods take implicitly: name them where they would hold
+  // (and the scene would take them).
+  const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
+  const bool springs = !scene.springs.empty() && !rigid && scene.events.empty() &&
+                       method_by_name(scene.method).kind != MethodKind::linearly_implicit;
   char text[500];
   std::snprintf(text, sizeof text,
                 "dt %g is past the largest stable step of %s on this scene, %.3g: its fastest mode (%s at "
@@ -269,7 +277,7 @@ StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOption
                  static_cast<unsigned long long>(scene.steps));
   }
   if (pays) plan.stiffness = stiffness_at_start(scene, options), plan.estimated = true;
-  plan.stable_step = plan.estimated ? largest_stable_step(method_by_name(scene.method), plan.stiffness)
+  plan.stable_step = plan.estimated ? largest_stable_step(explicit_part(method_by_name(scene.method)), plan.stiffness)
                                     : std::numeric_limits<double>::infinity();
   plan.tolerances = tolerances_of(scene);
   // Error control never goes past the stable step; fixed steps are checked against it.
@@ -378,12 +386,17 @@ std::optional<double> final_energy(const World<T>& world) {
   }
 }
 
-// The implicit solves' options where given (older runs' fingerprints stay as they were).
-std::string implicit_fingerprint(const RunOptions& o) {
-  if (!o.implicit_tolerance && !o.implicit_iterations) return "";
+// The implicit solves' options, as the stepper takes them, under an implicit method only
+// (the other methods' fingerprints stay as they were).
+std::string implicit_fingerprint(const RunOptions& o, const Scene& scene) {
+  if (scene.method == "auto" || method_by_name(scene.method).kind != MethodKind::linearly_implicit) return "";
+  const StepperOptions options = stepper_options(o);
+  const double given = options.implicit_tolerance, tolerance = given > 0 ? given
+                       : scene.precision == Precision::single ? kDefaultImplicitTolerance<float>
+                                                              : kDefaultImplicitTolerance<double>;
   char text[100];
-  std::snprintf(text, sizeof text, " implicit_tolerance=%a implicit_iterations=%d", o.implicit_tolerance.value_or(0),
-                o.implicit_iterations.value_or(0));
+  std::snprintf(text, sizeof text, " implicit_tolerance=%a implicit_iterations=%d", tolerance,
+                options.implicit_max_iterations);
   return text;
 }
 
@@ -395,7 +408,7 @@ std::string run_fingerprint(const RunOptions& o, const Scene& scene) {
                 "trajectory=%d relaxed=%d%s", scene.method.c_str(), scene.dt, static_cast<unsigned long long>(scene.steps),
                 int(scene.precision), scene.rtol.value_or(-1), scene.atol.value_or(-1), scene.tolerance.value_or(-1),
                 static_cast<unsigned long long>(o.every), int(!o.trajectory_path.empty()), int(o.relaxed_fma),
-                implicit_fingerprint(o).c_str());
+                implicit_fingerprint(o, scene).c_str());
   return fingerprint_of(o.scene_path, text);
 }
 
