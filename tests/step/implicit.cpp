@@ -6,6 +6,7 @@
 #include <cmath>
 #include <complex>
 #include <map>
+#include <utility>
 #include <string_view>
 #include <numbers>
 #include <stdexcept>
@@ -83,17 +84,24 @@ std::vector<double> step_sizes(const std::vector<int>& counts, double t_end) {
   return h;
 }
 
+// Body 1 (mass m, off the origin and moving) on a zero-rest-length spring k to a fixed body 0:
+// x'' = -(k / m) x in every direction, exactly linear.
+std::pair<ParticleSet<double>, ForceModel<double>> anchored(double k, double m) {
+  ParticleSet<double> b;
+  b.add_kinematic({0, 0, 0});
+  b.add({0.3, -0.2, 0.5}, {1, 2, -0.5}, m);
+  ForceModel<double> f;
+  f.add(Springs{{{0, 1, 0, k, 0}}});
+  return {std::move(b), std::move(f)};
+}
+
 }  // namespace
 
 TEST_CASE("implicit_euler is backward Euler on a linear spring, to round-off", "[implicit]") {
   // A zero-rest-length spring pulls with k d in every direction: the step is the solution of
   // v1 = v0 - h k/m x1, x1 = x0 + h v1.
   const double k = 400, m = 2, h = 0.1;  // h sqrt(k/m) = 1.4: past Euler's limit
-  ParticleSet<double> b;
-  b.add_kinematic({0, 0, 0});
-  b.add({0.3, -0.2, 0.5}, {1, 2, -0.5}, m);
-  ForceModel<double> f;
-  f.add(Springs{{{0, 1, 0, k, 0}}});
+  auto [b, f] = anchored(k, m);
   Stepper<double> s(f, implicit_euler, tight());
   double x[3] = {0.3, -0.2, 0.5}, v[3] = {1, 2, -0.5};
   for (int step = 0; step < 20; ++step) {
@@ -342,11 +350,7 @@ TEST_CASE("implicit methods lose an undamped mode's energy at their stability fu
     const double kept[2] = {1 / (1 + h_omega * h_omega), std::norm(1.0 + 2.0 * z / w + z * (z - 2.0) / (2.0 * w * w))};
     for (int which = 0; which < 2; ++which) {
       const Method& method = which == 0 ? implicit_euler : ros2;
-      ParticleSet<double> b;
-      b.add_kinematic({0, 0, 0});
-      b.add({0.3, -0.2, 0.5}, {1, 2, -0.5}, m);
-      ForceModel<double> f;
-      f.add(Springs{{{0, 1, 0, k, 0}}});
+      auto [b, f] = anchored(k, m);
       Stepper<double> s(f, method, tight());
       const double e0 = energy(b);
       s.advance(b, h, 20);
