@@ -95,23 +95,50 @@ template <class T>
   return total;
 }
 
+// One slice's lanes of one array, through restrict locals: stores through the job's pointers
+// could otherwise alias alpha and each other, and the loop would not vectorize.
+template <bool Full, class T>
+[[gnu::always_inline]] inline void update_lanes(T* __restrict x, T* __restrict r, T* __restrict z,
+                                                const T* __restrict p, const T* __restrict q,
+                                                const T* __restrict inv_diag, T alpha, std::size_t lanes,
+                                                double (&rz)[kLanes], double (&rr)[kLanes]) {
+  const std::size_t n = Full ? kLanes : lanes;
+  for (std::size_t l = 0; l < n; ++l) {
+    x[l] += alpha * p[l];
+    const T rl = r[l] - alpha * q[l], zl = inv_diag[l] * rl;
+    r[l] = rl, z[l] = zl;
+    rz[l] += double(rl) * double(zl), rr[l] += double(rl) * double(rl);
+  }
+}
+
 template <class T>
 [[gnu::always_inline]] inline void update_of(const CgUpdateJob<T>& job, std::size_t begin, std::size_t end,
                                              double sums[2]) {
   double rz[kLanes] = {}, rr[kLanes] = {};
+  const T alpha = job.alpha;
   for (std::size_t first = begin; first < end; first += kLanes) {
     const std::size_t lanes = std::min(kLanes, end - first);
     for (int d = 0; d < 3; ++d) {
-      for (std::size_t l = 0; l < lanes; ++l) {
-        const std::size_t i = first + l;
-        job.x[d][i] += job.alpha * job.p[d][i];
-        const T r = job.r[d][i] - job.alpha * job.q[d][i], z = job.inv_diag[d][i] * r;
-        job.r[d][i] = r, job.z[d][i] = z;
-        rz[l] += double(r) * double(z), rr[l] += double(r) * double(r);
+      T *x = job.x[d] + first, *r = job.r[d] + first, *z = job.z[d] + first;
+      const T *p = job.p[d] + first, *q = job.q[d] + first, *inv_diag = job.inv_diag[d] + first;
+      if (lanes == kLanes) {
+        update_lanes<true>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
+      } else {
+        update_lanes<false>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
       }
     }
   }
   for (std::size_t l = 0; l < kLanes; ++l) sums[0] += rz[l], sums[1] += rr[l];
+}
+
+template <class T>
+[[gnu::always_inline]] inline void direction_of(const CgDirectionJob<T>& job, std::size_t begin, std::size_t end) {
+  const T beta = job.beta;
+  for (int d = 0; d < 3; ++d) {
+    T* __restrict p = job.p[d];
+    const T* __restrict z = job.z[d];
+    for (std::size_t i = begin; i < end; ++i) p[i] = z[i] + beta * p[i];
+  }
 }
 
 }  // namespace
@@ -124,6 +151,12 @@ KINEMA_CLONED double spring_product(const SpringProductJob<double>& job, std::si
 }
 KINEMA_CLONED void cg_update(const CgUpdateJob<float>& job, std::size_t begin, std::size_t end, double sums[2]) {
   update_of(job, begin, end, sums);
+}
+KINEMA_CLONED void cg_direction(const CgDirectionJob<float>& job, std::size_t begin, std::size_t end) {
+  direction_of(job, begin, end);
+}
+KINEMA_CLONED void cg_direction(const CgDirectionJob<double>& job, std::size_t begin, std::size_t end) {
+  direction_of(job, begin, end);
 }
 KINEMA_CLONED void cg_update(const CgUpdateJob<double>& job, std::size_t begin, std::size_t end, double sums[2]) {
   update_of(job, begin, end, sums);

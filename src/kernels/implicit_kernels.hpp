@@ -50,4 +50,14 @@ struct CgUpdateJob {
 void cg_update(const CgUpdateJob<float>& job, std::size_t begin, std::size_t end, double sums[2]);
 void cg_update(const CgUpdateJob<double>& job, std::size_t begin, std::size_t end, double sums[2]);
 
+// p = z + beta p over [begin, end) of each of three arrays: the next search direction.
+template <class T>
+struct CgDirectionJob {
+  T* p[3];
+  const T* z[3];
+  T beta;
+};
+void cg_direction(const CgDirectionJob<float>& job, std::size_t begin, std::size_t end);
+void cg_direction(const CgDirectionJob<double>& job, std::size_t begin, std::size_t end);
+
 }  // namespace kinema::kernels

@@ -277,11 +277,8 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
       ++iterations;
       break;
     }
-    for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) {
-      for (std::size_t i = b.begin; i < b.end; ++i) {
-        for (int d = 0; d < 3; ++d) p_[d][i] = z_[d][i] + beta * p_[d][i];
-      }
-    });
+    const kernels::CgDirectionJob<T> direction{{p[0], p[1], p[2]}, {z_[0].data(), z_[1].data(), z_[2].data()}, beta};
+    for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { kernels::cg_direction(direction, b.begin, b.end); });
   }
   step_stats_.iterations += std::uint64_t(iterations);
   step_stats_.max_iterations = std::max(step_stats_.max_iterations, iterations);
