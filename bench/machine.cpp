@@ -127,10 +127,10 @@ void register_all() {
   // x += h v over the 38.7 MB a 512 x 512 cloth's spring kernel moves (1382400 bodies' state).
   benchmark::RegisterBenchmark("limit/stream", stream_in_place)
       ->Arg(1382400)->Threads(1)->Threads(2)->UseRealTime()->Unit(benchmark::kMicrosecond)->ComputeStatistics("max", best);
-  // And over the 19.7 MB one conjugate-gradient iteration of the 256 x 256 cloth works in
-  // (bench/implicit.cpp: 300 bytes a body, 702171 bodies' state).
+  // And over the 17.0 MB one conjugate-gradient iteration of the 256 x 256 cloth works in
+  // (bench/implicit.cpp: 260 bytes a body, 608549 bodies' state).
   benchmark::RegisterBenchmark("limit/stream", stream_in_place)
-      ->Arg(702171)->Threads(1)->UseRealTime()->Unit(benchmark::kMicrosecond)->ComputeStatistics("max", best);
+      ->Arg(608549)->Threads(1)->UseRealTime()->Unit(benchmark::kMicrosecond)->ComputeStatistics("max", best);
   for (std::int64_t n : {1 << 10, 1 << 12, 1 << 14, 1 << 16, 100000, 1 << 20, 1 << 22}) {
     for (std::int64_t ahead : {0, 1024, 4096}) {
       benchmark::RegisterBenchmark("limit/state_stream/float", state_stream<float>)

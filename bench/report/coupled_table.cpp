@@ -58,9 +58,9 @@ void print_implicit_lines(const Results& results, Noise& noise) {
     const auto frames = results.find(run(m), "s_per_simulated_s");
     if (!frames) continue;
     noise.add(frames->cv);
-    const auto bw = ratio(results.find(run(m), "GB_per_s"), results.find(stream_run(702171, 1), "GB_per_s"));
+    const auto bw = ratio(results.find(run(m), "GB_per_s"), results.find(stream_run(608549, 1), "GB_per_s"));
     std::printf("; %s at dt 1/60 %.3f (%s, %s CG iterations a frame, one at %s ns a body, %s of in-place "
-                "streaming over its 19.7 MB)",
+                "streaming over its 17.0 MB)",
                 m.c_str(), frames->median, cell(ratio(frames, verlet), "%.1fx").c_str(),
                 results.value(run(m), "cg_per_frame", "%.0f").c_str(),
                 results.value(run(m), "ns_per_body_iteration", "%.1f").c_str(), cell(percent(bw), "%.0f%%").c_str());

@@ -4,6 +4,9 @@
 #include "kernels/implicit_kernels.hpp"
 
 #include <algorithm>
+#include <bit>
+#include <cstdint>
+#include <type_traits>
 
 #include "kernels/cloned.hpp"
 #include "kernels/kernels.hpp"
@@ -14,45 +17,49 @@ namespace {
 constexpr std::size_t kLanes = kSpringSlice;
 
 // The other ends of one entry's lanes: consecutive bodies (read where they are), or gathered
-// into `gathered`. A masked run's empty lanes take the body itself, as the gathered layout
-// does (its slot's neighbour is the body): the same values either way.
+// into `gathered` by the slots' neighbours. A masked run (some lanes' slots empty) is
+// gathered too: an empty slot's neighbour is its body, whose value is the one the run's
+// layout gives it, and a gather vectorizes where a per-lane choice did not.
 template <bool Full, class T>
 [[gnu::always_inline]] inline void other_ends(const SpringProductJob<T>& job, std::size_t entry, std::size_t lanes,
-                                              const T (&own)[3][kLanes], T (&gathered)[3][kLanes],
-                                              const T* (&other)[3]) {
+                                              T (&gathered)[3][kLanes], const T* (&other)[3]) {
   const std::size_t n = Full ? kLanes : lanes;
   const std::int32_t code = job.contiguous[entry];
-  const std::size_t at = entry * kLanes;
-  for (int d = 0; d < 3; ++d) other[d] = gathered[d];
   if (code >= 0) {
     for (int d = 0; d < 3; ++d) other[d] = job.p[d] + code;
-  } else if (code < -1) {
-    const std::size_t first = std::size_t(-code - 2);
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t l = 0; l < n; ++l) gathered[d][l] = job.rest[at + l] < 0 ? own[d][l] : job.p[d][first + l];
-    }
-  } else {
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t l = 0; l < n; ++l) gathered[d][l] = job.p[d][std::size_t(job.neighbor[at + l])];
-    }
+    return;
+  }
+  const std::int32_t* __restrict neighbor = job.neighbor + entry * kLanes;
+  for (int d = 0; d < 3; ++d) {
+    const T* __restrict p = job.p[d];
+    T* __restrict g = gathered[d];
+    for (std::size_t l = 0; l < n; ++l) g[l] = p[std::size_t(neighbor[l])];
+    other[d] = gathered[d];
   }
 }
 
+// Through restrict locals: the sums are stores the compiler could not otherwise keep apart
+// from the job's pointers, and it would load them again for every lane.
 template <bool Full, class T>
 [[gnu::always_inline]] inline void add_entry(const SpringProductJob<T>& job, std::size_t entry, std::size_t lanes,
                                              const T (&own)[3][kLanes], const T* const (&other)[3],
                                              T (&sum)[3][kLanes]) {
   const std::size_t n = Full ? kLanes : lanes;
   const std::size_t at = entry * kLanes;
-  const T *ux = job.unit[0] + at, *uy = job.unit[1] + at, *uz = job.unit[2] + at;
-  const T *damping = job.damping + at, *along_k = job.k_along + at, *across_k = job.k_across + at;
+  const T *__restrict ux = job.unit[0] + at, *__restrict uy = job.unit[1] + at, *__restrict uz = job.unit[2] + at;
+  const T *__restrict along_w = job.along + at, *__restrict across_w = job.across + at;
+  const T *__restrict ox = other[0], *__restrict oy = other[1], *__restrict oz = other[2];
+  // The slots' arrays are five streams beside the vectors' seven: the hardware prefetcher
+  // alone leaves their misses exposed. A few entries ahead (past the end is harmless).
+  constexpr std::size_t ahead = 32 * kLanes;
+  for (const T* a : {ux, uy, uz, along_w, across_w}) __builtin_prefetch(a + ahead);
+  T *__restrict sx = sum[0], *__restrict sy = sum[1], *__restrict sz = sum[2];
   for (std::size_t l = 0; l < n; ++l) {
-    const T dx = other[0][l] - own[0][l], dy = other[1][l] - own[1][l], dz = other[2][l] - own[2][l];
-    const T along = ux[l] * dx + uy[l] * dy + uz[l] * dz;
-    const T s = (job.sc * damping[l] + job.sk * along_k[l]) * along, across = job.sk * across_k[l];
-    sum[0][l] += s * ux[l] + across * dx;
-    sum[1][l] += s * uy[l] + across * dy;
-    sum[2][l] += s * uz[l] + across * dz;
+    const T dx = ox[l] - own[0][l], dy = oy[l] - own[1][l], dz = oz[l] - own[2][l];
+    const T s = along_w[l] * (ux[l] * dx + uy[l] * dy + uz[l] * dz), across = across_w[l];
+    sx[l] += s * ux[l] + across * dx;
+    sy[l] += s * uy[l] + across * dy;
+    sz[l] += s * uz[l] + across * dz;
   }
 }
 
@@ -69,15 +76,22 @@ template <bool Full, class T>
     const std::size_t slice = first / kLanes;
     for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
       const T* other[3];
-      other_ends<Full>(job, e, lanes, own, gathered, other);
+      other_ends<Full>(job, e, lanes, gathered, other);
       add_entry<Full>(job, e, lanes, own, other, sum);
     }
   }
+  // Fixed bodies' out is 0: selected on the bits (a mass is never negative, so it is 0 when
+  // its bits past the sign are), which vectorizes where a float compare and branch did not.
+  using Bits = std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>;
+  const T* __restrict mass = job.mass + first;
   for (int d = 0; d < 3; ++d) {
+    T* __restrict out = job.out[d] + first;
+    const T *__restrict own_d = own[d], *__restrict sum_d = sum[d];
     for (std::size_t l = 0; l < n; ++l) {
-      const T value = job.mass[first + l] == 0 ? T(0) : sum[d][l];
-      job.out[d][first + l] = value;
-      dots[l] += double(own[d][l]) * double(value);
+      const Bits keep = std::bit_cast<Bits>(mass[l]) << 1 == 0 ? Bits(0) : ~Bits(0);
+      const T value = std::bit_cast<T>(std::bit_cast<Bits>(sum_d[l]) & keep);
+      out[l] = value;
+      dots[l] += double(own_d[l]) * double(value);
     }
   }
 }

@@ -12,8 +12,10 @@
 namespace kinema::kernels {
 
 // out_i = cm m_i p_i + sum over body i's spring slots (in layout order) of
-//   (sc damping + sk k_along) u (u . dp) + sk k_across dp,   dp = p_j - p_i,
-// and 0 for bodies of mass 0. The slots are the spring network's layout (kernels::SpringJob).
+//   along u (u . dp) + across dp,   dp = p_j - p_i,
+// and 0 for bodies of mass 0, with `along` and `across` per slot (the caller's weights of the
+// stiffness and damping along the spring and of the stiffness across it). The slots are the
+// spring network's layout (kernels::SpringJob).
 template <class T>
 struct SpringProductJob {
   const T* p[3];
@@ -23,12 +25,10 @@ struct SpringProductJob {
   const std::uint32_t* slice_offset;
   const std::int32_t* neighbor;
   const std::int32_t* contiguous;
-  const T* rest;
   const T* unit[3];
-  const T* damping;
-  const T* k_along;
-  const T* k_across;
-  T cm, sc, sk;
+  const T* along;
+  const T* across;
+  T cm;
 };
 
 // Bodies [begin, end): begin a multiple of kSpringSlice. Returns sum of p_i . out_i (double).

@@ -38,7 +38,7 @@ void ImplicitPath<T>::reserve(std::size_t padded) {
 template <class T>
 std::size_t ImplicitPath<T>::bytes() const {
   const std::size_t arrays = 9 * 3 + 4 * 3 + 1;  // x0 .. inv_diag, the stages' k, the masses
-  return arrays * capacity_ * sizeof(T) + (k_along_.size() * 5) * sizeof(T) + rates_.bytes();
+  return arrays * capacity_ * sizeof(T) + (k_along_.size() * 7) * sizeof(T) + rates_.bytes();
 }
 
 template <class T>
@@ -47,7 +47,7 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
   const std::size_t slots = net_.rest.size();
   if (k_along_.size() < slots) {  // the network is laid out before the first step
     for (auto& a : unit_) a.resize(slots);
-    k_along_.resize(slots), k_across_.resize(slots);
+    for (AlignedArray<T>* a : {&k_along_, &k_across_, &a_along_, &a_across_}) a->resize(slots);
   }
   gh_ = T(method_.rosenbrock.gamma * double(c.h));
   save_start(c);
@@ -120,9 +120,10 @@ void ImplicitPath<T>::build_jacobian(const StepContext<T>& c) {
           const T across = length > 0 ? std::max(T(0), T(1) - std::max(net_.rest[at], T(0)) / length) : T(0);
           k_along_[at] = k * (T(1) - across), k_across_[at] = k * across;
           const T w = sc * net_.damping[at] + sk * k_along_[at];
+          a_along_[at] = w, a_across_[at] = sk * k_across_[at];
           for (int d = 0; d < 3; ++d) {
             unit_[d][at] = length > 0 ? dx[d] / length : T(0);
-            inv_diag_[d][i] -= w * unit_[d][at] * unit_[d][at] + sk * k_across_[at];
+            inv_diag_[d][i] -= w * unit_[d][at] * unit_[d][at] + a_across_[at];
           }
         }
       }
@@ -134,7 +135,8 @@ void ImplicitPath<T>::build_jacobian(const StepContext<T>& c) {
 }
 
 template <class T>
-double ImplicitPath<T>::product(Block b, const T* const p[3], T* const out[3], T cm, T sc, T sk) const {
+double ImplicitPath<T>::product(Block b, const T* const p[3], T* const out[3], T cm, const T* along,
+                                const T* across) const {
   const kernels::SpringProductJob<T> job{{p[0], p[1], p[2]},
                                          {out[0], out[1], out[2]},
                                          mass_.data(),
@@ -142,14 +144,10 @@ double ImplicitPath<T>::product(Block b, const T* const p[3], T* const out[3], T
                                          net_.slice_offset.data(),
                                          net_.neighbor.data(),
                                          net_.contiguous.data(),
-                                         net_.rest.data(),
                                          {unit_[0].data(), unit_[1].data(), unit_[2].data()},
-                                         net_.damping.data(),
-                                         k_along_.data(),
-                                         k_across_.data(),
-                                         cm,
-                                         sc,
-                                         sk};
+                                         along,
+                                         across,
+                                         cm};
   return kernels::spring_product(job, b.begin, b.end);
 }
 
@@ -187,7 +185,7 @@ void ImplicitPath<T>::evaluate_stage(const StepContext<T>& c, int s) {
   T* const kr[3] = {q_[0].data(), q_[1].data(), q_[2].data()};
   const T* const rx[3] = {rx_[0].data(), rx_[1].data(), rx_[2].data()};
   for_each_block(c.workers, b.padded_size(), [&](Block k) {
-    product(k, rx, kr, T(0), T(0), T(1));
+    product(k, rx, kr, T(0), k_along_.data(), k_across_.data());
     for (std::size_t i = k.begin; i < k.end; ++i) {
       for (int d = 0; d < 3; ++d) rhs_[d][i] = mass_[i] * rhs_[d][i] + gh_ * q_[d][i];
     }
@@ -241,7 +239,6 @@ std::array<double, 2> ImplicitPath<T>::sum_blocks(const StepContext<T>& c, Pass&
 // until |r| <= tolerance |rhs| or the iteration cap.
 template <class T>
 void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
-  const T sc = -gh_, sk = -gh_ * gh_;
   T* const p[3] = {p_[0].data(), p_[1].data(), p_[2].data()};
   T* const q[3] = {q_[0].data(), q_[1].data(), q_[2].data()};
   auto [rz, bb] = sum_blocks(c, [&](Block b, double* sums) {
@@ -262,7 +259,9 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
       break;
     }
     if (c.stop != nullptr && (*c.stop)()) throw Stopped();
-    const double pq = sum_blocks(c, [&](Block b, double* sums) { sums[0] = product(b, p, q, T(1), sc, sk); })[0];
+    const double pq = sum_blocks(c, [&](Block b, double* sums) {
+      sums[0] = product(b, p, q, T(1), a_along_.data(), a_across_.data());
+    })[0];
     const kernels::CgUpdateJob<T> update{{x[0].data(), x[1].data(), x[2].data()},
                                          {r_[0].data(), r_[1].data(), r_[2].data()},
                                          {z_[0].data(), z_[1].data(), z_[2].data()},

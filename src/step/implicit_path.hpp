@@ -57,7 +57,8 @@ class ImplicitPath {
   void finish(const StepContext<T>& c);
   // The product out = (cm M + sc D + sk K) p over a block (kernels/implicit_kernels.hpp);
   // returns p . out over the block.
-  double product(Block b, const T* const p[3], T* const out[3], T cm, T sc, T sk) const;
+  // out = cm M p + (the slots' weights along and across) p over block b; returns p . out.
+  double product(Block b, const T* const p[3], T* const out[3], T cm, const T* along, const T* across) const;
   void conjugate_gradients(const StepContext<T>& c, Vec3s& x);
   void not_finite(const StepContext<T>& c, Vec3s& x);
   // Runs pass(block, sums) over every block, each adding two partial sums; returns their
@@ -77,10 +78,12 @@ class ImplicitPath {
   std::array<Vec3s, kMaxRosenbrockStages> kx_, kv_;  // the stages' k
   Vec3s rx_, rhs_, r_, z_, p_, q_, inv_diag_;        // a stage's right side and CG's vectors
   AlignedArray<T> mass_;                             // 1 / inv_mass, 0 for fixed bodies
-  // Per spring slot (the network's layout): the unit vector toward the other end, and the
-  // stiffness along it (k (1 - g)) and across (k g), g = max(0, 1 - rest / length).
+  // Per spring slot (the network's layout): the unit vector toward the other end, the
+  // stiffness along it (k (1 - g)) and across (k g), g = max(0, 1 - rest / length), and the
+  // system matrix's weights along (-gamma h damping - (gamma h)^2 k_along) and across
+  // (-(gamma h)^2 k_across).
   Vec3s unit_;
-  AlignedArray<T> k_along_, k_across_;
+  AlignedArray<T> k_along_, k_across_, a_along_, a_across_;
   std::vector<double> block_sums_[2];
   ImplicitStats stats_, step_stats_;  // since the path was made; in the step under way
 };
