@@ -16,7 +16,9 @@
 // damping), the stepper's clock exactly (Stepper::clock) and the step advance_to last
 // proposed, and what the record
 // may only be restored under: the precision, the kind of set, the method, the force model's
-// fingerprint (ForceModel::fingerprint), the finiteness guard's settings and relaxed_fma;
+// fingerprint (ForceModel::fingerprint), the finiteness guard's settings, relaxed_fma, and
+// for an implicit method its solves' tolerance and iteration cap (as they run: a 0
+// tolerance is the precision's default, so naming the default restores too);
 // and when an advance_to call was stopped early (AdaptiveStats::stopped), what its next call
 // goes on from: the controller's state and the first-same-as-last stage. Stepping the restored set
 // with the same calls then gives the same bits as never stopping. (A call that ran to its

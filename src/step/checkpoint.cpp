@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -49,7 +50,9 @@ constexpr std::size_t kind = 0, scalar = 1, flags = 2, guard = 3, bodies = 8, mo
                       steps = 40, h = 48, proposed = 56, max_speed = 64, max_angular = 72, name = 80,
                       // the continuation of an error-controlled call stopped early
                       continues = 112, rejected = 113, relaxed = 114, t_end = 120, rtol = 128, atol = 136, max_step = 144,
-                      next_h = 152, err_prev = 160, kept_scale = 168, crc = 188;
+                      next_h = 152, err_prev = 160, kept_scale = 168,
+                      // an implicit method's solves (0 for the others)
+                      implicit_tolerance = 176, implicit_iterations = 184, crc = 188;
 }
 
 template <class V>
@@ -80,6 +83,19 @@ std::uint64_t method_fingerprint(const Method& m) {
     for (const auto* weights : {&r.m, &r.time}) for (double w : *weights) fnv.add(w);
   }
   return fnv.value();
+}
+
+// The solves an implicit method's steps make, as the stepper runs them (its options' 0 is
+// the precision's default); nothing for the other methods.
+struct ImplicitSolves {
+  double tolerance = 0;
+  std::int32_t iterations = 0;
+};
+template <class T>
+ImplicitSolves implicit_solves(const Stepper<T>& stepper) {
+  if (stepper.method().kind != MethodKind::linearly_implicit) return {};
+  const StepperOptions& o = stepper.options();
+  return {o.implicit_tolerance > 0 ? o.implicit_tolerance : kDefaultImplicitTolerance<T>, o.implicit_max_iterations};
 }
 
 std::string_view guard_name(std::uint8_t g) { return g == 0 ? "off" : g == 1 ? "check" : "clamp"; }
@@ -229,6 +245,9 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   put(h + rec::continues, std::uint8_t(cont.active));
   put(h + rec::rejected, std::uint8_t(cont.controller.rejected));
   put(h + rec::relaxed, std::uint8_t(o.relaxed_fma));
+  const ImplicitSolves solves = implicit_solves(stepper);
+  put(h + rec::implicit_tolerance, solves.tolerance);
+  put(h + rec::implicit_iterations, solves.iterations);
   for (const auto& [at, value] : {std::pair{rec::t_end, cont.t_end}, {rec::rtol, cont.rtol}, {rec::atol, cont.atol},
                                   {rec::max_step, cont.max_step}, {rec::next_h, cont.h},
                                   {rec::err_prev, cont.controller.err_prev}, {rec::kept_scale, cont.kept_scale}}) {
@@ -432,6 +451,17 @@ void CheckpointReader::check_record(std::size_t k, bool rigid, const Stepper<T>&
   if ((get<std::uint8_t>(h + rec::relaxed) != 0) != o.relaxed_fma) {
     throw Error(which + " was taken " + (o.relaxed_fma ? "without" : "with") +
                 " relaxed_fma, which changes the last bits on the scalar and SSE2 paths");
+  }
+  const ImplicitSolves solves = implicit_solves(stepper);
+  const auto tolerance = get<double>(h + rec::implicit_tolerance);
+  const auto iterations = get<std::int32_t>(h + rec::implicit_iterations);
+  if (tolerance != solves.tolerance || iterations != solves.iterations) {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  " was taken with implicit solves to %g within %d iterations, not this stepper's %g within %d: "
+                  "the steps would differ",
+                  tolerance, int(iterations), solves.tolerance, int(solves.iterations));
+    throw Error(which + text);
   }
 }
 

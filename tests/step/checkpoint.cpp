@@ -102,6 +102,45 @@ TEST_CASE("a checkpoint resumes fixed steps bit for bit on every ISA and thread 
   }
 }
 
+// The shipped cloth's springs and masses on a 10 x 10 grid.
+Scene small_cloth() {
+  return parse_scene(R"({"precision": "float", "method": "implicit_euler", "dt": 0.016666666666666666, "steps": 1,
+    "forces": [{"type": "gravity", "g": [0, -9.81, 0]},
+      {"type": "springs", "grid": {"rows": 10, "columns": 10, "spacing": 0.02, "k": 400, "damping": 0.02,
+       "mass": 0.001, "origin": [0, 1, 0], "pinned": "top_corners"}}]})");
+}
+
+TEST_CASE("a checkpoint resumes implicit steps bit for bit and refuses other solve options", "[checkpoint][implicit]") {
+  const Scene scene = small_cloth();
+  const ForceModel<float> forces = make_forces<float>(scene);
+  const auto frames = [](auto& stepper, auto& bodies, int) { stepper.advance(bodies, float(1.0 / 60), 2); };
+  for (const Method* m : {&implicit_euler, &ros2}) {
+    for (const StepperOptions& o : resumed_options()) {
+      INFO(m->name << ", isa " << isa_name(o.isa) << ", " << (o.jobs ? "2 threads" : "serial"));
+      check_resume<ParticleSet<float>>([&] { return make_particles<float>(scene); }, forces, *m, frames, 4, 1, o);
+    }
+  }
+  ParticleSet<float> bodies = make_particles<float>(scene);
+  Stepper<float> defaults(forces, implicit_euler, test::serial_options());
+  defaults.advance(bodies, float(1.0 / 60), 1);
+  const std::vector<std::byte> saved = bits(bodies, defaults);
+  ParticleSet<float> restored;
+  StepperOptions looser = test::serial_options();
+  looser.implicit_tolerance = 1e-3;
+  Stepper<float> looser_stepper(forces, implicit_euler, looser);
+  CHECK_THROWS_WITH(CheckpointReader(saved).restore(0, restored, looser_stepper),
+                    Catch::Contains("implicit solves to 1e-05 within 1000 iterations, not this stepper's 0.001 within 1000"));
+  StepperOptions capped = test::serial_options();
+  capped.implicit_max_iterations = 50;
+  Stepper<float> capped_stepper(forces, implicit_euler, capped);
+  CHECK_THROWS_WITH(CheckpointReader(saved).restore(0, restored, capped_stepper), Catch::Contains("not this stepper's 1e-05 within 50"));
+  StepperOptions spelled_out = test::serial_options();
+  spelled_out.implicit_tolerance = 1e-5;  // float's default, named
+  Stepper<float> spelled_stepper(forces, implicit_euler, spelled_out);
+  CHECK_NOTHROW(CheckpointReader(saved).restore(0, restored, spelled_stepper));
+  CHECK(bits(restored, spelled_stepper) == saved);
+}
+
 TEST_CASE("a checkpoint resumes error-controlled steps bit for bit", "[checkpoint][adaptive]") {
   // Each call starts from the step the last one proposed, as kinema run makes its calls.
   const auto to = [](Stepper<double>& s, ParticleSet<double>& b, int c) {
