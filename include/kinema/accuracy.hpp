@@ -75,16 +75,21 @@ struct MethodChoice {
   double evaluations = 0;                 // force evaluations the choice costs
   double estimated_error = 0;
   std::string reason;       // one line: what each candidate would cost
-  // Every method that can reach the tolerance, with the step count the pilots estimate.
+  // Every method that can reach the tolerance, with the step count the pilots estimate and
+  // what it costs in force evaluations (an implicit method's solves: each iteration as one).
   struct Candidate {
     const Method* method;
     std::uint64_t steps;
+    double evaluations;
   };
   std::vector<Candidate> candidates;
 };
 
 // The named method and step count with the fewest force evaluations whose estimated error
-// over the scene's duration (dt x steps) stays under `tolerance`. Each method's error comes
+// over the scene's duration (dt x steps) stays under `tolerance`. On a particle scene with
+// springs (and no events) the implicit methods are tried too, each iteration of their
+// solves counted as a force evaluation, their step bounded by their explicit part's on the
+// scene without its springs. Each method's error comes
 // from pilot runs on a sample of bodies at N, 2N and 4N steps (Richardson, with the observed
 // order), and the choice is checked again at its own step count. No step past a method's
 // largest stable step on the scene (from a stiffness estimate at its start) is proposed, and

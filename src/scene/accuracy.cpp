@@ -58,11 +58,22 @@ BodyStates states_of(const World<T>& world) {
   return out;
 }
 
+// A fixed-step run's final states and the conjugate-gradient iterations its implicit
+// solves took (0 for the other methods).
+struct CountedRun {
+  BodyStates states;
+  std::uint64_t solve_iterations = 0;
+};
+
 template <class T>
-BodyStates run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
+CountedRun run(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
   World<T> world(scene, method, on_calling_thread());
   if (world.advance(T(duration / double(steps)), steps, current_stop()) < steps) throw Stopped();
-  return states_of(world);
+  return {states_of(world), world.particle_stepper().implicit_stats().iterations};
+}
+
+CountedRun simulate_counted(const Scene& scene, const Method& method, std::uint64_t steps, double duration) {
+  return with_precision(scene.precision, [&]<class T>() { return run<T>(scene, method, steps, duration); });
 }
 
 template <class T>
@@ -186,8 +197,7 @@ BodyStates simulate(const Scene& scene, const Method& method, std::uint64_t step
                     double duration, const StopRequest& stop) {
   if (steps == 0) throw Error("simulate: steps must be at least 1");
   const StopScope scope(stop);
-  return with_precision(scene.precision,
-                        [&]<class T>() { return run<T>(scene, method, steps, duration); });
+  return simulate_counted(scene, method, steps, duration).states;
 }
 
 AdaptiveRun simulate_adaptive(const Scene& scene, const Method& method, double tolerance, double duration,
@@ -303,27 +313,34 @@ double charged_bodies(const Scene& scene) {
 // charged to `spent` (body-steps).
 class Pilot {
  public:
-  Pilot(const Scene& scene, const Method& method, double duration, double& spent)
-      : scene_(scene), method_(method), duration_(duration), spent_(spent),
+  // Its runs may take `spent` up to `limit` body-steps.
+  Pilot(const Scene& scene, const Method& method, double duration, double& spent, double limit = kSearchBodySteps)
+      : scene_(scene), method_(method), duration_(duration), spent_(spent), limit_(limit),
         bodies_(charged_bodies(scene)) {}
 
   // Error estimate of the n-step run, from runs at n, 2n and 4n: the difference d of the
   // first two times 2^p / (2^p - 1), p the observed order (capped by the nominal one).
   double estimate(std::uint64_t n) {
-    const double d1 = state_error(at(n), at(2 * n)), d2 = state_error(at(2 * n), at(4 * n));
+    const double d1 = state_error(at(n).states, at(2 * n).states), d2 = state_error(at(2 * n).states, at(4 * n).states);
     if (!std::isfinite(d1) || !std::isfinite(d2)) return std::numeric_limits<double>::infinity();
     const double nominal = method_.order;
     const double p = d1 > 0 && d2 > 0 ? std::clamp(std::log2(d1 / d2), 0.5, nominal) : nominal;
     return d1 * std::pow(2.0, p) / (std::pow(2.0, p) - 1);
   }
 
+  // The n-step run's cost in force evaluations, an implicit solve's iteration counted as
+  // one (a product over every spring slot costs about what an evaluation of the springs does).
+  double cost(std::uint64_t n) { return double(n) * method_.evaluations() + double(at(n).solve_iterations); }
+  const BodyStates& states(std::uint64_t n) { return at(n).states; }
+
  private:
-  const BodyStates& at(std::uint64_t n) {
+  const CountedRun& at(std::uint64_t n) {
     auto it = runs_.find(n);
     if (it == runs_.end()) {
-      if (spent_ + double(n) * bodies_ > kSearchBodySteps) throw SearchSpent{};
+      if (spent_ + double(n) * bodies_ > limit_) throw SearchSpent{};
       spent_ += double(n) * bodies_;
-      it = runs_.emplace(n, simulate(scene_, method_, n, duration_)).first;
+      it = runs_.emplace(n, simulate_counted(scene_, method_, n, duration_)).first;
+      spent_ += double(it->second.solve_iterations) * bodies_;  // each about a step's work
     }
     return it->second;
   }
@@ -332,13 +349,15 @@ class Pilot {
   const Method& method_;
   double duration_;
   double& spent_;
+  double limit_;
   double bodies_;
-  std::map<std::uint64_t, BodyStates> runs_;
+  std::map<std::uint64_t, CountedRun> runs_;
 };
 
 // The fewest steps (to within a factor 4/3) whose estimated error stays under the
 // tolerance: halve or double from n, then try three quarters of the last good count.
-// Gives up once the steps would cost more force evaluations than `budget`.
+// Gives up once the steps would cost more force evaluations than `budget` (their
+// evaluations alone: an implicit method's solves come on top, in Pilot::cost).
 std::optional<std::uint64_t> steps_needed(Pilot& pilot, const Method& m, std::uint64_t n,
                                           double tolerance, double budget, std::uint64_t least) {
   auto fits = [&](std::uint64_t k) { return pilot.estimate(k) <= tolerance; };
@@ -393,6 +412,12 @@ StiffnessEstimate stiffness_of(const Scene& scene) {
   const ForceModel<double> forces = make_forces<double>(scene);
   if (bodies.size() > 0) return estimate_stiffness(bodies, forces, 0, 120, on_calling_thread(), current_stop());
   return estimate_stiffness(make_rigid_bodies<double>(scene), forces, 0, 120, on_calling_thread(), current_stop());
+}
+
+// Whether the implicit methods may run the scene: particles only, with springs for them to
+// take implicitly, and no events (the implicit path refuses rigid bodies and events).
+bool takes_implicit(const Scene& scene) {
+  return scene.rigid_bodies.empty() && !scene.particles.empty() && !scene.springs.empty() && scene.events.empty();
 }
 
 // Refuses at once a tolerance below the round-off of a single step: a few units in the
@@ -467,9 +492,19 @@ class MethodSearch {
     std::vector<const Method*> order(builtin_methods.begin(), builtin_methods.end());
     if (pilot_scene_.rigid_bodies.empty()) order.insert(order.end(), staged_methods.begin(), staged_methods.end());
     std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
+    // The implicit methods right after the first explicit one that meets the tolerance,
+    // whose run they are checked against (checked_implicit), before the search budget goes.
+    bool implicit_left = takes_implicit(pilot_scene_);
     for (const Method* m : order) {
       if (!fixed_steps_leave_budget(*m)) return false;
+      if (implicit_left && reference_) {
+        implicit_left = false;
+        for (const Method* i : implicit_methods) {
+          if (!fixed_steps_leave_budget(*i)) return false;
+        }
+      }
     }
+    if (implicit_left) note("the implicit methods not tried (no explicit method met the tolerance to check them against)");
     return true;
   }
 
@@ -500,19 +535,46 @@ class MethodSearch {
  private:
   void note(const std::string& text) { reason_ += (reason_.empty() ? "" : ", ") + text; }
 
+  // The largest stable step of m on the scene: an implicit method's is its explicit part's
+  // on the scene without its springs (the forces it steps explicitly).
+  double stable_step(const Method& m) {
+    if (m.kind != MethodKind::linearly_implicit) return largest_stable_step(m, stiffness_);
+    if (!explicit_stiffness_) {
+      Scene without = pilot_scene_;
+      without.springs.clear();
+      explicit_stiffness_ = stiffness_of(without);
+    }
+    return largest_stable_step(explicit_part(m), *explicit_stiffness_);
+  }
+
   // Tries m at fixed steps; false when the search budget ran out on it.
   bool fixed_steps_leave_budget(const Method& m) {
-    const double stable = largest_stable_step(m, stiffness_);
+    const double stable = stable_step(m);
     if (!(stable > 0)) {
       note(std::string(m.name) + " unstable here");
       return true;
     }
     const std::uint64_t least = std::isfinite(stable) ? std::uint64_t(std::ceil(duration_ / stable)) : 1;
-    Pilot pilot(pilot_scene_, m, duration_, spent_);
+    // An implicit method's pilots may take a quarter of the budget left: a scene where its
+    // estimates never settle must not cost the explicit methods still to come their turn.
+    const bool implicit = m.kind == MethodKind::linearly_implicit;
+    Pilot pilot(pilot_scene_, m, duration_, spent_,
+                implicit ? spent_ + (kSearchBodySteps - spent_) / 4 : kSearchBodySteps);
     std::optional<std::uint64_t> steps;
+    double estimated = 0;
     try {
       steps = steps_needed(pilot, m, start_, tolerance_, best_cost_, least);
+      if (steps) estimated = pilot.estimate(*steps);
+      if (steps && m.kind == MethodKind::linearly_implicit) {
+        const auto checked = checked_implicit(pilot, m, *steps);
+        if (!checked) return true;
+        steps = checked->first, estimated = checked->second;
+      }
     } catch (const SearchSpent&) {
+      if (implicit) {
+        note(std::string(m.name) + " not settled within its share of the search budget");
+        return true;
+      }
       // The best so far meets the tolerance; it may not be the cheapest.
       note(std::string(m.name) + " not tried (search budget spent)");
       return false;
@@ -524,17 +586,36 @@ class MethodSearch {
       note(std::string(m.name) + (std::isfinite(best_cost_) ? " costlier" : " cannot"));
       return true;
     }
-    const double cost = double(*steps) * m.evaluations();
+    const double cost = pilot.cost(*steps);
     note(std::string(m.name) + " " + std::to_string(std::uint64_t(cost)) + " (" + std::to_string(*steps) +
-         " steps)");
-    choice_.candidates.push_back({&m, *steps});
+         " steps" + (m.kind == MethodKind::linearly_implicit ? ", with their solves' iterations)" : ")"));
+    choice_.candidates.push_back({&m, *steps, cost});
+    if (m.kind != MethodKind::linearly_implicit && (!reference_ || estimated < reference_->error)) {
+      reference_ = ExplicitRun{pilot.states(*steps), estimated, &m};
+    }
     if (cost < best_cost_) {
       best_cost_ = cost;
       choice_.method = &m;
       choice_.steps = *steps;
-      choice_.estimated_error = pilot.estimate(*steps);
+      choice_.estimated_error = estimated;
     }
     return true;
+  }
+
+  // Richardson on an implicit method's pilots can agree with itself and not with the truth:
+  // with steps far past the stiff modes (h |lambda| >> 1) every pilot may lose the same
+  // motion (a stiff spring turning with its bodies is slowed at each step as the others are).
+  // So the steps are checked against the most accurate explicit run that met the tolerance,
+  // doubled (at most three times) until they agree within it; the steps and that error, or
+  // nullopt (noted).
+  std::optional<std::pair<std::uint64_t, double>> checked_implicit(Pilot& pilot, const Method& m, std::uint64_t n) {
+    const std::string name(m.name);
+    for (const std::uint64_t last = 8 * n; n <= last && double(n) * m.evaluations() <= best_cost_; n *= 2) {
+      const double error = state_error(pilot.states(n), reference_->states) + reference_->error;
+      if (error <= tolerance_) return std::pair{n, error};
+    }
+    note(name + " misses the tolerance against " + std::string(reference_->method->name) + "'s run");
+    return std::nullopt;
   }
 
   // Tries m with error control; false when the search budget ran out on it.
@@ -576,6 +657,14 @@ class MethodSearch {
   double duration_, tolerance_;
   Scene pilot_scene_;
   StiffnessEstimate stiffness_;
+  std::optional<StiffnessEstimate> explicit_stiffness_;  // without the springs, when asked
+  // The most accurate explicit run that met the tolerance: its final states and estimated error.
+  struct ExplicitRun {
+    BodyStates states;
+    double error;
+    const Method* method;
+  };
+  std::optional<ExplicitRun> reference_;
   std::uint64_t start_ = 0;
   MethodChoice choice_;
   double best_cost_ = std::numeric_limits<double>::infinity(), spent_ = 0;

@@ -31,8 +31,7 @@ const MethodChoice::Candidate* runner_up(const MethodChoice& c) {
   double cost = std::numeric_limits<double>::infinity();
   for (const auto& candidate : c.candidates) {
     if (!c.step_tolerance && candidate.method == c.method) continue;
-    const double e = double(candidate.steps) * candidate.method->evaluations();
-    if (e < cost) cost = e, best = &candidate;
+    if (candidate.evaluations < cost) cost = candidate.evaluations, best = &candidate;
   }
   return best;
 }
@@ -45,8 +44,9 @@ std::string choice_line(const MethodChoice& c, Precision scene_precision, double
                             c.evaluations, tolerance, duration, c.estimated_error);
   if (const auto* next = runner_up(c)) {
     line += format("; next cheapest: %s with fixed steps, %.0f force evaluations", std::string(next->method->name).c_str(),
-                   double(next->steps) * next->method->evaluations());
+                   next->evaluations);
   }
+  if (c.method->kind == MethodKind::linearly_implicit) line += "; each iteration of its solves counted as an evaluation";
   if (c.precision != scene_precision) line += "; float's round-off stays under a tenth of the tolerance";
   return line;
 }
@@ -67,7 +67,7 @@ nlohmann::ordered_json choice_record(const MethodChoice& c, double tolerance, do
   for (const auto& candidate : c.candidates) {
     j["candidates"].push_back({{"method", std::string(candidate.method->name)},
                                {"steps", candidate.steps},
-                               {"force_evaluations", candidate.steps * std::uint64_t(candidate.method->evaluations())}});
+                               {"force_evaluations", std::uint64_t(candidate.evaluations)}});
   }
   return j;
 }
