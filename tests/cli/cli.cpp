@@ -240,6 +240,29 @@ TEST_CASE("chart: the CSV holds each point's true error and cost", "[cli][chart]
   }
 }
 
+TEST_CASE("chart: an implicit method's cost counts its solves' iterations", "[cli][chart][implicit]") {
+  const std::string text = R"({"precision": "double", "method": "ros2", "dt": 0.01, "steps": 10,
+    "particles": [{"position": [-0.5, 0, 0], "velocity": [0, -1, 0], "mass": 1},
+                  {"position": [0.6, 0, 0], "velocity": [0, 1, 0], "mass": 1}],
+    "forces": [{"type": "springs", "pairs": [[0, 1, 1, 1e4, 0.5]]}]})";
+  const fs::path path = write("stiff_pair.json", text);
+  const fs::path out = work_dir() / "chart_implicit";
+  const Result r = kinema_cli("chart " + path.string() + " --methods implicit_euler,ros2 --dts 0.01 --repeat 1 -q --out " +
+                              out.string());
+  REQUIRE(r.code == 0);
+  const auto rows = csv_rows(out / "work_precision.csv");
+  REQUIRE(rows.size() == 2);
+  for (const auto& row : rows) {
+    const Method& m = method_by_name(row.at("method"));
+    INFO(m.name);
+    World<double> world(parse_scene(text), m, on_calling_thread());
+    world.advance(0.01, 10);
+    const std::uint64_t iterations = world.particle_stepper().implicit_stats().iterations;
+    CHECK(iterations >= 10 * m.rosenbrock.stages);
+    CHECK(number(row, "force_evaluations") == double((10 * m.evaluations() + iterations) * 2));
+  }
+}
+
 TEST_CASE("chart: fitted orders 1, 2, 2, 4, 1, 2, 3, 5, 6 on the eccentric orbit", "[cli][chart]") {
   const fs::path out = work_dir() / "chart_orbit";
   REQUIRE(kinema_cli("chart " + scene("kepler_eccentric.json") + " --repeat 1 -q --out " + out.string()).code == 0);
