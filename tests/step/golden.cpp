@@ -97,6 +97,8 @@ const std::map<std::string, std::uint64_t> kGolden = {
     {"box_chain/double", 0xeb9d17e0c63da338ull},
     {"double_pendulum/float", 0x0c4fa1ff14d29703ull},
     {"double_pendulum/double", 0x8e11370a264f2697ull},
+    {"stiff_pair/float", 0xbafe74a98a21c463ull},
+    {"stiff_pair/double", 0x8e1461eebf63d683ull},
 };
 
 }  // namespace
@@ -111,7 +113,7 @@ TEST_CASE("shipped scenes hash to their stored values on every ISA, thread count
   const char* names[] = {"damped_spring", "drag_field",      "kepler_circular", "kepler_eccentric",
                          "projectiles",   "spinning_debris", "tumbling_book",   "binary_orbit",
                          "hanging_chain", "cloth",           "plummer_cluster", "drag_oscillator",
-                         "heavy_top",     "box_chain",       "double_pendulum"};
+                         "heavy_top",     "box_chain",       "double_pendulum", "stiff_pair"};
   for (const char* name : names) {
     Scene scene = load_scene(std::string(KINEMA_SCENES) + "/" + name + ".json");
     // A cluster of 64 bodies: 4096^2 interactions per stage take seconds on the scalar path.
