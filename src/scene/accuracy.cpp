@@ -337,10 +337,15 @@ class Pilot {
   const CountedRun& at(std::uint64_t n) {
     auto it = runs_.find(n);
     if (it == runs_.end()) {
-      if (spent_ + double(n) * bodies_ > limit_) throw SearchSpent{};
+      // An implicit run's solves cost about a step an iteration: as many a step as the
+      // most the earlier runs took, and what this one took is charged after it.
+      if (spent_ + double(n) * (1 + iterations_per_step_) * bodies_ > limit_) throw SearchSpent{};
       spent_ += double(n) * bodies_;
       it = runs_.emplace(n, simulate_counted(scene_, method_, n, duration_)).first;
-      spent_ += double(it->second.solve_iterations) * bodies_;  // each about a step's work
+      const double iterations = double(it->second.solve_iterations);
+      spent_ += iterations * bodies_;
+      iterations_per_step_ = std::max(iterations_per_step_, iterations / double(n));
+      if (spent_ > limit_) throw SearchSpent{};
     }
     return it->second;
   }
@@ -350,6 +355,7 @@ class Pilot {
   double duration_;
   double& spent_;
   double limit_;
+  double iterations_per_step_ = 0;
   double bodies_;
   std::map<std::uint64_t, CountedRun> runs_;
 };
@@ -590,9 +596,7 @@ class MethodSearch {
     note(std::string(m.name) + " " + std::to_string(std::uint64_t(cost)) + " (" + std::to_string(*steps) +
          " steps" + (m.kind == MethodKind::linearly_implicit ? ", with their solves' iterations)" : ")"));
     choice_.candidates.push_back({&m, *steps, cost});
-    if (m.kind != MethodKind::linearly_implicit && (!reference_ || estimated < reference_->error)) {
-      reference_ = ExplicitRun{pilot.states(*steps), estimated, &m};
-    }
+    if (m.kind != MethodKind::linearly_implicit && !reference_) reference_ = ExplicitRun{pilot.states(*steps), estimated, &m};
     if (cost < best_cost_) {
       best_cost_ = cost;
       choice_.method = &m;
@@ -605,16 +609,23 @@ class MethodSearch {
   // Richardson on an implicit method's pilots can agree with itself and not with the truth:
   // with steps far past the stiff modes (h |lambda| >> 1) every pilot may lose the same
   // motion (a stiff spring turning with its bodies is slowed at each step as the others are).
-  // So the steps are checked against the most accurate explicit run that met the tolerance,
-  // doubled (at most three times) until they agree within it; the steps and that error, or
-  // nullopt (noted).
+  // So the steps are checked against the run of the first explicit method that met the
+  // tolerance (the highest order's, usually the most accurate), doubled (at most three
+  // times) until they agree within it; the steps and that error, or nullopt (noted).
   std::optional<std::pair<std::uint64_t, double>> checked_implicit(Pilot& pilot, const Method& m, std::uint64_t n) {
     const std::string name(m.name);
-    for (const std::uint64_t last = 8 * n; n <= last && double(n) * m.evaluations() <= best_cost_; n *= 2) {
-      const double error = state_error(pilot.states(n), reference_->states) + reference_->error;
-      if (error <= tolerance_) return std::pair{n, error};
+    const std::string against = " against " + std::string(reference_->method->name) + "'s run";
+    try {
+      for (const std::uint64_t last = 8 * n;
+           n <= std::min(last, kMostPilotSteps) && double(n) * m.evaluations() <= best_cost_; n *= 2) {
+        const double error = state_error(pilot.states(n), reference_->states) + reference_->error;
+        if (error <= tolerance_) return std::pair{n, error};
+      }
+    } catch (const SearchSpent&) {
+      note(name + " not checked" + against + " within its share of the search budget");
+      return std::nullopt;
     }
-    note(name + " misses the tolerance against " + std::string(reference_->method->name) + "'s run");
+    note(name + " misses the tolerance" + against);
     return std::nullopt;
   }
 
@@ -658,7 +669,7 @@ class MethodSearch {
   Scene pilot_scene_;
   StiffnessEstimate stiffness_;
   std::optional<StiffnessEstimate> explicit_stiffness_;  // without the springs, when asked
-  // The most accurate explicit run that met the tolerance: its final states and estimated error.
+  // The first explicit run that met the tolerance: its final states and estimated error.
   struct ExplicitRun {
     BodyStates states;
     double error;

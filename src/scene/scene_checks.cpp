@@ -205,7 +205,7 @@ RunBytes run_bytes(const Scene& scene) {
     for (const Springs& network : scene.springs) pairs += double(network.pairs.size());
     pairs += 2 * double(scene.body_springs.springs.size());
     r.springs = pairs * (kSpringCopies + 2 * 1.5 * (4 + 3 * sizeof(T)) + 2 * 1.5 * (4 + 3 * sizeof(double)));
-    if (method.kind == MethodKind::linearly_implicit) r.springs += pairs * 2 * 1.5 * 5 * sizeof(T);  // 5 a slot
+    if (method.kind == MethodKind::linearly_implicit) r.springs += pairs * 2 * 1.5 * 7 * sizeof(T);  // 7 a slot
   }
   if (scene.method != "auto" && method_by_name(scene.method).kind == MethodKind::linearly_implicit) {
     // ImplicitPath: 40 arrays a body, its own accelerations probe's 9 besides.

@@ -41,7 +41,7 @@ constexpr std::array<std::pair<Flags, BodyParameter>, 3> kParameterFlags{
 // + 3 for forces, + 3 for torques, + 3 for a kept first stage
 constexpr std::size_t kParticleArrays = 7, kRigidArrays = 17;
 
-// Field offsets in the 48-byte header and the 128-byte record header.
+// Field offsets in the 48-byte header and the 192-byte record header.
 namespace head {
 constexpr std::size_t version = 8, records = 12, total = 16, user = 24, crc = 44;
 }
@@ -455,6 +455,10 @@ void CheckpointReader::check_record(std::size_t k, bool rigid, const Stepper<T>&
   const ImplicitSolves solves = implicit_solves(stepper);
   const auto tolerance = get<double>(h + rec::implicit_tolerance);
   const auto iterations = get<std::int32_t>(h + rec::implicit_iterations);
+  if (solves.iterations > 0 && tolerance == 0 && iterations == 0) {
+    throw Error(which + " was taken before checkpoints kept an implicit method's solve options: "
+                        "it cannot say which its steps took");
+  }
   if (tolerance != solves.tolerance || iterations != solves.iterations) {
     char text[200];
     std::snprintf(text, sizeof text,

@@ -114,7 +114,8 @@ void ImplicitPath<T>::build_jacobian(const StepContext<T>& c) {
           const std::size_t j = std::size_t(net_.neighbor[at]);
           T dx[3], length2 = 0;
           for (int d = 0; d < 3; ++d) dx[d] = x0_[d][j] - x0_[d][i], length2 += dx[d] * dx[d];
-          const T length = std::sqrt(length2), k = net_.k[at];
+          // A k of -0 counts as +0: no zero's sign in the products hangs on how k was written.
+          const T length = std::sqrt(length2), k = net_.k[at] + T(0);
           // Stretched: the geometric stiffness k (1 - rest / length) across the spring. Under
           // compression it would be negative: left out, so the matrix stays definite.
           const T across = length > 0 ? std::max(T(0), T(1) - std::max(net_.rest[at], T(0)) / length) : T(0);

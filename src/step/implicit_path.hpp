@@ -55,9 +55,7 @@ class ImplicitPath {
   void evaluate_stage(const StepContext<T>& c, int s);
   void solve_stage(const StepContext<T>& c, int s);
   void finish(const StepContext<T>& c);
-  // The product out = (cm M + sc D + sk K) p over a block (kernels/implicit_kernels.hpp);
-  // returns p . out over the block.
-  // out = cm M p + (the slots' weights along and across) p over block b; returns p . out.
+  // The product (kernels/implicit_kernels.hpp): out = cm M p + (the slots' weights along and across) p over block b; returns p . out.
   double product(Block b, const T* const p[3], T* const out[3], T cm, const T* along, const T* across) const;
   void conjugate_gradients(const StepContext<T>& c, Vec3s& x);
   void not_finite(const StepContext<T>& c, Vec3s& x);

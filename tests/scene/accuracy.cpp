@@ -114,6 +114,11 @@ TEST_CASE("auto takes an implicit method where a stiff spring sets every explici
   REQUIRE(choice.method != nullptr);
   CHECK(choice.method->kind == MethodKind::linearly_implicit);
   CHECK_THAT(choice.reason, Catch::Contains("with their solves' iterations"));
+  // Its cost counts its solves' iterations: a run of its steps takes these many.
+  ParticleSet<double> bodies = make_particles<double>(scene);
+  Stepper<double> stepper(make_forces<double>(scene), *choice.method, on_calling_thread());
+  stepper.advance(bodies, duration / double(choice.steps), choice.steps);
+  CHECK(choice.evaluations == double(choice.steps * choice.method->evaluations() + stepper.implicit_stats().iterations));
   const Reference ref = reference_states(scene, duration, std::uint64_t(1) << 18);
   CHECK(state_error(simulate(scene, *choice.method, choice.steps, duration), ref.states) <= tolerance);
   // Its solves counted, three times cheaper than any explicit method can be (one force

@@ -103,7 +103,7 @@ TEST_CASE("a checkpoint resumes fixed steps bit for bit on every ISA and thread 
 }
 
 // The shipped cloth's springs and masses on a 10 x 10 grid.
-Scene small_cloth() {
+static Scene small_cloth() {
   return parse_scene(R"({"precision": "float", "method": "implicit_euler", "dt": 0.016666666666666666, "steps": 1,
     "forces": [{"type": "gravity", "g": [0, -9.81, 0]},
       {"type": "springs", "grid": {"rows": 10, "columns": 10, "spacing": 0.02, "k": 400, "damping": 0.02,
@@ -362,6 +362,22 @@ TEST_CASE("a checkpoint of another version, size, scene, method or precision is 
   Stepper<float> with_guard(test::all_local_terms<float>(), rk4, guarded);
   CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, b, with_guard), Catch::Contains("guard off"));
   CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(1, b, same), Catch::Contains("no record 1"));
+}
+
+TEST_CASE("an implicit record without its solve options is refused by name", "[checkpoint][implicit]") {
+  const Scene scene = small_cloth();
+  const ForceModel<float> forces = make_forces<float>(scene);
+  ParticleSet<float> bodies = make_particles<float>(scene);
+  Stepper<float> stepper(forces, ros2, test::serial_options());
+  stepper.advance(bodies, float(1.0 / 60), 1);
+  std::vector<std::byte> old = bits(bodies, stepper);
+  patch(old, kCheckpointHeaderBytes + 176, 0.0);  // as records were before they kept them
+  patch(old, kCheckpointHeaderBytes + 184, std::int32_t(0));
+  reseal(old);
+  ParticleSet<float> restored;
+  CHECK_THROWS_WITH(CheckpointReader(old).restore(0, restored, stepper),
+                    Catch::Contains("before checkpoints kept an implicit method's solve options"));
+  CHECK(restored.size() == 0);
 }
 
 TEST_CASE("a checkpoint made to pass its checksums with a state no set can hold is refused", "[checkpoint]") {
