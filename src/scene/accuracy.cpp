@@ -571,7 +571,7 @@ class MethodSearch {
     try {
       steps = steps_needed(pilot, m, start_, tolerance_, best_cost_, least);
       if (steps) estimated = pilot.estimate(*steps);
-      if (steps && m.kind == MethodKind::linearly_implicit) {
+      if (steps && implicit) {
         const auto checked = checked_implicit(pilot, m, *steps);
         if (!checked) return true;
         steps = checked->first, estimated = checked->second;
@@ -594,9 +594,9 @@ class MethodSearch {
     }
     const double cost = pilot.cost(*steps);
     note(std::string(m.name) + " " + std::to_string(std::uint64_t(cost)) + " (" + std::to_string(*steps) +
-         " steps" + (m.kind == MethodKind::linearly_implicit ? ", with their solves' iterations)" : ")"));
+         " steps" + (implicit ? ", with their solves' iterations)" : ")"));
     choice_.candidates.push_back({&m, *steps, cost});
-    if (m.kind != MethodKind::linearly_implicit && !reference_) reference_ = ExplicitRun{pilot.states(*steps), estimated, &m};
+    if (!implicit && !reference_) reference_ = ExplicitRun{pilot.states(*steps), estimated, &m};
     if (cost < best_cost_) {
       best_cost_ = cost;
       choice_.method = &m;
