@@ -166,14 +166,14 @@ KINEMA_CLONED double spring_product(const SpringProductJob<double>& job, std::si
 KINEMA_CLONED void cg_update(const CgUpdateJob<float>& job, std::size_t begin, std::size_t end, double sums[2]) {
   update_of(job, begin, end, sums);
 }
+KINEMA_CLONED void cg_update(const CgUpdateJob<double>& job, std::size_t begin, std::size_t end, double sums[2]) {
+  update_of(job, begin, end, sums);
+}
 KINEMA_CLONED void cg_direction(const CgDirectionJob<float>& job, std::size_t begin, std::size_t end) {
   direction_of(job, begin, end);
 }
 KINEMA_CLONED void cg_direction(const CgDirectionJob<double>& job, std::size_t begin, std::size_t end) {
   direction_of(job, begin, end);
-}
-KINEMA_CLONED void cg_update(const CgUpdateJob<double>& job, std::size_t begin, std::size_t end, double sums[2]) {
-  update_of(job, begin, end, sums);
 }
 
 }  // namespace kinema::kernels

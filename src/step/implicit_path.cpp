@@ -10,7 +10,6 @@ namespace kinema {
 
 using kernels::kSpringSlice;
 
-
 template <class T>
 ImplicitPath<T>::ImplicitPath(const ForceModel<T>& forces, const Method& method, const kernels::KernelTable<T>& table,
                               const LoweredForces<T>& lowered, const StepperOptions& options)
