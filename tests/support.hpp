@@ -103,6 +103,19 @@ ParticleSet<T> cloud(std::size_t count, std::uint64_t seed = 3) {
   return set;
 }
 
+// The cloud's centres as rigid bodies, turning and tumbling, of many shapes and masses.
+template <class T>
+RigidBodySet<T> tumbling_cloud(std::size_t n) {
+  RigidBodySet<T> set;
+  const ParticleSet<T> centers = cloud<T>(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const T a = T(i % 17) / 17, b = T(i % 5) / 5;
+    set.add({centers.position(i), centers.velocity(i), {1, a, b, T(0.3)}, {a, T(1), b},
+             T(1) + a, {T(1) + a, T(2), T(2.5) - b}});
+  }
+  return set;
+}
+
 // Every built-in local term, with a central attractor off the cloud's centre.
 template <class T>
 ForceModel<T> all_local_terms(bool quadratic = true, bool central = true) {

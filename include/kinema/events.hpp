@@ -11,7 +11,10 @@
 // positions, velocities and accelerations, with dopri5's own term after a dopri5 step),
 // which finds the time to `time_tolerance`. The hit records the time, the body, the event and
 // the state there. Events are watched on particle sets whose model has built-in local terms
-// only, under any method, by step(), advance() and advance_to() (each accepted step).
+// only, under any method, by step(), advance() and advance_to() (each accepted step), and on
+// rigid bodies' centres under the same terms by step() and advance(): a rigid body's values
+// are its centre's, and a stop settles all 13 components of every body (the orientation
+// kept unit) on their Hermite (RigidDenseOutput's).
 //
 // - A value that reaches zero exactly at a step's end counts in that step (its sign at the
 //   next step's start is zero, neither above nor below): each crossing is found once.
@@ -98,7 +101,7 @@ struct EventHit {
   double time = 0;
   std::size_t body = 0;
   int event = 0;  // index into EventOptions::events
-  Vec3<T> position{}, velocity{};
+  Vec3<T> position{}, velocity{};  // of a rigid body: its centre's
 };
 
 }  // namespace kinema

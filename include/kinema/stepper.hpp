@@ -177,6 +177,9 @@ class Stepper {
   // CoupledTerms) or another method. Use one stepper per body set: each keeps its own clock.
   void step(RigidBodySet<T>& io_bodies, T h);
   void advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps);
+  // With `stop` polled as for particles; returns the steps completed (a stop event: the
+  // steps to it, the last cut at the event).
+  std::uint64_t advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps, const StopRequest& stop);
   // Error control for rigid bodies, as for particles, the error norm's mean taken over the
   // 13 components of each body: x, v, the orientation quaternion q (dimensionless: atol 1e-6
   // allows about 2e-6 rad of turn) and the world angular momentum L, all weighted by
@@ -216,8 +219,11 @@ class Stepper {
   // Events (kinema/events.hpp) watched by every later step(), advance() and advance_to()
   // on a particle set whose model has built-in local terms only (any method): on the fused
   // path the kernels run the sign test themselves, elsewhere each step is scanned; only the
-  // bodies that crossed are located. A call that cannot watch them (rigid bodies, a model
-  // with callbacks or coupled terms) throws kinema::Error before any body moves. Under
+  // bodies that crossed are located. Rigid bodies under built-in local terms (no rigid
+  // callback, point spring, body spring or coupled term) are watched by step() and
+  // advance(): their centres' values, each slice's steps scanned in cache. A call that
+  // cannot watch them (a model with callbacks or coupled terms, rigid bodies under
+  // advance_to) throws kinema::Error before any body moves. Under
   // advance_to a stop event ends the call at the event (the set and time() there; the next
   // call starts its step sizes afresh, as a first call does), and a throwing event function
   // takes back the step it scanned and its hits. An empty list watches nothing.

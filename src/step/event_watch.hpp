@@ -92,6 +92,9 @@ class EventWatch {
   // crossing, is not stopped again by the same crossing at the next call's start.
   void settle(const Workers& workers, ParticleSet<T>& bodies, const EventCall<T>& call,
               const T* const before[6], const Stop& stop, double h);
+  // The set was left at `stop` by other means (rigid bodies: FixedSteps::settle), as settle
+  // leaves it.
+  void settled_at(const Stop& stop) { settled_ = stop; }
 
  private:
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,

@@ -4,6 +4,7 @@
 
 #include "kinema/dense_output.hpp"
 
+#include <cmath>
 #include <string>
 #include <type_traits>
 
@@ -11,9 +12,11 @@ namespace kinema {
 
 template <class T>
 std::size_t FixedSteps<T>::checkpoint_bytes() const {
-  std::size_t previous = 0;
-  for (const auto& a : previous_) previous += a.size() * sizeof(T);
-  return checkpoint_.bytes() + buffer_.bytes() + call_start_.bytes() + previous;
+  std::size_t events = 0;
+  for (const auto* arrays : {&previous_, &end_state_, &end_rates_}) {
+    for (const auto& a : *arrays) events += a.size() * sizeof(T);
+  }
+  return checkpoint_.bytes() + buffer_.bytes() + call_start_.bytes() + events;
 }
 
 template <class T>
@@ -27,10 +30,12 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
   if (!events_.active()) return advance_checked(w, b, h, steps);
   check_events(b);
   events_.clear();
-  if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
-    for (auto& a : previous_) {
-      if (a.size() != b.capacity()) a = AlignedArray<T>(b.capacity());
-    }
+  constexpr bool rigid = std::is_same_v<Set, RigidBodySet<T>>;
+  std::size_t capacity = 0;
+  if constexpr (rigid) capacity = b.centers().capacity();
+  else capacity = b.capacity();
+  for (int a = 0; a < (rigid && events_.stops() ? 13 : 6); ++a) {
+    if (previous_[a].size() != capacity) previous_[a] = AlignedArray<T>(capacity);
   }
   struct Ordered {  // whatever ends the call, its hits are in order
     EventWatch<T>& events;
@@ -56,18 +61,22 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
       throw;
     }
   } else {
-    advance_checked(w, b, h, steps);
+    events_.stops() ? advance_to_stop(w, b, h, steps) : advance_checked(w, b, h, steps);
   }
 }
 
 template <class T>
 template <class Set>
 void FixedSteps<T>::check_events(const Set& b) const {
-  if constexpr (!std::is_same_v<Set, ParticleSet<T>>) {
-    throw Error("events are watched on particle sets only: step rigid bodies with a stepper without events");
-  } else if (core_.paths.implicit) {
+  if (core_.paths.implicit) {
     throw Error("events are not watched under an implicit method (" + std::string(core_.method.name) +
                 "): use an explicit one, or a stepper without events");
+  }
+  if constexpr (std::is_same_v<Set, RigidBodySet<T>>) {
+    if (!centres_move_alone(core_.forces())) {
+      throw Error("events on rigid bodies are watched with built-in local terms only (any method): this model has "
+                  "rigid callbacks, point springs, body springs or coupled terms");
+    }
   } else if (core_.paths.block || (core_.paths.fused_for(reads_per_body(b)) == nullptr && !core_.forces().fusable())) {
     throw Error("events are watched with built-in local terms only (any method): this model takes the " +
                 std::string(core_.paths.block ? "block" : "staged") + " path for its callbacks or coupled terms");
@@ -75,8 +84,10 @@ void FixedSteps<T>::check_events(const Set& b) const {
 }
 
 template <class T>
-void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps) {
+template <class Set>
+void FixedSteps<T>::advance_to_stop(const Workers& w, Set& b, T h, std::uint64_t steps) {
   for (std::uint64_t k = 0; k < steps; ++k) {
+    const double t0 = core_.clock.time();
     try {
       advance_checked(w, b, h, 1);
     } catch (const NonFiniteError& e) {
@@ -86,12 +97,58 @@ void FixedSteps<T>::advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, st
     if (!stop) continue;
     steps_to_stop_ = k + 1;
     if (stop->theta == 1) return;
-    const T* const before[6] = {previous_[0].data(), previous_[1].data(), previous_[2].data(),
-                                previous_[3].data(), previous_[4].data(), previous_[5].data()};
-    events_.settle(w, b, event_call(b), before, *stop, double(h));
+    settle(w, b, *stop, t0, h);
     core_.clock.set(stop->time);
     return;
   }
+}
+
+template <class T>
+void FixedSteps<T>::settle(const Workers& w, ParticleSet<T>& b, const typename EventWatch<T>::Stop& stop, double,
+                           T h) {
+  const T* const before[6] = {previous_[0].data(), previous_[1].data(), previous_[2].data(),
+                              previous_[3].data(), previous_[4].data(), previous_[5].data()};
+  events_.settle(w, b, event_call(b), before, stop, double(h));
+}
+
+// The rates at the step's end, then at its start (the set put back there for the probe), then
+// each real body at the stop on their Hermite; padding stays as the step left it.
+template <class T>
+void FixedSteps<T>::settle(const Workers& w, RigidBodySet<T>& b, const typename EventWatch<T>::Stop& stop, double t0,
+                           T h) {
+  events_.settled_at(stop);
+  const StateArrays<T> state = state_arrays(b);
+  const std::size_t n = b.padded_size(), size = b.size();
+  for (auto* arrays : {&end_state_, &end_rates_}) {
+    for (auto& a : *arrays) {
+      if (a.size() < n) a = AlignedArray<T>(b.centers().capacity());
+    }
+  }
+  RigidBlockPath<T>& probe = core_.rigid_probe();
+  probe.reserve(n);
+  const typename RigidBlockPath<T>::Call call{b, T(1), core_.options.renormalize_quaternions};
+  probe.evaluate_rates(call, w, t0 + double(h));
+  for_each_block(w, n, [&](Block k) {
+    for (int c = 0; c < state.count; ++c) {
+      std::copy(state.data[c] + k.begin, state.data[c] + k.end, end_state_[c].data() + k.begin);
+      std::copy(probe.rate_of(c) + k.begin, probe.rate_of(c) + k.end, end_rates_[c].data() + k.begin);
+      std::copy(previous_[c].data() + k.begin, previous_[c].data() + k.end, state.data[c] + k.begin);
+    }
+  });
+  probe.evaluate_rates(call, w, t0);
+  const HermiteWeights weights = HermiteWeights::at(stop.theta);
+  for_each_block(w, n, [&](Block k) {
+    for (std::size_t i = k.begin; i < k.end; ++i) {
+      double y[StateArrays<T>::kMax];
+      for (int c = 0; c < state.count; ++c) {
+        y[c] = i < size ? weights.of(state.data[c][i], probe.rate_of(c)[i], end_state_[c][i], end_rates_[c][i], double(h))
+                        : double(end_state_[c][i]);
+      }
+      const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
+      if (i < size) for (int c = 6; c < 10; ++c) y[c] /= norm;
+      for (int c = 0; c < state.count; ++c) state.data[c][i] = T(y[c]);
+    }
+  });
 }
 
 template <class T>
@@ -105,6 +162,13 @@ std::optional<EventCall<T>> FixedSteps<T>::watch_adaptive(ParticleSet<T>& b) {
 template <class T>
 EventCall<T> FixedSteps<T>::event_call(ParticleSet<T>& b) const {
   return {core_.table, core_.lowered().particle, b.inv_mass(), per_body(b), b.size(),
+          has_dopri5_interpolant(core_.method)};
+}
+
+// A rigid body's centre moves as a particle under the rigid terms (check_events).
+template <class T>
+EventCall<T> FixedSteps<T>::event_call(RigidBodySet<T>& b) const {
+  return {core_.table, core_.lowered().rigid, b.centers().inv_mass(), per_body(b.centers()), b.size(),
           has_dopri5_interpolant(core_.method)};
 }
 
@@ -250,6 +314,9 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
     path.reserve(b.padded_size());
     RigidBlocks blocks{path, {b, h, core_.options.renormalize_quaternions}};
     path.prepare(blocks.call);
+    if (events_.active()) {
+      return run_rigid_watched(w, b, h, steps, guard, [&](Block s, double t0) { path.step_block(blocks.call, s, t0); });
+    }
     if (!path.coupled()) return run_blocks(w, b, blocks, steps, guard);
     return run_steps(w, b, steps, guard, [&](double t0) { path.step_all(blocks.call, w, t0, stop_); });
   }
@@ -260,6 +327,7 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
                                  core_.options.renormalize_quaternions,
                                  {b.applied_torque_data(0), b.applied_torque_data(1), b.applied_torque_data(2)},
                                  b.parameters().data(BodyParameter::angular_damping)};
+  if (events_.active()) return run_rigid_watched(w, b, h, steps, guard, [&](Block s, double) { rigid_fn(job, s.begin, s.end); });
   for_each_block(w, b.padded_size(), [&](Block block) {
     run_block(b, block, steps, guard, [&](Block k) { rigid_fn(job, k.begin, k.end); });
   });
@@ -342,6 +410,34 @@ void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::Fu
         Clock<T> now = start;
         now.steps += k;
         events_.scan(call, ends, now.time(), double(job.h));
+      }
+    }
+    if (guard) guard->scan.scan(block);
+  });
+  core_.clock.steps += steps;
+}
+
+template <class T>
+template <class Step>
+void FixedSteps<T>::run_rigid_watched(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard,
+                                      Step&& step) {
+  const EventCall<T> call = event_call(b);
+  const Clock<T> start = core_.clock;
+  const StateArrays<T> state = state_arrays(b);
+  const int kept = events_.stops() ? state.count : 6;
+  for_each_block(w, b.padded_size(), [&](Block block) {
+    if (guard) guard->checkpoint.save(guard->state, block);
+    for (std::size_t s = block.begin; s < block.end; s += kSliceBodies) {
+      const Block slice{s, std::min(s + kSliceBodies, block.end)};
+      SliceEnds<T> ends{{}, {}, s, slice.end - s};
+      for (int a = 0; a < 6; ++a) ends.before[a] = previous_[a].data() + s, ends.after[a] = state.data[a] + s;
+      for (std::uint64_t k = 0; k < steps; ++k) {
+        for (int a = 0; a < kept; ++a) std::copy(state.data[a] + s, state.data[a] + slice.end, previous_[a].data() + s);
+        Clock<T> now = start;
+        now.steps += k;
+        step(slice, now.time());
+        if (guard && guard->clamp) clamp(b, slice);
+        events_.scan(call, ends, now.time(), double(h));
       }
     }
     if (guard) guard->scan.scan(block);

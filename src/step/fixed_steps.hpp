@@ -33,7 +33,7 @@ class FixedSteps {
   void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps, const StopRequest* stop = nullptr);
 
   std::size_t checkpoint_bytes() const;
-  // The events watched by particle steps (kinema/events.hpp), and the hits of the last call.
+  // The events watched by the steps (kinema/events.hpp), and the hits of the last call.
   EventWatch<T>& events() { return events_; }
   const EventWatch<T>& events() const { return events_; }
   // The steps the last call took when a stop event ended it (its last one cut at the event).
@@ -58,7 +58,12 @@ class FixedSteps {
   template <class Set>
   void advance_checked(const Workers& w, Set& b, T h, std::uint64_t steps);
   // Stop events: one step at a time, each watched; the first stop settles the set there.
-  void advance_to_stop(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
+  template <class Set>
+  void advance_to_stop(const Workers& w, Set& b, T h, std::uint64_t steps);
+  // Every rigid body on the dense output at the stop (its 13 components' Hermite, from the
+  // rates at both ends; the orientation kept unit), `previous_` holding the step's start.
+  void settle(const Workers& w, RigidBodySet<T>& b, const typename EventWatch<T>::Stop& stop, double t0, T h);
+  void settle(const Workers& w, ParticleSet<T>& b, const typename EventWatch<T>::Stop& stop, double t0, T h);
   template <class Set>
   void check_events(const Set& b) const;
   // The fused particle path with events: each slice of a block takes its steps in L1 and is
@@ -66,6 +71,12 @@ class FixedSteps {
   void run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
                    const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard);
   EventCall<T> event_call(ParticleSet<T>& b) const;
+  EventCall<T> event_call(RigidBodySet<T>& b) const;
+  // Rigid bodies with events: each slice of a block takes every step in L1, its start kept
+  // in previous_ before each (the centres', or all 13 components under a stop event), then
+  // scanned. step(slice, t0) steps a slice.
+  template <class Step>
+  void run_rigid_watched(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard, Step&& step);
   template <class Set>
   std::optional<NonFinite> guarded_run(const Workers& w, Set& b, T h, std::uint64_t steps,
                                        const StateArrays<T>& state);
@@ -126,8 +137,11 @@ class FixedSteps {
   StateBuffer<T> buffer_;     // or, on the fused particle path, where it steps to
   EventWatch<T> events_;
   // Events: where each body's last step started (every body under a stop event, else the
-  // batches the kernel's probe listed).
-  std::array<AlignedArray<T>, 6> previous_;
+  // batches the kernel's probe listed): px .. vz, and for rigid bodies under a stop event
+  // q and L too.
+  std::array<AlignedArray<T>, 13> previous_;
+  // A rigid stop's settle: the step's end and its rates there.
+  std::array<AlignedArray<T>, 13> end_state_, end_rates_;
   std::uint64_t steps_to_stop_ = 0;
   Checkpoint<T> call_start_;  // events with a user function: the state a call starts from
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for

@@ -19,6 +19,11 @@ bool has_point_springs(const ForceModel<T>& f) {
 }
 
 template <class T>
+bool centres_move_alone(const ForceModel<T>& f) {
+  return !f.couples_rigid() && f.rigid_callbacks().empty() && !has_point_springs(f);
+}
+
+template <class T>
 StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const kernels::KernelTable<T>& table,
                          const StepperOptions& options, PathCapacity capacity) {
   StepPaths<T> paths;
@@ -35,8 +40,7 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
   const int builtin = builtin_index(method);
   // Rigid bodies ignore particle callbacks, as particles ignore rigid ones (and point springs
   // and body springs).
-  const bool rigid_fused = builtin >= 0 && method.embedded_order == 0 && !f.couples_rigid() &&
-                           f.rigid_callbacks().empty() && !has_point_springs(f);
+  const bool rigid_fused = builtin >= 0 && method.embedded_order == 0 && centres_move_alone(f);
   if (rigid_fused) {
     paths.rigid = table.rigid[builtin][l.rigid.has_quadratic()][l.rigid.has_central()];
   } else {
@@ -59,7 +63,8 @@ StepPaths<T> build_paths(const ForceModel<T>& f, const Method& method, const ker
 #define KINEMA_STEP_PATHS(T)                                                                                    \
   template struct StepPaths<T>;                                                                                \
   template StepPaths<T> build_paths(const ForceModel<T>&, const Method&, const kernels::KernelTable<T>&,        \
-                                    const StepperOptions&, PathCapacity);
+                                    const StepperOptions&, PathCapacity);                                      \
+  template bool centres_move_alone(const ForceModel<T>&);
 KINEMA_STEP_PATHS(float)
 KINEMA_STEP_PATHS(double)
 #undef KINEMA_STEP_PATHS

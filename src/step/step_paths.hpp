@@ -43,6 +43,12 @@ struct PathCapacity {
   std::size_t particles = 0, rigid = 0;
 };
 
+// Whether a rigid body's centre moves under the model's built-in local terms alone, as a
+// particle would (no rigid callback, point spring, body spring or coupled term): then the
+// fused rigid kernels apply (with a method that has them), and events can be located.
+template <class T>
+bool centres_move_alone(const ForceModel<T>& forces);
+
 // Lowers `forces` and picks their kernels. The paths taken keep references to `forces`,
 // `method` and `table`, and get scratch for `capacity` bodies. Throws kinema::Error for
 // parameters that overflow T.

@@ -45,7 +45,8 @@ struct Stepper<T>::Impl {
     if (steps > 0) forces_used(bodies);
   }
 
-  std::uint64_t advance(ParticleSet<T>& bodies, T h, std::uint64_t steps, const StopRequest& stop) {
+  template <class Set>
+  std::uint64_t advance(Set& bodies, T h, std::uint64_t steps, const StopRequest& stop) {
     if (!stop) {
       advance(bodies, h, steps);
       return fixed.events().stop_time() ? fixed.steps_to_stop() : steps;
@@ -65,7 +66,7 @@ struct Stepper<T>::Impl {
   }
 
   void refuse_events() const {
-    if (fixed.events().active()) throw Error("advance_to watches events on particle sets only");
+    if (fixed.events().active()) throw Error("advance_to watches events on particle sets only: step rigid bodies with step() or advance()");
   }
 
   // Applied forces last one call, unless the set keeps them.
@@ -253,6 +254,11 @@ void Stepper<T>::step(RigidBodySet<T>& io_bodies, T h) {
 template <class T>
 void Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps) {
   impl_->advance(io_bodies, h, steps);
+}
+
+template <class T>
+std::uint64_t Stepper<T>::advance(RigidBodySet<T>& io_bodies, T h, std::uint64_t steps, const StopRequest& stop) {
+  return impl_->advance(io_bodies, h, steps, stop);
 }
 
 template <class T>

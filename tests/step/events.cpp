@@ -431,7 +431,6 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   pair.set_events({{floor_event()}});
   RigidBodySet<double> rigid;
   rigid.add({{0, 1, 0}, {}, {1, 0, 0, 0}, {}, 1, {1, 1, 1}});
-  CHECK_THROWS_WITH(s.step(rigid, 0.1), Catch::Contains("particle sets"));
   CHECK_THROWS_WITH(pair.advance_to(rigid, 1, Tolerances{}), Catch::Contains("advance_to") &&
                                                                  Catch::Contains("particle sets"));
   Stepper<double> pair_callback(callback_model(), dopri5, test::serial_options());
@@ -597,4 +596,188 @@ TEST_CASE("rigid dense output: a spinning body's orientation to rk4's order and 
   RigidDenseOutput<double> unused;
   double z = 0, *p[4] = {&z, &z, &z, &z};
   CHECK_THROWS_AS(unused.state_at(0, p, p, p, p), Error);
+}
+
+// Rigid bodies: events on their centres, the fused rigid kernels and the rigid path alike.
+
+namespace {
+
+RigidBodyDesc<double> spinning(const Vec3<double>& x, const Vec3<double>& v, double spin = 2) {
+  return {x, v, {1, 0, 0, 0}, {0.1, -0.2, spin * 0.5}, 2, {0.3, 0.4, 0.5}};
+}
+
+}  // namespace
+
+TEST_CASE("rigid bodies: a turning body's floor crossing is found to round-off with a coarse step, on each path",
+          "[events]") {
+  const double y0 = 10, v0 = 3, h = 0.1, t = landing_time(y0, v0);
+  for (const Method* m : {&rk4, &velocity_verlet, &bs3, &dopri5}) {  // fused kernels; the rigid path
+    INFO(m->name);
+    Stepper<double> s(falling(), *m, test::serial_options());
+    s.set_events({{floor_event()}});
+    RigidBodySet<double> b;
+    b.add(spinning({1, y0, -2}, {0.5, v0, 0}));
+    s.advance(b, h, 30);
+    REQUIRE(s.event_hits().size() == 1);
+    const EventHit<double>& hit = s.event_hits()[0];
+    CHECK(hit.body == 0);
+    CHECK(std::abs(hit.time - t) <= 1e-12 * t);
+    CHECK(std::abs(hit.position[1]) <= 1e-12 * y0);
+    CHECK(hit.position[0] == Approx(1 + 0.5 * t).epsilon(1e-13));
+    CHECK(hit.velocity[1] == Approx(v0 - kG * t).epsilon(1e-12));
+    CHECK(s.time() == Approx(30 * h));
+  }
+}
+
+TEST_CASE("rigid bodies: every body of several blocks through a plane is found once, at its analytic time",
+          "[events]") {
+  Stepper<double> s(falling(), rk4, test::serial_options());
+  s.set_events({{floor_event()}});
+  RigidBodySet<double> b;
+  const std::size_t n = 2500;
+  for (std::size_t i = 0; i < n; ++i) b.add(spinning({0, 1 + 0.01 * double(i), 0}, {0, 0, 0}, 0.001 * double(i)));
+  std::vector<int> found(n, 0);
+  double worst = 0;
+  for (int call = 0; call < 12; ++call) {
+    s.advance(b, 0.05, 5);
+    for (const EventHit<double>& hit : s.event_hits()) {
+      ++found[hit.body];
+      worst = std::max(worst, std::abs(hit.time - landing_time(1 + 0.01 * double(hit.body), 0)));
+    }
+  }
+  CHECK(std::count(found.begin(), found.end(), 1) == std::ptrdiff_t(n));  // every one, once
+  CHECK(worst < 1e-12);
+}
+
+TEST_CASE("rigid bodies: a stop event settles every body's 13 components on the dense output, q of unit length",
+          "[events]") {
+  // Body 0 (mass 2) falls at g - 0.5 / 2: the point force pushes its centre up.
+  const double h = 0.1, g0 = kG - 0.25, t = (3 + std::sqrt(9 + 2 * g0 * 10)) / g0;
+  const auto bodies = [] {
+    RigidBodySet<double> b;
+    b.add({{0, 10, 0}, {0, 3, 0}, {1, 0, 0, 0}, {0, 0, 1}, 2, {0.3, 0.4, 0.5}});  // spins about z at 2 rad/s
+    b.add({{4, 30, 1}, {1, -2, 0}, {0.9, 0.1, -0.3, 0.2}, {0.4, 0.7, -0.2}, 1, {1, 2, 2.5}});  // tumbles
+    return b;
+  };
+  ForceModel<double> f = falling();
+  f.add(AngularDrag{0.3}).add(PointForce{{0.2, 0, 0}, {0, 0.5, 0}});
+  Stepper<double> s(f, rk4, test::serial_options());
+  s.set_events({{floor_event(EventAction::stop)}});
+  RigidBodySet<double> b = bodies();
+  s.advance(b, h, 50);
+  REQUIRE(s.stopped_at_event());
+  REQUIRE(s.event_hits().size() == 1);
+  CHECK(s.time() == s.event_hits()[0].time);
+  CHECK(std::abs(s.event_hits()[0].position[1]) <= 1e-12);
+  CHECK(std::abs(b.centers().position(0)[1]) <= 1e-12);
+  // The same steps without events, and their dense output at the stop.
+  Stepper<double> free(f, rk4, test::serial_options());
+  RigidBodySet<double> reference = bodies();
+  RigidDenseOutput<double> dense;
+  while (free.time() + h < s.time()) free.step(reference, h);
+  dense.begin(free, reference);
+  free.step(reference, h);
+  dense.end(free, reference);
+  double cx[3][2], cv[3][2], cq[4][2], cl[3][2];
+  double* cxp[3] = {cx[0], cx[1], cx[2]};
+  double* cvp[3] = {cv[0], cv[1], cv[2]};
+  double* cqp[4] = {cq[0], cq[1], cq[2], cq[3]};
+  double* clp[3] = {cl[0], cl[1], cl[2]};
+  dense.state_at(s.time(), cxp, cvp, cqp, clp);
+  for (std::size_t i = 0; i < 2; ++i) {
+    INFO("body " << i);
+    const Quat<double> qi = b.orientation(i);
+    double norm = 0;
+    for (int k = 0; k < 4; ++k) {
+      CHECK(qi[k] == Approx(cq[k][i]).margin(1e-13));
+      norm += qi[k] * qi[k];
+    }
+    CHECK(std::abs(std::sqrt(norm) - 1) < 1e-15);
+    for (int d = 0; d < 3; ++d) {
+      CHECK(b.centers().position(i)[d] == Approx(cx[d][i]).margin(1e-12));
+      CHECK(b.centers().velocity(i)[d] == Approx(cv[d][i]).margin(1e-12));
+      CHECK(b.angular_momentum(i)[d] == Approx(cl[d][i]).margin(1e-13));
+    }
+  }
+  CHECK(std::abs(s.time() - t) <= 1e-12 * t);
+  // The next call goes on from there: body 1 lands at its own time.
+  s.advance(b, h, 50);
+  REQUIRE(s.stopped_at_event());
+  CHECK(s.event_hits().back().body == 1);
+}
+
+TEST_CASE("rigid bodies: the same hits and stops on every ISA, thread count and job system", "[events]") {
+  const EventFunction<float> above_diagonal = [](const EventBlock<float>& b, float* value) {
+    for (std::size_t i = 0; i < b.count; ++i) value[i] = b.px[i] - b.py[i];
+  };
+  const std::vector<Event<float>> record = {{PlaneEvent{{0.2, 1, -0.1}, -0.5}, Crossing::either},
+                                            {DistanceEvent{{0.5, 0, 0}, 1.5}, Crossing::up},
+                                            {SpeedEvent{2}, Crossing::down},
+                                            {above_diagonal, Crossing::either}};
+  const std::vector<Event<float>> stop = {{PlaneEvent{{0, 1, 0}, -0.5}, Crossing::down, EventAction::stop}};
+  const auto hash = [&](StepperOptions o, std::size_t count) {
+    std::uint64_t h = 1469598103934665603ull;
+    for (const Method* m : {&rk4, &bs3}) {
+      for (const bool stops : {false, true}) {
+        RigidBodySet<float> b = test::tumbling_cloud<float>(count);
+        Stepper<float> s(test::rotational_terms<float>(), *m, o);
+        s.set_events({stops ? stop : record});
+        std::size_t hits = 0;
+        for (int call = 0; call < 4; ++call) {
+          s.advance(b, 0.01f, 5);
+          for (const EventHit<float>& hit : s.event_hits()) {
+            const double values[] = {hit.time, double(hit.body), double(hit.event), hit.position[0], hit.position[1],
+                                     hit.position[2], hit.velocity[0], hit.velocity[1], hit.velocity[2]};
+            for (double v : values) h = (h ^ std::hash<double>{}(v)) * 1099511628211ull;
+            ++hits;
+          }
+        }
+        CHECK(hits >= (stops ? 4u : count / 50));
+        h ^= test::state_hash(b) ^ std::hash<double>{}(s.time());
+      }
+    }
+    return h;
+  };
+  test::check_same_bits_everywhere(hash, 512, 5000);
+}
+
+TEST_CASE("rigid bodies: events are refused where a centre does not move alone, and under advance_to", "[events]") {
+  RigidBodySet<double> b;
+  b.add(spinning({0, 1, 0}, {0, 0, 0}));
+  const auto refused = [&](ForceModel<double> f, const Method& m = rk4) {
+    Stepper<double> s(std::move(f), m, test::serial_options());
+    s.set_events({{floor_event()}});
+    CHECK_THROWS_WITH(s.step(b, 0.1), Catch::Contains("rigid bodies") && Catch::Contains("local terms only"));
+  };
+  ForceModel<double> callback = falling();
+  callback.add([](const RigidBlock<double>&) {});
+  refused(callback);
+  ForceModel<double> point_spring = falling();
+  point_spring.add(PointSpring{{0.1, 0, 0}, {0, 2, 0}, 5});
+  refused(point_spring);
+  ForceModel<double> body_springs = falling();
+  body_springs.add(BodySprings{{{0, 1, {0, 0, 0}, {0, 0, 0}, 1, 1}}});
+  refused(body_springs, bs3);
+  Stepper<double> pair(falling(), dopri5, test::serial_options());
+  pair.set_events({{floor_event()}});
+  CHECK_THROWS_WITH(pair.advance_to(b, 1, Tolerances{}), Catch::Contains("advance_to"));
+  CHECK(b.centers().position(0)[1] == 1);  // nothing moved
+}
+
+TEST_CASE("rigid bodies under the finiteness guard: a call taken back keeps none of its hits", "[events][guard]") {
+  StepperOptions o = test::serial_options();
+  o.guard = FiniteGuard::check;
+  ForceModel<double> f = falling();
+  f.add(Central{{0, -50, 0}, 1e30});  // body 1 starts on the centre: its first step is not finite
+  Stepper<double> s(f, rk4, o);
+  s.set_events({{floor_event()}});
+  RigidBodySet<double> b;
+  b.add(spinning({0, 0.05, 0}, {0, -1, 0}));
+  b.add(spinning({0, -50, 0}, {0, 0, 0}));
+  CHECK_THROWS_AS(s.advance(b, 0.1, 3), NonFiniteError);
+  CHECK(s.event_hits().empty());
+  CHECK(b.centers().position(0)[1] == 0.05);
+  s.set_forces(falling());
+  s.advance(b, 0.1, 3);
+  CHECK(s.event_hits().size() == 1);
 }

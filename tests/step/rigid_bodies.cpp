@@ -278,22 +278,10 @@ TEST_CASE("bad rigid bodies are refused by name", "[rigid][errors]") {
 namespace {
 
 template <class T>
-RigidBodySet<T> tumbling_cloud(std::size_t n) {
-  RigidBodySet<T> set;
-  const ParticleSet<T> centers = test::cloud<T>(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const T a = T(i % 17) / 17, b = T(i % 5) / 5;
-    set.add({centers.position(i), centers.velocity(i), {1, a, b, T(0.3)}, {a, T(1), b},
-             T(1) + a, {T(1) + a, T(2), T(2.5) - b}});
-  }
-  return set;
-}
-
-template <class T>
 void check_rigid_determinism() {
   for (const Method* m : builtin_methods) {
     auto run = [&](StepperOptions o) {
-      RigidBodySet<T> b = tumbling_cloud<T>(3000);
+      RigidBodySet<T> b = test::tumbling_cloud<T>(3000);
       Stepper<T>(test::rotational_terms<T>(), *m, o).advance(b, T(0.01), 10);
       REQUIRE(all_finite(b.centers()));
       return test::state_hash(b);
