@@ -32,13 +32,14 @@ class World {
   // does (a step abandoned is not taken); returns the steps taken, fewer than asked once
   // `stop` returned true. The bits are those of one call.
   std::uint64_t advance(T h, std::uint64_t steps, const StopRequest& stop);
-  // Watches the scene's events (Scene::events) from the next advance on; a world watches none
-  // until asked (the analyses that build worlds from a scene step it to fixed times).
+  // Watches the scene's events (Scene::events) from the next advance on, on the main
+  // stepper's bodies (a scene with events has one kind); a world watches none until asked
+  // (the analyses that build worlds from a scene step it to fixed times).
   void watch_events();
   // The events found by the last advance call, in order, and whether
   // one of them stopped it (the world then at its time; the steps returned count the cut one).
   const std::vector<EventHit<T>>& event_hits() const { return event_hits_; }
-  bool stopped_at_event() const { return particle_stepper_.stopped_at_event(); }
+  bool stopped_at_event() const { return main_stepper().stopped_at_event(); }
   // Steps of about the same work: 2^22 body-evaluations, where a body costs its springs too
   // and, under N-body gravity, half of every body again (its share of the pairs).
   std::uint64_t steps_per_call() const;
@@ -62,9 +63,7 @@ class World {
   const Stepper<T>& rigid_stepper() const { return rigid_stepper_; }
   // The stepper that moves the world's bodies: the particles', or the rigid bodies' when
   // the world has no particles.
-  const Stepper<T>& main_stepper() const {
-    return particles.size() > 0 || rigid.size() == 0 ? particle_stepper_ : rigid_stepper_;
-  }
+  const Stepper<T>& main_stepper() const { return rigid_only() ? rigid_stepper_ : particle_stepper_; }
 
  private:
   std::shared_ptr<const ForceModel<T>> forces_;  // declared first: built before the bodies
@@ -75,6 +74,7 @@ class World {
 
  private:
   void advance_rigid(T h, std::uint64_t steps, bool cut_short);
+  bool rigid_only() const { return particles.size() == 0 && rigid.size() > 0; }
 
   Stepper<T> particle_stepper_, rigid_stepper_;
   std::vector<EventHit<T>> event_hits_;

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 #include <unistd.h>
+#include <variant>
 #include <vector>
 
 #include "forces/force_terms.hpp"
@@ -327,6 +328,19 @@ EventSpec parse_event(const Node& n) {
   return e;
 }
 
+// Events watch one kind of body, under local terms (a rigid body's centre moving alone);
+// rigid bodies' by fixed steps.
+void check_events(const Node& events, const Scene& s) {
+  if (mixed_bodies(s)) events.fail("events watch bodies of one kind; the scene has particles and rigid bodies");
+  if (s.nbody || !s.springs.empty()) events.fail("events are watched with local terms only: not with nbody or springs");
+  if (rigid_count(s) == 0) return;
+  const auto point_spring = [](const LocalTerm& t) { return std::holds_alternative<PointSpring>(t); };
+  if (!s.body_springs.springs.empty() || std::any_of(s.forces.begin(), s.forces.end(), point_spring)) {
+    events.fail("events on rigid bodies are watched with local terms only: not with body_springs or point_spring");
+  }
+  if (s.rtol || s.atol) events.fail("events on rigid bodies are watched by fixed steps: not with rtol or atol");
+}
+
 }  // namespace
 
 Scene parse_scene(std::string_view text, std::string_view origin) {
@@ -339,11 +353,7 @@ Scene parse_scene(std::string_view text, std::string_view origin) {
   parse_bodies(root, s);
   parse_forces(root, s);
   parse_list(root, "events", s.events, parse_event);
-  if (!s.events.empty()) {
-    const Node events = root.child("events");
-    if (!s.rigid_bodies.empty() || (s.generate && s.generate->rigid)) events.fail("events watch particles; this scene has rigid bodies");
-    if (s.nbody || !s.springs.empty()) events.fail("events are watched with local terms only: not with nbody or springs");
-  }
+  if (!s.events.empty()) check_events(root.child("events"), s);
   if (s.particles.empty() && s.rigid_bodies.empty() && (!s.generate || s.generate->count == 0)) {
     root.fail("the scene has no bodies (give 'particles', 'rigid_bodies' or 'generate')");
   }

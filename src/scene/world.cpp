@@ -20,14 +20,14 @@ template <class T>
 void World<T>::watch_events() {
   Scene events;
   events.events = scene_events_;
-  particle_stepper_.set_events(make_events<T>(events));
+  (rigid_only() ? rigid_stepper_ : particle_stepper_).set_events(make_events<T>(events));
 }
 
 template <class T>
 void World<T>::advance(T h, std::uint64_t steps) {
   if (particles.size() > 0) particle_stepper_.advance(particles, h, steps);
   if (rigid.size() > 0) rigid_stepper_.advance(rigid, h, steps);
-  event_hits_ = particle_stepper_.event_hits();
+  event_hits_ = main_stepper().event_hits();
 }
 
 template <class T>
@@ -37,6 +37,13 @@ std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& sto
   event_hits_.clear();
   while (done < steps && !(stop && stop())) {
     const std::uint64_t n = std::min(chunk, steps - done);
+    if (rigid_only()) {  // its events, its stop
+      const std::uint64_t taken = rigid_stepper_.advance(rigid, h, n, stop);
+      event_hits_.insert(event_hits_.end(), rigid_stepper_.event_hits().begin(), rigid_stepper_.event_hits().end());
+      done += taken;
+      if (taken < n || rigid_stepper_.stopped_at_event()) break;
+      continue;
+    }
     // A coupled step can outlast a call's budget: the particles poll inside it too.
     const std::uint64_t taken = particles.size() > 0 ? particle_stepper_.advance(particles, h, n, stop) : n;
     const auto& hits = particle_stepper_.event_hits();

@@ -628,10 +628,13 @@ TEST_CASE("run writes the scene's events to events.csv beside the trajectory; a 
           "[cli][events]") {
   // Body 0 lands at (3 + sqrt(9 + 2 g 10)) / g, body 1 at (-2 + sqrt(4 + 2 g 30)) / g.
   const double g = 9.81, first = (3 + std::sqrt(9 + 2 * g * 10)) / g, second = (-2 + std::sqrt(4 + 2 * g * 30)) / g;
-  // Fixed steps, then error control (dopri5's steps, exact on a parabola).
-  const auto drop = [](const std::string& action, const std::string& control = "") {
+  // Fixed steps, then error control (dopri5's steps, exact on a parabola); rigid bodies
+  // turning as they fall, by fixed steps.
+  const auto drop = [](const std::string& action, const std::string& control, const std::string& kind) {
+    const std::string turning = kind == "rigid_bodies" ? R"(, "angular_momentum": [0.3, 1, -2], "inertia": [1, 2, 3])" : "";
     return R"({"name": "drop", "precision": "double", "dt": 0.05, "steps": 100, )" + control + R"(
-      "particles": [{"position": [0, 10, 0], "velocity": [1, 3, 0]}, {"position": [2, 30, 0], "velocity": [0, -2, 0]}],
+      ")" + kind + R"(": [{"position": [0, 10, 0], "velocity": [1, 3, 0])" + turning + R"(},
+                          {"position": [2, 30, 0], "velocity": [0, -2, 0])" + turning + R"(}],
       "forces": [{"type": "gravity", "g": [0, -9.81, 0]}],
       "events": [{"type": "plane", "normal": [0, 1, 0], "direction": "down", "action": ")" + action + R"("},
                  {"type": "speed", "speed": 1000, "direction": "up"}]})";
@@ -639,10 +642,12 @@ TEST_CASE("run writes the scene's events to events.csv beside the trajectory; a 
   const fs::path dir = work_dir() / "events";
   fs::create_directories(dir);
   const fs::path csv = dir / "traj.csv", summary = dir / "summary.json", events = dir / "events.csv";
-  for (const std::string control : {"", R"("method": "dopri5", "rtol": 1e-9, "atol": 1e-9,)"}) {
+  const std::string adaptive = R"("method": "dopri5", "rtol": 1e-9, "atol": 1e-9,)";
+  for (const auto& [kind, control] : {std::pair<std::string, std::string>{"particles", ""}, {"particles", adaptive},
+                                      {"rigid_bodies", ""}}) {
     for (const std::string action : {"record", "stop"}) {
-      INFO(action << " " << control);
-      const fs::path file = write("drop_" + action + ".json", drop(action, control));
+      INFO(kind << " " << action << " " << control);
+      const fs::path file = write("drop_" + action + ".json", drop(action, control, kind));
       REQUIRE(kinema_cli("run " + file.string() + " -q --out " + csv.string() + " --summary " + summary.string()).code == 0);
       std::istringstream rows(read(events));
       std::string line;
@@ -673,6 +678,9 @@ TEST_CASE("run writes the scene's events to events.csv beside the trajectory; a 
       "events": [{"type": "plane", "normal": [0, 0, 0]}]})").string());
   CHECK(bad.code != 0);
   CHECK(bad.err.find("events[0].normal") != std::string::npos);
+  const Result rigid_adaptive = kinema_cli("run " + write("rigid_adaptive.json", drop("record", adaptive, "rigid_bodies")).string());
+  CHECK(rigid_adaptive.code != 0);
+  CHECK(rigid_adaptive.err.find("events on rigid bodies are watched by fixed steps") != std::string::npos);
 }
 
 TEST_CASE("run: the cloth at 60 Hz blows up under rk4, which names the implicit methods, and holds under them",
