@@ -41,6 +41,12 @@ constexpr double particle_step_bytes() {
   return 13.0 * sizeof(T);
 }
 
+// State bytes per rigid step: 17 arrays in (centre 7, q 4, L 3, inverse inertia 3), 13 out.
+template <class T>
+constexpr double rigid_step_bytes() {
+  return 30.0 * sizeof(T);
+}
+
 // Counters every suite reports, so ratios can be read across rows.
 inline void report_body_steps(benchmark::State& state, double body_steps_per_iteration,
                               double bytes_per_body_step) {

@@ -3,7 +3,9 @@
 // and with four (the floor, a distance, a speed and a user function); and dopri5 (the staged
 // path) without events and with the floor, on fixed steps and under advance_to. The heights spread
 // over 0.5 .. 500 m, so a few bodies in a thousand cross per step; the set is put back
-// every 4 simulated seconds. Same bodies, same run, 1 thread at the best ISA.
+// every 4 simulated seconds. Same bodies, same run, 1 thread at the best ISA. Rigid bodies
+// (rigid-float, rigid-double) fall the same way, turning, on the fused rigid kernel: off and
+// floor.
 #include <benchmark/benchmark.h>
 
 #include <functional>
@@ -81,6 +83,41 @@ void falling_step(benchmark::State& state, Watch w, const Method& method) {
   state.counters["hits_per_step"] = hits / double(state.iterations());
 }
 
+// The falling bodies as rigid bodies, each turning about its own axis.
+template <class T>
+const RigidBodySet<T>& falling_rigid_bodies(std::size_t n) {
+  return cached<RigidBodySet<T>>(n, [](std::size_t count) {
+    const ParticleSet<T>& centres = falling_bodies<T>(count);
+    RigidBodySet<T> b;
+    for (std::size_t i = 0; i < count; ++i) {
+      const T turn = T(0.1) * T(i % 7);
+      b.add({centres.position(i), {}, {1, 0, 0, 0}, {turn, T(0.2), T(-0.3)}, T(1), {T(0.5), T(0.8), T(1.1)}});
+    }
+    return b;
+  });
+}
+
+template <class T>
+void falling_rigid_step(benchmark::State& state, Watch w) {
+  const auto n = std::size_t(state.range(0));
+  const RigidBodySet<T>& initial = falling_rigid_bodies<T>(n);
+  RigidBodySet<T> bodies = initial;
+  Stepper<T> stepper(Falling<T>::gravity(), rk4, on_calling_thread());
+  stepper.set_events(watched<T>(w));
+  stepper.step(bodies, T(kDt));
+  std::int64_t k = 0;
+  double hits = 0;
+  for (auto _ : state) {
+    if (++k % kRestoreSteps == 0) bodies = initial;  // same capacity: no allocation
+    stepper.step(bodies, T(kDt));
+    hits += double(stepper.event_hits().size());
+    benchmark::ClobberMemory();
+  }
+  if (!all_finite(bodies)) state.SkipWithError("state is not finite after the run");
+  report_body_steps(state, double(n), rigid_step_bytes<T>());
+  state.counters["hits_per_step"] = hits / double(state.iterations());
+}
+
 // A frame's advance_to under dopri5 (error control, rtol = atol = 1e-6), watched as above:
 // per body-step of the steps it accepted.
 template <class T>
@@ -104,7 +141,7 @@ void falling_adaptive(benchmark::State& state, Watch w) {
 
 // rk4 on the fused path (off, floor, four); dopri5 on the staged path (dopri5-off,
 // dopri5-floor), where each step keeps its start and is scanned whole; a frame's advance_to
-// (adaptive-off, adaptive-floor).
+// (adaptive-off, adaptive-floor); rigid bodies on the fused rigid kernel (off, floor).
 void register_all() {
   const std::string isa(isa_name(best_isa()));
   const auto add = [&](const std::string& name, Watch w, const Method& method) {
@@ -120,6 +157,13 @@ void register_all() {
   add("four", Watch::four, rk4);
   add("dopri5-off", Watch::none, dopri5);
   add("dopri5-floor", Watch::floor, dopri5);
+  for (Watch w : {Watch::none, Watch::floor}) {
+    const std::string name = w == Watch::none ? "off" : "floor";
+    for (auto* b : {benchmark::RegisterBenchmark(("events/rigid-float/" + name + "/" + isa).c_str(), falling_rigid_step<float>, w),
+                    benchmark::RegisterBenchmark(("events/rigid-double/" + name + "/" + isa).c_str(), falling_rigid_step<double>, w)}) {
+      b->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);
+    }
+  }
   for (Watch w : {Watch::none, Watch::floor}) {
     const std::string name = w == Watch::none ? "adaptive-off" : "adaptive-floor";
     for (auto* b : {benchmark::RegisterBenchmark(("events/float/" + name + "/" + isa).c_str(), falling_adaptive<float>, w),

@@ -9,12 +9,6 @@
 namespace kinema::bench {
 namespace {
 
-// State bytes per rigid step: 17 arrays in (centre 7, q 4, L 3, inverse inertia 3), 13 out.
-template <class T>
-constexpr double rigid_step_bytes() {
-  return 30.0 * sizeof(T);
-}
-
 // Floating-point operations per body-step of the rk4 kernel this scene takes (no point
 // forces, no central term): 168 FMAs (2 each), 121 multiplies, 88 adds, 43 subtracts, 8
 // divisions and 1 square root (the renormalization), float and double alike, counted in the

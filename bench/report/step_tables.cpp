@@ -70,6 +70,23 @@ void print_events_row(const Results& results, Noise& noise, const std::string& p
               cell(ratio(adaptive_floor, adaptive_off), "%.2fx").c_str());
 }
 
+// Rigid bodies on the fused rigid kernel: off and floor, and the step's own traffic (17
+// arrays read, 13 written).
+void print_rigid_events_row(const Results& results, Noise& noise, const std::string& p) {
+  const std::string at = "/" + results.isa() + "/100000/real_time";
+  const auto off = results.find("events/rigid-" + p + "/off" + at, "ns_per_body_step");
+  if (!off) return;
+  const auto floor = results.find("events/rigid-" + p + "/floor" + at, "ns_per_body_step");
+  noise.add(off->cv);
+  if (floor) noise.add(floor->cv);
+  const auto s = state_stream(results, p, 100000, 1);
+  const double step_ns = s ? 30.0 * value_bytes(p) / s->median : 0;
+  std::printf("rigid %-6s off %.3f | floor %s (%s) | %s hits per step | the step's traffic %s\n", p.c_str(),
+              off->median, cell(median(floor), "%.3f").c_str(), cell(ratio(floor, off), "%.2fx").c_str(),
+              results.value("events/rigid-" + p + "/floor" + at, "hits_per_step", "%.0f").c_str(),
+              step_ns > 0 ? cell(step_ns, "%.3f").c_str() : "-");
+}
+
 void print_adaptive_row(const Results& results, Noise& noise, const std::string& p) {
   const std::string at = "/" + results.isa() + "/100000/real_time";
   const auto adaptive = results.find("adaptive/dopri5/" + p + at, "ns_per_body_step");
@@ -132,9 +149,10 @@ void print_events_table(const Results& results, Noise& noise) {
   std::printf("\nEvents, 100k bodies falling onto a plane, one rk4 step per call, 1 thread, %s: ns per body-step "
               "(times no events); floor: one plane event, four: plane, distance, speed and a user function; "
               "dopri5 takes the staged path; advance_to: a frame's error-controlled dopri5 steps "
-              "(rtol = atol = 1e-6), per step accepted\n",
+              "(rtol = atol = 1e-6), per step accepted; rigid: turning bodies on the fused rigid kernel\n",
               results.isa().c_str());
   for (const std::string p : {"float", "double"}) print_events_row(results, noise, p);
+  for (const std::string p : {"float", "double"}) print_rigid_events_row(results, noise, p);
 }
 
 void print_adaptive_table(const Results& results, Noise& noise) {

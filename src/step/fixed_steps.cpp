@@ -34,7 +34,7 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
   std::size_t capacity = 0;
   if constexpr (rigid) capacity = b.centers().capacity();
   else capacity = b.capacity();
-  for (int a = 0; a < (rigid && events_.stops() ? 13 : 6); ++a) {
+  for (int a = 0; a < (!rigid ? 6 : events_.stops() ? 13 : 0); ++a) {
     if (previous_[a].size() != capacity) previous_[a] = AlignedArray<T>(capacity);
   }
   struct Ordered {  // whatever ends the call, its hits are in order
@@ -315,7 +315,8 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
     RigidBlocks blocks{path, {b, h, core_.options.renormalize_quaternions}};
     path.prepare(blocks.call);
     if (events_.active()) {
-      return run_rigid_watched(w, b, h, steps, guard, [&](Block s, double t0) { path.step_block(blocks.call, s, t0); });
+      return run_rigid_watched(w, b, h, steps, guard, kSliceBodies,
+                               [&](Block s, double t0) { path.step_block(blocks.call, s, t0); });
     }
     if (!path.coupled()) return run_blocks(w, b, blocks, steps, guard);
     return run_steps(w, b, steps, guard, [&](double t0) { path.step_all(blocks.call, w, t0, stop_); });
@@ -327,7 +328,10 @@ void FixedSteps<T>::run(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t
                                  core_.options.renormalize_quaternions,
                                  {b.applied_torque_data(0), b.applied_torque_data(1), b.applied_torque_data(2)},
                                  b.parameters().data(BodyParameter::angular_damping)};
-  if (events_.active()) return run_rigid_watched(w, b, h, steps, guard, [&](Block s, double) { rigid_fn(job, s.begin, s.end); });
+  if (events_.active()) {
+    return run_rigid_watched(w, b, h, steps, guard, kEventSliceBodies<T>,
+                             [&](Block s, double) { rigid_fn(job, s.begin, s.end); });
+  }
   for_each_block(w, b.padded_size(), [&](Block block) {
     run_block(b, block, steps, guard, [&](Block k) { rigid_fn(job, k.begin, k.end); });
   });
@@ -417,22 +421,40 @@ void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::Fu
   core_.clock.steps += steps;
 }
 
+namespace {
+
+template <class T>
+void prefetch_slice(const StateArrays<T>& state, std::size_t begin, std::size_t end) {
+  constexpr std::size_t kLine = 64 / sizeof(T);
+  for (int a = 0; a < state.count; ++a) {
+    for (std::size_t i = begin; i < end; i += kLine) __builtin_prefetch(state.data[a] + i);
+  }
+}
+
+}  // namespace
+
 template <class T>
 template <class Step>
 void FixedSteps<T>::run_rigid_watched(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard,
-                                      Step&& step) {
+                                      std::size_t slice_bodies, Step&& step) {
   const EventCall<T> call = event_call(b);
   const Clock<T> start = core_.clock;
   const StateArrays<T> state = state_arrays(b);
-  const int kept = events_.stops() ? state.count : 6;
+  const bool stops = events_.stops();
+  const int kept = stops ? state.count : 6;
   for_each_block(w, b.padded_size(), [&](Block block) {
     if (guard) guard->checkpoint.save(guard->state, block);
-    for (std::size_t s = block.begin; s < block.end; s += kSliceBodies) {
-      const Block slice{s, std::min(s + kSliceBodies, block.end)};
+    alignas(64) T slice_start[6][kEventSliceBodies<T>];  // without a stop, the start stays in cache
+    for (std::size_t s = block.begin; s < block.end; s += slice_bodies) {
+      const Block slice{s, std::min(s + slice_bodies, block.end)};
+      T* before[StateArrays<T>::kMax];
+      for (int a = 0; a < kept; ++a) before[a] = stops ? previous_[a].data() + s : slice_start[a];
       SliceEnds<T> ends{{}, {}, s, slice.end - s};
-      for (int a = 0; a < 6; ++a) ends.before[a] = previous_[a].data() + s, ends.after[a] = state.data[a] + s;
+      for (int a = 0; a < 6; ++a) ends.before[a] = before[a], ends.after[a] = state.data[a] + s;
       for (std::uint64_t k = 0; k < steps; ++k) {
-        for (int a = 0; a < kept; ++a) std::copy(state.data[a] + s, state.data[a] + slice.end, previous_[a].data() + s);
+        for (int a = 0; a < kept; ++a) std::copy(state.data[a] + s, state.data[a] + slice.end, before[a]);
+        // The next slice's state on its way while this one steps: its copy then reads the cache.
+        if (k == 0) prefetch_slice(state, slice.end, std::min(slice.end + slice_bodies, block.end));
         Clock<T> now = start;
         now.steps += k;
         step(slice, now.time());

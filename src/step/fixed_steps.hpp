@@ -72,11 +72,13 @@ class FixedSteps {
                    const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard);
   EventCall<T> event_call(ParticleSet<T>& b) const;
   EventCall<T> event_call(RigidBodySet<T>& b) const;
-  // Rigid bodies with events: each slice of a block takes every step in L1, its start kept
-  // in previous_ before each (the centres', or all 13 components under a stop event), then
+  // Rigid bodies with events: each slice of a block (`slice_bodies`, at most
+  // kEventSliceBodies) takes every step in cache, its centres' start kept beside it before
+  // each (under a stop event all 13 components, in previous_, which a settle reads), then
   // scanned. step(slice, t0) steps a slice.
   template <class Step>
-  void run_rigid_watched(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard, Step&& step);
+  void run_rigid_watched(const Workers& w, RigidBodySet<T>& b, T h, std::uint64_t steps, Guard* guard,
+                         std::size_t slice_bodies, Step&& step);
   template <class Set>
   std::optional<NonFinite> guarded_run(const Workers& w, Set& b, T h, std::uint64_t steps,
                                        const StateArrays<T>& state);
@@ -137,8 +139,8 @@ class FixedSteps {
   StateBuffer<T> buffer_;     // or, on the fused particle path, where it steps to
   EventWatch<T> events_;
   // Events: where each body's last step started (every body under a stop event, else the
-  // batches the kernel's probe listed): px .. vz, and for rigid bodies under a stop event
-  // q and L too.
+  // batches the kernel's probe listed): px .. vz, and for rigid bodies (under a stop event
+  // only) q and L too.
   std::array<AlignedArray<T>, 13> previous_;
   // A rigid stop's settle: the step's end and its rates there.
   std::array<AlignedArray<T>, 13> end_state_, end_rates_;
