@@ -184,7 +184,8 @@ class Stepper {
   // 13 components of each body: x, v, the orientation quaternion q (dimensionless: atol 1e-6
   // allows about 2e-6 rad of turn) and the world angular momentum L, all weighted by
   // atol + rtol max(|y_old|, |y_new|). Every stage is evaluated (no first stage reused); no
-  // stop requests; Tolerances::limit_to_stable_step is refused (kinema::Error).
+  // stop requests; Tolerances::limit_to_stable_step is refused (kinema::Error). Events are
+  // watched on each accepted step, a stop event ending the call at it, as for particles.
   AdaptiveStats advance_to(RigidBodySet<T>& io_bodies, double t_end, const Tolerances& tolerances);
   // Throws the kinema::Error a step of size h would throw (h not positive and finite in T,
   // or h times the force parameters, a rigid body's point forces included, overflowing T),
@@ -220,10 +221,9 @@ class Stepper {
   // on a particle set whose model has built-in local terms only (any method): on the fused
   // path the kernels run the sign test themselves, elsewhere each step is scanned; only the
   // bodies that crossed are located. Rigid bodies under built-in local terms (no rigid
-  // callback, point spring, body spring or coupled term) are watched by step() and
-  // advance(): their centres' values, each slice's steps scanned in cache. A call that
-  // cannot watch them (a model with callbacks or coupled terms, rigid bodies under
-  // advance_to) throws kinema::Error before any body moves. Under
+  // callback, point spring, body spring or coupled term) are watched too, by their centres'
+  // values (each slice's fixed steps scanned in cache). A call that cannot watch them (a
+  // model with callbacks or coupled terms) throws kinema::Error before any body moves. Under
   // advance_to a stop event ends the call at the event (the set and time() there; the next
   // call starts its step sizes afresh, as a first call does), and a throwing event function
   // takes back the step it scanned and its hits. An empty list watches nothing.

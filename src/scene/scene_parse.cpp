@@ -328,8 +328,7 @@ EventSpec parse_event(const Node& n) {
   return e;
 }
 
-// Events watch one kind of body, under local terms (a rigid body's centre moving alone);
-// rigid bodies' by fixed steps.
+// Events watch one kind of body, under local terms (a rigid body's centre moving alone).
 void check_events(const Node& events, const Scene& s) {
   if (mixed_bodies(s)) events.fail("events watch bodies of one kind; the scene has particles and rigid bodies");
   if (s.nbody || !s.springs.empty()) events.fail("events are watched with local terms only: not with nbody or springs");
@@ -338,7 +337,6 @@ void check_events(const Node& events, const Scene& s) {
   if (!s.body_springs.springs.empty() || std::any_of(s.forces.begin(), s.forces.end(), point_spring)) {
     events.fail("events on rigid bodies are watched with local terms only: not with body_springs or point_spring");
   }
-  if (s.rtol || s.atol) events.fail("events on rigid bodies are watched by fixed steps: not with rtol or atol");
 }
 
 }  // namespace

@@ -100,7 +100,9 @@ AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, c
   if (particles.size() > 0) {
     throw Error("error-controlled steps take one kind of body; the scene has particles and rigid bodies");
   }
-  return rigid_stepper_.advance_to(rigid, t_end, tolerances);
+  const AdaptiveStats stats = rigid_stepper_.advance_to(rigid, t_end, tolerances);
+  event_hits_ = rigid_stepper_.event_hits();
+  return stats;
 }
 
 template <class T>

@@ -241,9 +241,41 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, P
   return AdaptiveRun<T>(core, workers, bodies, tolerances, events).to(t_end, max_step, continuation, stops);
 }
 
+namespace {
+
+// An accepted rigid step's scan, from the attempt's start to the set; at a stop event the set
+// and the clock go to it. A throwing event function puts the step back, and the clock.
+template <class T>
+bool rigid_stops_at_event(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
+                          RigidBlockPath<T>& path, const typename RigidBlockPath<T>::Call& call,
+                          const AdaptiveEvents<T>& events, const Clock<T>& start) {
+  const std::array<const T*, 13> before = path.attempt_start();
+  T* const after[6] = {bodies.position_data(0), bodies.position_data(1), bodies.position_data(2),
+                       bodies.velocity_data(0), bodies.velocity_data(1), bodies.velocity_data(2)};
+  const double t0 = start.time(), h = double(call.h);
+  const std::size_t kept = events.watch->hits().size();
+  try {
+    events.watch->scan_blocks(workers, events.call, before.data(), after, bodies.padded_size(), t0, h);
+  } catch (...) {
+    path.take_back(call, workers);
+    core.clock = start;
+    events.watch->rollback(kept);
+    throw;
+  }
+  const auto stop = events.watch->first_stop();
+  if (!stop) return false;
+  if (stop->theta < 1) {
+    events.watch->settle(workers, bodies, core.rigid_probe(), call.renormalize, before.data(), *stop, t0, h);
+  }
+  core.clock.set(stop->time);
+  return true;
+}
+
+}  // namespace
+
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
-                                 double t_end, const Tolerances& tol) {
+                                 double t_end, const Tolerances& tol, const AdaptiveEvents<T>& events) {
   RigidBlockPath<T>& path = *core.paths.rigid_block;
   if (path.coupled()) core.reach(bodies.centers());
   path.reserve(bodies.padded_size());
@@ -262,9 +294,11 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
     stats.evaluations += std::uint64_t(method.tableau.stages);
     const bool accepted = err <= 1;
     if (accepted) {
+      const Clock<T> start = core.clock;
       ++core.clock.steps;
       if (last) core.clock.set(t_end);
       count_accepted(stats, double(size));
+      if (events.watch && rigid_stops_at_event(core, workers, bodies, path, call, events, start)) break;
       t = core.clock.time();
     } else {
       path.take_back(call, workers);
@@ -277,9 +311,9 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
 }
 
 template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, RigidBodySet<float>&, double,
-                                          const Tolerances&);
+                                          const Tolerances&, const AdaptiveEvents<float>&);
 template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, RigidBodySet<double>&, double,
-                                          const Tolerances&);
+                                          const Tolerances&, const AdaptiveEvents<double>&);
 template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, ParticleSet<float>&, double,
                                           const Tolerances&, double, AdaptiveContinuation&, const CallStops&,
                                           const AdaptiveEvents<float>&);

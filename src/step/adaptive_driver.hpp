@@ -62,9 +62,10 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, P
 
 // Rigid bodies on the rigid path: the same steps, sizes and last step, the error over x, v, q
 // and L (RigidBlockPath::attempt); every stage evaluated (no first stage reused), no stop
-// requests. An initial_step of 0 starts at a hundredth of the span.
+// requests; `events` as above, on the centres. An initial_step of 0 starts at a hundredth of
+// the span.
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
-                                 double t_end, const Tolerances& tolerances);
+                                 double t_end, const Tolerances& tolerances, const AdaptiveEvents<T>& events = {});
 
 }  // namespace kinema

@@ -9,6 +9,7 @@
 #include "kinema/dense_output.hpp"
 #include "kinema/error.hpp"
 #include "parallel/blocks.hpp"
+#include "step/rigid_block_path.hpp"
 
 namespace kinema {
 
@@ -451,6 +452,57 @@ void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const Even
       }
     }
   });
+}
+
+// The rates at the step's end, then at its start (the set put back there for the probe), then
+// each real body at the stop on their Hermite.
+template <class T>
+void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBlockPath<T>& probe, bool renormalize,
+                           const T* const before[13], const Stop& stop, double t0, double h) {
+  settled_ = stop;
+  T* const state[13] = {b.position_data(0), b.position_data(1), b.position_data(2), b.velocity_data(0),
+                        b.velocity_data(1), b.velocity_data(2), b.q(0), b.q(1), b.q(2), b.q(3),
+                        b.l(0), b.l(1), b.l(2)};
+  const std::size_t n = b.padded_size(), size = b.size();
+  for (auto* arrays : {&end_state_, &end_rates_}) {
+    for (auto& a : *arrays) {
+      if (a.size() < n) a = AlignedArray<T>(b.centers().capacity());
+    }
+  }
+  probe.reserve(n);
+  const typename RigidBlockPath<T>::Call call{b, T(1), renormalize};
+  probe.evaluate_rates(call, workers, t0 + h);
+  for_each_block(workers, n, [&](Block k) {
+    for (int c = 0; c < 13; ++c) {
+      std::copy(state[c] + k.begin, state[c] + k.end, end_state_[c].data() + k.begin);
+      std::copy(probe.rate_of(c) + k.begin, probe.rate_of(c) + k.end, end_rates_[c].data() + k.begin);
+      std::copy(before[c] + k.begin, before[c] + k.end, state[c] + k.begin);
+    }
+  });
+  probe.evaluate_rates(call, workers, t0);
+  const HermiteWeights weights = HermiteWeights::at(stop.theta);
+  for_each_block(workers, n, [&](Block k) {
+    for (std::size_t i = k.begin; i < k.end; ++i) {
+      double y[13];
+      for (int c = 0; c < 13; ++c) {
+        y[c] = i < size ? weights.of(state[c][i], probe.rate_of(c)[i], end_state_[c][i], end_rates_[c][i], h)
+                        : double(end_state_[c][i]);  // padding as the step left it
+      }
+      const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
+      if (i < size) for (int c = 6; c < 10; ++c) y[c] /= norm;
+      for (int c = 0; c < 13; ++c) state[c][i] = T(y[c]);
+    }
+  });
+}
+
+template <class T>
+std::size_t EventWatch<T>::bytes() const {
+  std::size_t n = 0;
+  for (const auto& a : acc_) n += a.size() * sizeof(T);
+  for (const auto* arrays : {&end_state_, &end_rates_}) {
+    for (const auto& a : *arrays) n += a.size() * sizeof(T);
+  }
+  return n;
 }
 
 template class EventWatch<float>;

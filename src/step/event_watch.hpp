@@ -17,6 +17,9 @@
 
 namespace kinema {
 
+template <class T>
+class RigidBlockPath;
+
 // Bodies per slice of the sign test: a slice's state at the step's start (the kernel's
 // stores) and end stay in L1 from the kernel's stores to the test's loads.
 template <class T>
@@ -69,6 +72,8 @@ class EventWatch {
   // step in full, blocks spread over the workers.
   void scan_blocks(const Workers& workers, const EventCall<T>& call, const T* const before[6],
                    const T* const after[6], std::size_t padded, double t0, double h);
+  // Bytes of the settles' scratch.
+  std::size_t bytes() const;
   // Forgets the hits recorded after the first `kept` (steps taken back).
   void rollback(std::size_t kept);
   // The earliest stop hit recorded, if any: its time and the fraction of its step.
@@ -92,9 +97,11 @@ class EventWatch {
   // crossing, is not stopped again by the same crossing at the next call's start.
   void settle(const Workers& workers, ParticleSet<T>& bodies, const EventCall<T>& call,
               const T* const before[6], const Stop& stop, double h);
-  // The set was left at `stop` by other means (rigid bodies: FixedSteps::settle), as settle
-  // leaves it.
-  void settled_at(const Stop& stop) { settled_ = stop; }
+  // Every rigid body (at the step's end now, `before` its 13 components at its start t0) on
+  // the Hermite of its components and their rates at both ends (`probe`'s), at the stop, the
+  // orientation normalized; padding stays as the step left it.
+  void settle(const Workers& workers, RigidBodySet<T>& bodies, RigidBlockPath<T>& probe, bool renormalize,
+              const T* const before[13], const Stop& stop, double t0, double h);
 
  private:
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
@@ -111,6 +118,7 @@ class EventWatch {
   std::optional<Stop> stop_;
   std::optional<Stop> settled_;  // the stop the set was last left at
   AlignedArray<T> acc_[6];  // settle: the accelerations at both ends
+  std::array<AlignedArray<T>, 13> end_state_, end_rates_;  // a rigid settle: the step's end
 };
 
 extern template class EventWatch<float>;

@@ -12,11 +12,9 @@ namespace kinema {
 
 template <class T>
 std::size_t FixedSteps<T>::checkpoint_bytes() const {
-  std::size_t events = 0;
-  for (const auto* arrays : {&previous_, &end_state_, &end_rates_}) {
-    for (const auto& a : *arrays) events += a.size() * sizeof(T);
-  }
-  return checkpoint_.bytes() + buffer_.bytes() + call_start_.bytes() + events;
+  std::size_t previous = 0;
+  for (const auto& a : previous_) previous += a.size() * sizeof(T);
+  return checkpoint_.bytes() + buffer_.bytes() + call_start_.bytes() + previous + events_.bytes();
 }
 
 template <class T>
@@ -111,48 +109,24 @@ void FixedSteps<T>::settle(const Workers& w, ParticleSet<T>& b, const typename E
   events_.settle(w, b, event_call(b), before, stop, double(h));
 }
 
-// The rates at the step's end, then at its start (the set put back there for the probe), then
-// each real body at the stop on their Hermite; padding stays as the step left it.
 template <class T>
 void FixedSteps<T>::settle(const Workers& w, RigidBodySet<T>& b, const typename EventWatch<T>::Stop& stop, double t0,
                            T h) {
-  events_.settled_at(stop);
-  const StateArrays<T> state = state_arrays(b);
-  const std::size_t n = b.padded_size(), size = b.size();
-  for (auto* arrays : {&end_state_, &end_rates_}) {
-    for (auto& a : *arrays) {
-      if (a.size() < n) a = AlignedArray<T>(b.centers().capacity());
-    }
-  }
-  RigidBlockPath<T>& probe = core_.rigid_probe();
-  probe.reserve(n);
-  const typename RigidBlockPath<T>::Call call{b, T(1), core_.options.renormalize_quaternions};
-  probe.evaluate_rates(call, w, t0 + double(h));
-  for_each_block(w, n, [&](Block k) {
-    for (int c = 0; c < state.count; ++c) {
-      std::copy(state.data[c] + k.begin, state.data[c] + k.end, end_state_[c].data() + k.begin);
-      std::copy(probe.rate_of(c) + k.begin, probe.rate_of(c) + k.end, end_rates_[c].data() + k.begin);
-      std::copy(previous_[c].data() + k.begin, previous_[c].data() + k.end, state.data[c] + k.begin);
-    }
-  });
-  probe.evaluate_rates(call, w, t0);
-  const HermiteWeights weights = HermiteWeights::at(stop.theta);
-  for_each_block(w, n, [&](Block k) {
-    for (std::size_t i = k.begin; i < k.end; ++i) {
-      double y[StateArrays<T>::kMax];
-      for (int c = 0; c < state.count; ++c) {
-        y[c] = i < size ? weights.of(state.data[c][i], probe.rate_of(c)[i], end_state_[c][i], end_rates_[c][i], double(h))
-                        : double(end_state_[c][i]);
-      }
-      const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
-      if (i < size) for (int c = 6; c < 10; ++c) y[c] /= norm;
-      for (int c = 0; c < state.count; ++c) state.data[c][i] = T(y[c]);
-    }
-  });
+  const T* before[13];
+  for (int a = 0; a < 13; ++a) before[a] = previous_[a].data();
+  events_.settle(w, b, core_.rigid_probe(), core_.options.renormalize_quaternions, before, stop, t0, double(h));
 }
 
 template <class T>
 std::optional<EventCall<T>> FixedSteps<T>::watch_adaptive(ParticleSet<T>& b) {
+  if (!events_.active()) return std::nullopt;
+  check_events(b);
+  events_.clear();
+  return event_call(b);
+}
+
+template <class T>
+std::optional<EventCall<T>> FixedSteps<T>::watch_adaptive(RigidBodySet<T>& b) {
   if (!events_.active()) return std::nullopt;
   check_events(b);
   events_.clear();

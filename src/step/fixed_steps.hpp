@@ -41,6 +41,7 @@ class FixedSteps {
   // Events under advance_to: refuses a model they cannot be watched on, clears the last
   // call's hits and gives what the adaptive driver's scans read; nothing without events.
   std::optional<EventCall<T>> watch_adaptive(ParticleSet<T>& b);
+  std::optional<EventCall<T>> watch_adaptive(RigidBodySet<T>& b);
   // What the block paths keep per block for `padded` bodies (allocates only to grow).
   void reserve_blocks(std::size_t padded) { completed_.resize(std::max(completed_.size(), block_count(padded))); }
 
@@ -60,8 +61,8 @@ class FixedSteps {
   // Stop events: one step at a time, each watched; the first stop settles the set there.
   template <class Set>
   void advance_to_stop(const Workers& w, Set& b, T h, std::uint64_t steps);
-  // Every rigid body on the dense output at the stop (its 13 components' Hermite, from the
-  // rates at both ends; the orientation kept unit), `previous_` holding the step's start.
+  // Every body on the dense output at the stop, `previous_` holding the step's start at t0
+  // (EventWatch::settle).
   void settle(const Workers& w, RigidBodySet<T>& b, const typename EventWatch<T>::Stop& stop, double t0, T h);
   void settle(const Workers& w, ParticleSet<T>& b, const typename EventWatch<T>::Stop& stop, double t0, T h);
   template <class Set>
@@ -142,8 +143,6 @@ class FixedSteps {
   // batches the kernel's probe listed): px .. vz, and for rigid bodies (under a stop event
   // only) q and L too.
   std::array<AlignedArray<T>, 13> previous_;
-  // A rigid stop's settle: the step's end and its rates there.
-  std::array<AlignedArray<T>, 13> end_state_, end_rates_;
   std::uint64_t steps_to_stop_ = 0;
   Checkpoint<T> call_start_;  // events with a user function: the state a call starts from
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for

@@ -64,6 +64,12 @@ class RigidBlockPath {
   // throws leaves the bodies as they were.
   double attempt(const Call& call, const Workers& workers, double t0, double rtol, double atol);
   void take_back(const Call& call, const Workers& workers);
+  // Where the last attempt started: its 13 state arrays (x, v, q, L), kept until the next.
+  std::array<const T*, 13> attempt_start() const {
+    std::array<const T*, 13> start;
+    for (int a = 0; a < 13; ++a) start[a] = saved_[a].data();
+    return start;
+  }
 
   // The rates of every state component (x, v, q, L: 13 arrays, padded) at the bodies' state
   // and time t: stage 0 alone, the bodies untouched. For the stiffness estimate.

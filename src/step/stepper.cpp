@@ -65,10 +65,6 @@ struct Stepper<T>::Impl {
     return fixed.events().stop_time() ? fixed.steps_to_stop() : steps;
   }
 
-  void refuse_events() const {
-    if (fixed.events().active()) throw Error("advance_to watches events on particle sets only: step rigid bodies with step() or advance()");
-  }
-
   // Applied forces last one call, unless the set keeps them.
   template <class Set>
   static void forces_used(Set& bodies) {
@@ -109,13 +105,18 @@ struct Stepper<T>::Impl {
 
   AdaptiveStats advance_to(RigidBodySet<T>& bodies, double t_end, const Tolerances& tolerances) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
-    refuse_events();
     if (tolerances.limit_to_stable_step) throw Error("advance_to: limit_to_stable_step takes particles only");
+    AdaptiveEvents<T> events;
+    if (const auto call = fixed.watch_adaptive(bodies)) events = {&fixed.events(), *call};
+    struct Ordered {  // whatever ends the call, its hits are in order
+      EventWatch<T>& events;
+      ~Ordered() { events.finish(events.stop_time()); }
+    } ordered{fixed.events()};
     check_tolerance_floor(bodies.centers(), tolerances);
     continuation.active = false;
     AdaptiveStats stats;
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
-      stats = advance_adaptively(core, w, bodies, t_end, tolerances);
+      stats = advance_adaptively(core, w, bodies, t_end, tolerances, events);
       return double(bodies.size()) * double(stats.evaluations);
     });
     if (stats.accepted > 0) forces_used(bodies);

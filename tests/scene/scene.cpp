@@ -224,8 +224,6 @@ TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") 
       {R"({"rigid_bodies": [{"position": [0,0,0]}], "events": [{"type": "plane"}],
            "forces": [{"type": "point_spring", "point": [0.1,0,0], "anchor": [0,1,0], "k": 2}]})",
        "scene: events: events on rigid bodies are watched with local terms only: not with body_springs or point_spring"},
-      {R"({"rigid_bodies": [{"position": [0,0,0]}], "events": [{"type": "plane"}], "method": "dopri5", "rtol": 1e-6})",
-       "scene: events: events on rigid bodies are watched by fixed steps: not with rtol or atol"},
       {R"({"generate": {"count": 4, "distribution": "plummer"}})", "scene: generate: missing key 'radius'"},
       {R"({"generate": {"count": 4, "distribution": "plummer", "radius": 1, "position_min": [0,0,0]}})",
        "scene: generate.position_min: only for \"distribution\": \"box\""},

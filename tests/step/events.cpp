@@ -429,10 +429,6 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   b.add({0, 1, 0}, {0, 0, 0}, 1);
   Stepper<double> pair(falling(), dopri5, test::serial_options());
   pair.set_events({{floor_event()}});
-  RigidBodySet<double> rigid;
-  rigid.add({{0, 1, 0}, {}, {1, 0, 0, 0}, {}, 1, {1, 1, 1}});
-  CHECK_THROWS_WITH(pair.advance_to(rigid, 1, Tolerances{}), Catch::Contains("advance_to") &&
-                                                                 Catch::Contains("particle sets"));
   Stepper<double> pair_callback(callback_model(), dopri5, test::serial_options());
   pair_callback.set_events({{floor_event()}});
   CHECK_THROWS_WITH(pair_callback.advance_to(b, 1, Tolerances{}), Catch::Contains("local terms only"));
@@ -741,7 +737,7 @@ TEST_CASE("rigid bodies: the same hits and stops on every ISA, thread count and 
   test::check_same_bits_everywhere(hash, 512, 5000);
 }
 
-TEST_CASE("rigid bodies: events are refused where a centre does not move alone, and under advance_to", "[events]") {
+TEST_CASE("rigid bodies: events are refused where a centre does not move alone", "[events]") {
   RigidBodySet<double> b;
   b.add(spinning({0, 1, 0}, {0, 0, 0}));
   const auto refused = [&](ForceModel<double> f, const Method& m = rk4) {
@@ -758,9 +754,9 @@ TEST_CASE("rigid bodies: events are refused where a centre does not move alone, 
   ForceModel<double> body_springs = falling();
   body_springs.add(BodySprings{{{0, 1, {0, 0, 0}, {0, 0, 0}, 1, 1}}});
   refused(body_springs, bs3);
-  Stepper<double> pair(falling(), dopri5, test::serial_options());
+  Stepper<double> pair(callback, dopri5, test::serial_options());
   pair.set_events({{floor_event()}});
-  CHECK_THROWS_WITH(pair.advance_to(b, 1, Tolerances{}), Catch::Contains("advance_to"));
+  CHECK_THROWS_WITH(pair.advance_to(b, 1, Tolerances{}), Catch::Contains("local terms only"));
   CHECK(b.centers().position(0)[1] == 1);  // nothing moved
 }
 
@@ -780,4 +776,34 @@ TEST_CASE("rigid bodies under the finiteness guard: a call taken back keeps none
   s.set_forces(falling());
   s.advance(b, 0.1, 3);
   CHECK(s.event_hits().size() == 1);
+}
+
+TEST_CASE("rigid bodies under advance_to: crossings on each accepted step, a stop settles the set there",
+          "[events]") {
+  const double t = landing_time(10, 3), later = landing_time(30, -2);
+  Stepper<double> s(falling(), dopri5, test::serial_options());
+  s.set_events({{floor_event()}});
+  RigidBodySet<double> b;
+  b.add(spinning({0, 10, 0}, {1, 3, 0}));
+  b.add(spinning({4, 30, 1}, {0, -2, 0}, -1));
+  s.advance_to(b, 5, Tolerances{1e-9, 1e-9});
+  REQUIRE(s.event_hits().size() == 2);
+  CHECK(std::abs(s.event_hits()[0].time - t) <= 1e-12 * t);
+  CHECK(std::abs(s.event_hits()[1].time - later) <= 1e-12 * later);
+  CHECK(s.time() == 5);
+  s.set_events({{floor_event(EventAction::stop)}});
+  RigidBodySet<double> again;
+  again.add(spinning({0, 10, 0}, {1, 3, 0}));
+  again.add(spinning({4, 30, 1}, {0, -2, 0}, -1));
+  s.set_time(0);
+  s.advance_to(again, 5, Tolerances{1e-9, 1e-9});
+  REQUIRE(s.stopped_at_event());
+  CHECK(std::abs(s.time() - t) <= 1e-12 * t);
+  CHECK(std::abs(again.centers().position(0)[1]) <= 1e-11);
+  CHECK(again.centers().position(1)[1] == Approx(30 - 2 * t - kG * t * t / 2).epsilon(1e-12));
+  const Quat<double> q = again.orientation(1);
+  CHECK(std::abs(std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) - 1) < 1e-15);
+  s.advance_to(again, 5, Tolerances{1e-9, 1e-9});  // goes on from there to the other landing
+  REQUIRE(s.stopped_at_event());
+  CHECK(std::abs(s.time() - later) <= 1e-12 * later);
 }
