@@ -316,19 +316,23 @@ KINEMA_INLINE const T* const (*as_const(T* const (*k)[N]))[N] {
   return reinterpret_cast<const T* const (*)[N]>(k);
 }
 
-// Stage state y0 + sum_j w_j k_j, its angular velocity, and zeroed outputs.
+// Stage state y0 + sum_j w_j k_j, its angular velocity, and zeroed outputs. A stage whose x,
+// q and L are the bodies' own (xs is x: stage 0) stores only v of them.
 template <class V>
 void rigid_block_stage(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   const Vec<V> zero{{V(0), V(0), V(0)}};
+  const bool in_place = job.xs[0] == job.x[0];
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const Vec<V> x = weighted<V, 3>(job, load3<V>(job.x, i), job.kx, i);
     const Vec<V> v = weighted<V, 3>(job, load3<V>(job.v, i), as_const<3>(job.kv), i);
     const Quat4<V> q = weighted<V, 4>(job, load_n<4, V>(job.q, i), as_const<4>(job.kq), i);
     const Vec<V> l = weighted<V, 3>(job, load3<V>(job.l, i), as_const<3>(job.kl), i);
-    store3(job.xs, i, x);
     store3(job.vs, i, v);
-    store_n<4, V>(job.qs, i, q);
-    store3(job.ls, i, l);
+    if (!in_place) {
+      store3(job.xs, i, x);
+      store_n<4, V>(job.qs, i, q);
+      store3(job.ls, i, l);
+    }
     store3(job.omega, i, angular_velocity(rotation(q), load3<V>(job.inv_inertia, i), l));
     store3(job.force, i, zero);
     store3(job.torque, i, zero);

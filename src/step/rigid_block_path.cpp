@@ -116,6 +116,10 @@ void RigidBlockPath<T>::prepare(const Call& call) {
   if (method_.kind == MethodKind::runge_kutta) {
     const ButcherTableau& tab = method_.tableau;
     for (int s = 0; s < tab.stages; ++s) stage_jobs_[s] = with_terms(base, tab.a[s], s, call.h, s);
+    // Stage 0 is the bodies' own state: it reads x, q and L where they are (v is copied: it is
+    // the position rate the finish and the error estimate read once v has moved on).
+    for (int d = 0; d < 3; ++d) stage_jobs_[0].xs[d] = base.x[d], stage_jobs_[0].ls[d] = base.l[d];
+    for (int k = 0; k < 4; ++k) stage_jobs_[0].qs[k] = base.q[k];
     finish_job_ = with_terms(base, tab.b, tab.stages, call.h, 0);
     return;
   }
