@@ -121,6 +121,13 @@ class EventWatch {
   std::array<AlignedArray<T>, 13> end_state_, end_rates_;  // a rigid settle: the step's end
 };
 
+// Whatever ends a call, its hits end in order (EventWatch::finish, up to its stop).
+template <class T>
+struct OrderedHits {
+  EventWatch<T>& events;
+  ~OrderedHits() { events.finish(events.stop_time()); }
+};
+
 extern template class EventWatch<float>;
 extern template class EventWatch<double>;
 

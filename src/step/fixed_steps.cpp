@@ -35,10 +35,7 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
   for (int a = 0; a < (!rigid ? 6 : events_.stops() ? 13 : 0); ++a) {
     if (previous_[a].size() != capacity) previous_[a] = AlignedArray<T>(capacity);
   }
-  struct Ordered {  // whatever ends the call, its hits are in order
-    EventWatch<T>& events;
-    ~Ordered() { events.finish(events.stop_time()); }
-  } ordered{events_};
+  const OrderedHits<T> ordered{events_};
   if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
     const auto watched = [&] { return events_.stops() ? advance_to_stop(w, b, h, steps) : advance_checked(w, b, h, steps); };
     if (!events_.calls_user()) return watched();
@@ -118,15 +115,8 @@ void FixedSteps<T>::settle(const Workers& w, RigidBodySet<T>& b, const typename 
 }
 
 template <class T>
-std::optional<EventCall<T>> FixedSteps<T>::watch_adaptive(ParticleSet<T>& b) {
-  if (!events_.active()) return std::nullopt;
-  check_events(b);
-  events_.clear();
-  return event_call(b);
-}
-
-template <class T>
-std::optional<EventCall<T>> FixedSteps<T>::watch_adaptive(RigidBodySet<T>& b) {
+template <class Set>
+std::optional<EventCall<T>> FixedSteps<T>::watch_adaptive(Set& b) {
   if (!events_.active()) return std::nullopt;
   check_events(b);
   events_.clear();
@@ -572,6 +562,10 @@ void FixedSteps<T>::run_steps(const Workers& w, Set& set, std::uint64_t steps, G
 
 template class FixedSteps<float>;
 template class FixedSteps<double>;
+template std::optional<EventCall<float>> FixedSteps<float>::watch_adaptive(ParticleSet<float>&);
+template std::optional<EventCall<float>> FixedSteps<float>::watch_adaptive(RigidBodySet<float>&);
+template std::optional<EventCall<double>> FixedSteps<double>::watch_adaptive(ParticleSet<double>&);
+template std::optional<EventCall<double>> FixedSteps<double>::watch_adaptive(RigidBodySet<double>&);
 template void FixedSteps<float>::advance(const Workers&, ParticleSet<float>&, float, std::uint64_t, const StopRequest*);
 template void FixedSteps<float>::advance(const Workers&, RigidBodySet<float>&, float, std::uint64_t, const StopRequest*);
 template void FixedSteps<double>::advance(const Workers&, ParticleSet<double>&, double, std::uint64_t,

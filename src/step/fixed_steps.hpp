@@ -40,8 +40,9 @@ class FixedSteps {
   std::uint64_t steps_to_stop() const { return steps_to_stop_; }
   // Events under advance_to: refuses a model they cannot be watched on, clears the last
   // call's hits and gives what the adaptive driver's scans read; nothing without events.
-  std::optional<EventCall<T>> watch_adaptive(ParticleSet<T>& b);
-  std::optional<EventCall<T>> watch_adaptive(RigidBodySet<T>& b);
+  // (Instantiated for ParticleSet<T> and RigidBodySet<T>.)
+  template <class Set>
+  std::optional<EventCall<T>> watch_adaptive(Set& b);
   // What the block paths keep per block for `padded` bodies (allocates only to grow).
   void reserve_blocks(std::size_t padded) { completed_.resize(std::max(completed_.size(), block_count(padded))); }
 

@@ -65,6 +65,15 @@ struct Stepper<T>::Impl {
     return fixed.events().stop_time() ? fixed.steps_to_stop() : steps;
   }
 
+  // The events an adaptive call watches (none: a null watch); refuses a model they cannot be
+  // watched on.
+  template <class Set>
+  AdaptiveEvents<T> adaptive_events(Set& bodies) {
+    AdaptiveEvents<T> events;
+    if (const auto call = fixed.watch_adaptive(bodies)) events = {&fixed.events(), *call};
+    return events;
+  }
+
   // Applied forces last one call, unless the set keeps them.
   template <class Set>
   static void forces_used(Set& bodies) {
@@ -73,12 +82,8 @@ struct Stepper<T>::Impl {
 
   AdaptiveStats advance_to(ParticleSet<T>& bodies, double t_end, const Tolerances& tolerances, const CallStops& stops) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
-    AdaptiveEvents<T> events;
-    if (const auto call = fixed.watch_adaptive(bodies)) events = {&fixed.events(), *call};
-    struct Ordered {  // whatever ends the call, its hits are in order
-      EventWatch<T>& events;
-      ~Ordered() { events.finish(events.stop_time()); }
-    } ordered{fixed.events()};
+    const AdaptiveEvents<T> events = adaptive_events(bodies);
+    const OrderedHits<T> ordered{fixed.events()};
     core.reach(bodies);
     // A call that goes on from one stopped early keeps its cap (the bodies have moved since)
     // and was checked when it began.
@@ -106,12 +111,8 @@ struct Stepper<T>::Impl {
   AdaptiveStats advance_to(RigidBodySet<T>& bodies, double t_end, const Tolerances& tolerances) {
     check_adaptive(core.method, t_end, tolerances, core.clock.time());
     if (tolerances.limit_to_stable_step) throw Error("advance_to: limit_to_stable_step takes particles only");
-    AdaptiveEvents<T> events;
-    if (const auto call = fixed.watch_adaptive(bodies)) events = {&fixed.events(), *call};
-    struct Ordered {  // whatever ends the call, its hits are in order
-      EventWatch<T>& events;
-      ~Ordered() { events.finish(events.stop_time()); }
-    } ordered{fixed.events()};
+    const AdaptiveEvents<T> events = adaptive_events(bodies);
+    const OrderedHits<T> ordered{fixed.events()};
     check_tolerance_floor(bodies.centers(), tolerances);
     continuation.active = false;
     AdaptiveStats stats;

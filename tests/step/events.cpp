@@ -101,6 +101,16 @@ KeplerRun kepler_events(double e, double h, int orbits) {
   return run;
 }
 
+// Mixes every field of the hits into h (FNV-1a); returns how many there were.
+std::size_t hash_hits(std::uint64_t& h, const std::vector<EventHit<float>>& hits) {
+  for (const EventHit<float>& hit : hits) {
+    const double values[] = {hit.time, double(hit.body), double(hit.event), hit.position[0], hit.position[1],
+                             hit.position[2], hit.velocity[0], hit.velocity[1], hit.velocity[2]};
+    for (double v : values) h = (h ^ std::hash<double>{}(v)) * 1099511628211ull;
+  }
+  return hits.size();
+}
+
 }  // namespace
 
 TEST_CASE("a projectile's floor crossing is found to round-off under rk4 with a coarse step", "[events]") {
@@ -262,12 +272,7 @@ TEST_CASE("events give the same hits on every ISA, thread count and job system",
       std::size_t hits = 0;
       for (int call = 0; call < 4; ++call) {
         s.advance(b, 0.01f, 5);
-        for (const EventHit<float>& hit : s.event_hits()) {
-          const double values[] = {hit.time, double(hit.body), double(hit.event), hit.position[0], hit.position[1],
-                                   hit.position[2], hit.velocity[0], hit.velocity[1], hit.velocity[2]};
-          for (double v : values) h = (h ^ std::hash<double>{}(v)) * 1099511628211ull;
-          ++hits;
-        }
+        hits += hash_hits(h, s.event_hits());
       }
       CHECK(hits > count / 50);  // the test sees many hits
       h ^= test::state_hash(b);
@@ -445,13 +450,24 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   CHECK(b.position(0)[1] < 1);
 }
 
-TEST_CASE("under the finiteness guard a call taken again records its hits once", "[events][guard]") {
+namespace {
+
+// A guarded stepper watching the floor, with a central attractor at (0, -50, 0): a body that
+// starts on it takes a first step that is not finite.
+Stepper<double> guarded_floor() {
   StepperOptions o = test::serial_options();
   o.guard = FiniteGuard::check;
   ForceModel<double> f = falling();
-  f.add(Central{{0, -50, 0}, 1e30});  // body 1 starts on the centre: its first step is not finite
+  f.add(Central{{0, -50, 0}, 1e30});
   Stepper<double> s(f, rk4, o);
   s.set_events({{floor_event()}});
+  return s;
+}
+
+}  // namespace
+
+TEST_CASE("under the finiteness guard a call taken again records its hits once", "[events][guard]") {
+  Stepper<double> s = guarded_floor();
   ParticleSet<double> b;
   b.add({0, 0.05, 0}, {0, -1, 0}, 1);
   b.add({0, -50, 0}, {0, 0, 0}, 1);
@@ -721,12 +737,7 @@ TEST_CASE("rigid bodies: the same hits and stops on every ISA, thread count and 
         std::size_t hits = 0;
         for (int call = 0; call < 4; ++call) {
           s.advance(b, 0.01f, 5);
-          for (const EventHit<float>& hit : s.event_hits()) {
-            const double values[] = {hit.time, double(hit.body), double(hit.event), hit.position[0], hit.position[1],
-                                     hit.position[2], hit.velocity[0], hit.velocity[1], hit.velocity[2]};
-            for (double v : values) h = (h ^ std::hash<double>{}(v)) * 1099511628211ull;
-            ++hits;
-          }
+          hits += hash_hits(h, s.event_hits());
         }
         CHECK(hits >= (stops ? 4u : count / 50));
         h ^= test::state_hash(b) ^ std::hash<double>{}(s.time());
@@ -761,12 +772,7 @@ TEST_CASE("rigid bodies: events are refused where a centre does not move alone",
 }
 
 TEST_CASE("rigid bodies under the finiteness guard: a call taken back keeps none of its hits", "[events][guard]") {
-  StepperOptions o = test::serial_options();
-  o.guard = FiniteGuard::check;
-  ForceModel<double> f = falling();
-  f.add(Central{{0, -50, 0}, 1e30});  // body 1 starts on the centre: its first step is not finite
-  Stepper<double> s(f, rk4, o);
-  s.set_events({{floor_event()}});
+  Stepper<double> s = guarded_floor();
   RigidBodySet<double> b;
   b.add(spinning({0, 0.05, 0}, {0, -1, 0}));
   b.add(spinning({0, -50, 0}, {0, 0, 0}));
