@@ -12,9 +12,9 @@
 // which finds the time to `time_tolerance`. The hit records the time, the body, the event and
 // the state there. Events are watched on particle sets whose model has built-in local terms
 // only, under any method, by step(), advance() and advance_to() (each accepted step), and on
-// rigid bodies' centres under the same terms by step() and advance(): a rigid body's values
-// are its centre's, and a stop settles all 13 components of every body (the orientation
-// kept unit) on their Hermite (RigidDenseOutput's).
+// rigid bodies' centres under the same terms: a rigid body's values are its centre's, located
+// on the Hermite for every method (dopri5 too, as RigidDenseOutput has it), and a stop settles
+// all 13 components of every body (the orientation kept unit) on their Hermite.
 //
 // - A value that reaches zero exactly at a step's end counts in that step (its sign at the
 //   next step's start is zero, neither above nor below): each crossing is found once.

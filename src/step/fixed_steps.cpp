@@ -36,27 +36,23 @@ void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, 
     if (previous_[a].size() != capacity) previous_[a] = AlignedArray<T>(capacity);
   }
   const OrderedHits<T> ordered{events_};
-  if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
-    const auto watched = [&] { return events_.stops() ? advance_to_stop(w, b, h, steps) : advance_checked(w, b, h, steps); };
-    if (!events_.calls_user()) return watched();
-    // A user's event function may throw with blocks at different steps: the set goes back to
-    // where the call started (the guard's own NonFiniteError leaves it where it says).
-    const StateArrays<T> state = state_arrays(b);
-    call_start_.reserve(state);
-    for_each_block(w, b.padded_size(), [&](Block block) { call_start_.save(state, block); });
-    const Clock<T> clock = core_.clock;
-    try {
-      watched();
-    } catch (const NonFiniteError&) {
-      throw;
-    } catch (...) {
-      call_start_.restore(w, state);
-      core_.clock = clock;
-      events_.clear();
-      throw;
-    }
-  } else {
-    events_.stops() ? advance_to_stop(w, b, h, steps) : advance_checked(w, b, h, steps);
+  const auto watched = [&] { return events_.stops() ? advance_to_stop(w, b, h, steps) : advance_checked(w, b, h, steps); };
+  if (!events_.calls_user()) return watched();
+  // A user's event function may throw with blocks at different steps: the set goes back to
+  // where the call started (the guard's own NonFiniteError leaves it where it says).
+  const StateArrays<T> state = state_arrays(b);
+  call_start_.reserve(state);
+  for_each_block(w, b.padded_size(), [&](Block block) { call_start_.save(state, block); });
+  const Clock<T> clock = core_.clock;
+  try {
+    watched();
+  } catch (const NonFiniteError&) {
+    throw;
+  } catch (...) {
+    call_start_.restore(w, state);
+    core_.clock = clock;
+    events_.clear();
+    throw;
   }
 }
 
@@ -129,11 +125,11 @@ EventCall<T> FixedSteps<T>::event_call(ParticleSet<T>& b) const {
           has_dopri5_interpolant(core_.method)};
 }
 
-// A rigid body's centre moves as a particle under the rigid terms (check_events).
+// A rigid body's centre moves as a particle under the rigid terms (check_events), located on
+// the Hermite for every method, as RigidDenseOutput and a stop's settle have it.
 template <class T>
 EventCall<T> FixedSteps<T>::event_call(RigidBodySet<T>& b) const {
-  return {core_.table, core_.lowered().rigid, b.centers().inv_mass(), per_body(b.centers()), b.size(),
-          has_dopri5_interpolant(core_.method)};
+  return {core_.table, core_.lowered().rigid, b.centers().inv_mass(), per_body(b.centers()), b.size(), false};
 }
 
 template <class T>

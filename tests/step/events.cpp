@@ -800,16 +800,59 @@ TEST_CASE("rigid bodies under advance_to: crossings on each accepted step, a sto
   s.set_events({{floor_event(EventAction::stop)}});
   RigidBodySet<double> again;
   again.add(spinning({0, 10, 0}, {1, 3, 0}));
-  again.add(spinning({4, 30, 1}, {0, -2, 0}, -1));
+  again.add({{4, 30, 1}, {0, -2, 0}, {1, 0, 0, 0}, {0, 0, 1}, 2, {0.3, 0.4, 0.5}});  // 2 rad/s about z
   s.set_time(0);
   s.advance_to(again, 5, Tolerances{1e-9, 1e-9});
   REQUIRE(s.stopped_at_event());
   CHECK(std::abs(s.time() - t) <= 1e-12 * t);
   CHECK(std::abs(again.centers().position(0)[1]) <= 1e-11);
   CHECK(again.centers().position(1)[1] == Approx(30 - 2 * t - kG * t * t / 2).epsilon(1e-12));
+  // Body 1's q(t) = (cos t, 0, 0, sin t), on its step's Hermite at the stop.
   const Quat<double> q = again.orientation(1);
   CHECK(std::abs(std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) - 1) < 1e-15);
+  CHECK(std::abs(q[0] - std::cos(t)) < 1e-6);
+  CHECK(std::abs(q[3] - std::sin(t)) < 1e-6);
+  CHECK(again.angular_momentum(1)[2] == 1);
   s.advance_to(again, 5, Tolerances{1e-9, 1e-9});  // goes on from there to the other landing
   REQUIRE(s.stopped_at_event());
   CHECK(std::abs(s.time() - later) <= 1e-12 * later);
+}
+
+TEST_CASE("rigid bodies: a stop under dopri5 with drag leaves the centre on the crossing it located", "[events]") {
+  ForceModel<double> f = falling();
+  f.add(LinearDrag{0.8});
+  for (const bool adaptive : {false, true}) {
+    INFO((adaptive ? "advance_to" : "fixed steps"));
+    Stepper<double> s(f, dopri5, test::serial_options());
+    s.set_events({{floor_event(EventAction::stop)}});
+    RigidBodySet<double> b;
+    b.add(spinning({0, 10, 0}, {1, 3, 0}));
+    b.add(spinning({4, 30, 1}, {0, -2, 0}));
+    adaptive ? void(s.advance_to(b, 6, Tolerances{1e-6, 1e-6})) : s.advance(b, 0.1, 60);
+    REQUIRE(s.stopped_at_event());
+    const EventHit<double> hit = s.event_hits()[0];
+    CHECK(std::abs(b.centers().position(0)[1]) <= 1e-12);  // on the plane, where it was located
+    CHECK(b.centers().position(0)[0] == hit.position[0]);
+    CHECK(std::abs(hit.time - drag_landing(10, 3, 0.4)) < 1e-5);  // F = -0.8 v on a mass of 2
+    const double stopped = s.time();
+    adaptive ? void(s.advance_to(b, 6, Tolerances{1e-6, 1e-6})) : s.advance(b, 0.1, 60);
+    REQUIRE(s.stopped_at_event());  // the next landing, not the same one again
+    CHECK(s.event_hits()[0].body == 1);
+    CHECK(s.time() > stopped + 0.5);
+  }
+}
+
+TEST_CASE("rigid bodies: a throwing event function leaves the set and the clock as before the call", "[events]") {
+  RigidBodySet<double> b = test::tumbling_cloud<double>(3000);
+  const std::uint64_t before = test::state_hash(b);
+  Stepper<double> s(test::rotational_terms<double>(), rk4, test::serial_options());
+  int calls = 0;
+  s.set_events({{{EventFunction<double>([&](const EventBlock<double>& block, double* value) {
+    if (block.first >= 2048 && ++calls > 3) throw std::runtime_error("the game's event failed");
+    for (std::size_t i = 0; i < block.count; ++i) value[i] = block.py[i];
+  })}}});
+  CHECK_THROWS_WITH(s.advance(b, 0.01, 10), "the game's event failed");
+  CHECK(test::state_hash(b) == before);
+  CHECK(s.time() == 0);
+  CHECK(s.event_hits().empty());
 }
