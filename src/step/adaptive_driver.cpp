@@ -7,10 +7,35 @@
 #include "core/text.hpp"
 #include "kernels/reductions.hpp"
 #include "kinema/error.hpp"
+#include "step/finite_guard.hpp"
 #include "step/step_controller.hpp"
 
 namespace kinema {
 namespace {
+
+// An accepted step's scan, from the attempt's start `before` to the set's state `after` (their
+// first six arrays: px .. vz); at a stop event `settle` puts the set there (a stop at the
+// step's end needs none) and the clock goes to the hit's own time. A throwing event function
+// puts the step back (`take_back`), the clock and the step's hits too.
+template <class T, class TakeBack, class Settle>
+bool scanned_to_stop(const AdaptiveEvents<T>& events, const Workers& workers, const T* const* before,
+                     const T* const* after, std::size_t padded, Clock<T>& clock, const Clock<T>& start, double h,
+                     TakeBack&& take_back, Settle&& settle) {
+  const std::size_t kept = events.watch->hits().size();
+  try {
+    events.watch->scan_blocks(workers, events.call, before, after, padded, start.time(), h);
+  } catch (...) {
+    take_back();
+    clock = start;
+    events.watch->rollback(kept);  // the step's hits go with it, a stop among them too
+    throw;
+  }
+  const auto stop = events.watch->first_stop();
+  if (!stop) return false;
+  if (stop->theta < 1) settle(*stop);
+  clock.set(stop->time);  // the hit's own time, also at a last step's end
+  return true;
+}
 
 // The size of the next attempt from t toward t_end: h, capped at max_step (h keeps the cap);
 // no sliver of a last step: one within 1% of the end takes the rest, if max_step allows.
@@ -134,25 +159,14 @@ class AdaptiveRun {
   // the step back, and the clock.
   bool stops_at_event(const StepContext<T>& c, const Clock<T>& start) {
     const std::array<const T*, 6> before = staged_.attempt_start();
-    T* const after[6] = {bodies_.px(), bodies_.py(), bodies_.pz(), bodies_.vx(), bodies_.vy(), bodies_.vz()};
-    const double t0 = start.time(), h = double(c.h);
-    const std::size_t kept = events_.watch->hits().size();
-    try {
-      events_.watch->scan_blocks(workers_, events_.call, before.data(), after, bodies_.padded_size(), t0, h);
-    } catch (...) {
-      staged_.take_back(c);
-      core_.clock = start;
-      events_.watch->rollback(kept);  // the step's hits go with it, a stop among them too
-      throw;
-    }
-    const auto stop = events_.watch->first_stop();
-    if (!stop) return false;
-    if (stop->theta < 1) {
-      events_.watch->settle(workers_, bodies_, events_.call, before.data(), *stop, h);
-      kept_scale_ = 0;  // the kept stage was the step's end
-    }
-    core_.clock.set(stop->time);  // the hit's own time, also at a last step's end
-    return true;
+    const double h = double(c.h);
+    return scanned_to_stop(
+        events_, workers_, before.data(), state_arrays(bodies_).data.data(), bodies_.padded_size(), core_.clock,
+        start, h, [&] { staged_.take_back(c); },
+        [&](const typename EventWatch<T>::Stop& stop) {
+          events_.watch->settle(workers_, bodies_, events_.call, before.data(), stop, h);
+          kept_scale_ = 0;  // the kept stage was the step's end
+        });
   }
 
   // Stage 0's kept accelerations, rescaled to this step's acceleration scale; 0: none kept.
@@ -243,32 +257,19 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, P
 
 namespace {
 
-// An accepted rigid step's scan, from the attempt's start to the set; at a stop event the set
-// and the clock go to it. A throwing event function puts the step back, and the clock.
+// An accepted rigid step's scan, from the attempt's start to the set (scanned_to_stop).
 template <class T>
 bool rigid_stops_at_event(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
                           RigidBlockPath<T>& path, const typename RigidBlockPath<T>::Call& call,
                           const AdaptiveEvents<T>& events, const Clock<T>& start) {
   const std::array<const T*, 13> before = path.attempt_start();
-  T* const after[6] = {bodies.position_data(0), bodies.position_data(1), bodies.position_data(2),
-                       bodies.velocity_data(0), bodies.velocity_data(1), bodies.velocity_data(2)};
-  const double t0 = start.time(), h = double(call.h);
-  const std::size_t kept = events.watch->hits().size();
-  try {
-    events.watch->scan_blocks(workers, events.call, before.data(), after, bodies.padded_size(), t0, h);
-  } catch (...) {
-    path.take_back(call, workers);
-    core.clock = start;
-    events.watch->rollback(kept);
-    throw;
-  }
-  const auto stop = events.watch->first_stop();
-  if (!stop) return false;
-  if (stop->theta < 1) {
-    events.watch->settle(workers, bodies, core.rigid_probe(), call.renormalize, before.data(), *stop, t0, h);
-  }
-  core.clock.set(stop->time);
-  return true;
+  const double h = double(call.h);
+  return scanned_to_stop(
+      events, workers, before.data(), state_arrays(bodies).data.data(), bodies.padded_size(), core.clock, start, h,
+      [&] { path.take_back(call, workers); },
+      [&](const typename EventWatch<T>::Stop& stop) {
+        events.watch->settle(workers, bodies, core.rigid_probe(), call.renormalize, before.data(), stop, start.time(), h);
+      });
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include "kinema/dense_output.hpp"
 #include "kinema/error.hpp"
 #include "parallel/blocks.hpp"
+#include "step/finite_guard.hpp"
 #include "step/rigid_block_path.hpp"
 
 namespace kinema {
@@ -460,9 +461,8 @@ template <class T>
 void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBlockPath<T>& probe, bool renormalize,
                            const T* const before[13], const Stop& stop, double t0, double h) {
   settled_ = stop;
-  T* const state[13] = {b.position_data(0), b.position_data(1), b.position_data(2), b.velocity_data(0),
-                        b.velocity_data(1), b.velocity_data(2), b.q(0), b.q(1), b.q(2), b.q(3),
-                        b.l(0), b.l(1), b.l(2)};
+  const StateArrays<T> set = state_arrays(b);
+  T* const* const state = set.data.data();
   const std::size_t n = b.padded_size(), size = b.size();
   for (auto* arrays : {&end_state_, &end_rates_}) {
     for (auto& a : *arrays) {
