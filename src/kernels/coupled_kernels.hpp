@@ -6,7 +6,9 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cmath>
 #include <cstddef>
+#include <limits>
 
 #include "kernels/kernel_impl.hpp"
 
@@ -22,24 +24,35 @@ template <class T>
 struct SourceTile {
   alignas(64) T x[3][kSourceTile];
   alignas(64) T mass[kSourceTile];
+  alignas(64) T mass_three_halves[kSourceTile];  // fast_inverse_cube's factor with the mass
   std::size_t count = 0;
+  T largest_mass = 0;
 
-  // Fast: each mass times 3/2, the factor of fast_inverse_cube's correction.
-  template <bool Fast>
   void fill(const NBodyJob<T>& job, std::size_t first) {
     count = 0;
+    largest_mass = 0;
     for (std::size_t j = first; j < std::min(job.sources, first + kSourceTile); ++j) {
       const T w = job.inv_mass[j];
       if (w == 0) continue;
       for (int d = 0; d < 3; ++d) x[d][count] = job.x[d][j];
-      mass[count++] = (Fast ? T(1.5) : T(1)) / w;
+      mass[count] = T(1) / w;
+      mass_three_halves[count] = T(1.5) / w;
+      largest_mass = std::max(largest_mass, mass[count++]);
     }
+  }
+
+  // Whether every pair's factor s <= 2.6 m eps^-3 (either variant) is finite and eps^3 is
+  // normal: then a body's pair with itself (or a twin at its point, dx = dy = dz = 0) adds
+  // exactly +-0 to its sums, and leaving out the mask changes no bit.
+  bool pairs_vanish_at_zero(T eps2) const {
+    const double bound = double(std::numeric_limits<T>::max()) / 8;
+    return double(eps2) >= 1e-20 && 2.6 * double(largest_mass) * std::pow(double(eps2), -1.5) < bound;
   }
 };
 
 // m r2^(-3/2) from an approximate y = 1 / sqrt(r2) (rough_inverse_root), corrected once:
 // r2^(-3/2) = y^3 (r2 y^2)^(-3/2) = y^3 (1 - e)^(-3/2) ~ y^3 (1 + 3/2 e) with e = 1 - r2 y^2,
-// which is 3/2 y^3 (5/3 - r2 y^2); the 3/2 comes with the mass (SourceTile::fill<true>).
+// which is 3/2 y^3 (5/3 - r2 y^2); the 3/2 comes with the mass (SourceTile).
 // The series' first dropped term is 15/8 e^2, e ~ 2 (y's relative error): below 3e-8 for
 // AVX-512's 14-bit start, 1.1e-6 for SSE2's and AVX2's 12 bits, before float round-off.
 template <class V>
@@ -48,8 +61,20 @@ KINEMA_INLINE V fast_inverse_cube(V r2, V mass_three_halves) {
   return (mass_three_halves * y) * y2 * mul_add(V(0) - r2, y2, V(value_t<V>(5) / 3));
 }
 
-// The partial sums of U lane groups of targets, starting at target i, over one tile.
-template <bool Fast, int U, class V>
+// m r2^(-3/2), exact (the only kind for double) or fast.
+template <class V>
+KINEMA_INLINE V pair_factor(bool exact, V r2, value_t<V> mass, value_t<V> mass_three_halves) {
+  if constexpr (std::is_same_v<value_t<V>, float>) {
+    if (!exact) return fast_inverse_cube(r2, V(mass_three_halves));
+  }
+  return V(mass) / (r2 * root(r2));
+}
+
+// The partial sums of U lane groups of targets, starting at target i, over one tile. The
+// groups in Exact (bit u) take the exact root and division, which run on the divider; the
+// others fast_inverse_cube, which runs on the FMA pipes. Mixed, both units work at once.
+// Masked: a pair at distance 0 gets s = 0 (needed unless pairs_vanish_at_zero).
+template <bool Masked, unsigned Exact, int U, class V>
 KINEMA_INLINE void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2,
                                      const NBodyJob<value_t<V>>& job, std::size_t i,
                                      value_t<V>* sum[3], std::size_t at) {
@@ -62,17 +87,13 @@ KINEMA_INLINE void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2,
     }
   }
   for (std::size_t j = 0; j < tile.count; ++j) {
-    const V sx(tile.x[0][j]), sy(tile.x[1][j]), sz(tile.x[2][j]), m(tile.mass[j]);
+    const V sx(tile.x[0][j]), sy(tile.x[1][j]), sz(tile.x[2][j]);
     for (int u = 0; u < U; ++u) {
       const V dx = sx - x[u][0], dy = sy - x[u][1], dz = sz - x[u][2];
       const V d2 = mul_add(dx, dx, mul_add(dy, dy, dz * dz)), r2 = d2 + eps2;
+      V s = pair_factor<V>((Exact >> u) & 1, r2, tile.mass[j], tile.mass_three_halves[j]);
       // A body and itself (or a twin at the same point): no force, whatever m / eps^3 is.
-      V s;
-      if constexpr (Fast) {
-        s = pick(d2 != V(0), fast_inverse_cube(r2, m), V(0));
-      } else {
-        s = pick(d2 != V(0), m / (r2 * root(r2)), V(0));
-      }
+      if constexpr (Masked) s = pick(d2 != V(0), s, V(0));
       a[u][0] = mul_add(s, dx, a[u][0]);
       a[u][1] = mul_add(s, dy, a[u][1]);
       a[u][2] = mul_add(s, dz, a[u][2]);
@@ -83,21 +104,41 @@ KINEMA_INLINE void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2,
   }
 }
 
+// One tile's pairs for the targets [begin, end). Exact: every group exact. Fast: lane
+// groups alternate, the even ones (counting from target 0, so a group's kind never depends
+// on where a job's range starts) exact, the odd ones fast.
+template <bool Fast, bool Masked, class V>
+void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2, const NBodyJob<value_t<V>>& job,
+                       std::size_t begin, std::size_t end, value_t<V>* sum[3]) {
+  constexpr std::size_t W = Lane<V>::width;
+  constexpr int U = 4;  // target groups in registers: enough to hide the divider's latency
+  constexpr unsigned kAll = 0xF, kEven = Fast ? 0x5 : kAll, kOdd = Fast ? 0xA : kAll;
+  const bool starts_even = (begin / W) % 2 == 0;
+  std::size_t i = begin;
+  for (; i + U * W <= end; i += U * W) {
+    if (starts_even) gravity_from_tile<Masked, kEven, U, V>(tile, eps2, job, i, sum, i - begin);
+    else gravity_from_tile<Masked, kOdd, U, V>(tile, eps2, job, i, sum, i - begin);
+  }
+  for (; i < end; i += W) {
+    if ((i / W) % 2 == 0) gravity_from_tile<Masked, kEven & 1, 1, V>(tile, eps2, job, i, sum, i - begin);
+    else gravity_from_tile<Masked, kOdd & 1, 1, V>(tile, eps2, job, i, sum, i - begin);
+  }
+}
+
 template <bool Fast, class V>
 void nbody_sums(const NBodyJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
   using T = value_t<V>;
   constexpr std::size_t W = Lane<V>::width;
-  constexpr int U = 4;  // target groups in registers: enough to hide the divider's latency
   assert(end - begin <= kMaxNBodyTargets);
   alignas(64) T sum_x[kMaxNBodyTargets]{}, sum_y[kMaxNBodyTargets]{}, sum_z[kMaxNBodyTargets]{};
   T* sum[3] = {sum_x, sum_y, sum_z};
   SourceTile<T> tile;
   const V eps2(job.eps2);
   for (std::size_t first = 0; first < job.sources; first += kSourceTile) {
-    tile.template fill<Fast>(job, first);
-    std::size_t i = begin;
-    for (; i + U * W <= end; i += U * W) gravity_from_tile<Fast, U, V>(tile, eps2, job, i, sum, i - begin);
-    for (; i < end; i += W) gravity_from_tile<Fast, 1, V>(tile, eps2, job, i, sum, i - begin);
+    tile.fill(job, first);
+    // The mask costs an FMA-pipe operation per group, which the fast variant is bound by.
+    if (Fast && tile.pairs_vanish_at_zero(job.eps2)) gravity_from_tile<Fast, false, V>(tile, eps2, job, begin, end, sum);
+    else gravity_from_tile<Fast, true, V>(tile, eps2, job, begin, end, sum);
   }
   const V scale(job.scale_G);
   for (std::size_t i = begin; i < end; i += W) {
