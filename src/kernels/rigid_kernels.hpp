@@ -300,33 +300,52 @@ constexpr RigidFn<value_t<V>> rigid_kernel() {
 }
 
 // The rigid block path's kernels (see RigidBlockJob).
-template <class V, int N>
-KINEMA_INLINE Vec<V, N> weighted(const RigidBlockJob<value_t<V>>& job, const Vec<V, N>& base,
-                                 const value_t<V>* const (*k)[N], std::size_t i) {
-  Vec<V, N> sum = base;
-  for (int j = 0; j < job.terms; ++j) {
-    const Vec<V, N> kj = load_n<N, V>(k[job.term[j]], i);
-    for (int d = 0; d < N; ++d) sum.c[d] = mul_add(V(job.weight[j]), kj.c[d], sum.c[d]);
-  }
-  return sum;
-}
 
-template <int N, class T>
-KINEMA_INLINE const T* const (*as_const(T* const (*k)[N]))[N] {
-  return reinterpret_cast<const T* const (*)[N]>(k);
-}
+// The weighted earlier stages of a stage or the finish, Terms of them, copied out of the
+// job: held in a local, no store of the loop can change them, and with Terms a constant the
+// sums unroll.
+template <int Terms, class T>
+struct WeightedStages {
+  static constexpr int kCount = Terms > 0 ? Terms : 1;
+  T weight[kCount];
+  const T* kx[kCount][3];
+  const T* kv[kCount][3];
+  const T* kq[kCount][4];
+  const T* kl[kCount][3];
+
+  explicit WeightedStages(const RigidBlockJob<T>& job) {
+    for (int j = 0; j < Terms; ++j) {
+      const int t = job.term[j];
+      weight[j] = job.weight[j];
+      for (int d = 0; d < 3; ++d) kx[j][d] = job.kx[t][d], kv[j][d] = job.kv[t][d], kl[j][d] = job.kl[t][d];
+      for (int d = 0; d < 4; ++d) kq[j][d] = job.kq[t][d];
+    }
+  }
+
+  // base + sum_j w_j k_j, the terms in the job's order.
+  template <class V, int N>
+  KINEMA_INLINE Vec<V, N> add_to(const Vec<V, N>& base, const T* const (&k)[kCount][N], std::size_t i) const {
+    Vec<V, N> sum = base;
+    for (int j = 0; j < Terms; ++j) {
+      const Vec<V, N> kj = load_n<N, V>(k[j], i);
+      for (int d = 0; d < N; ++d) sum.c[d] = mul_add(V(weight[j]), kj.c[d], sum.c[d]);
+    }
+    return sum;
+  }
+};
 
 // Stage state y0 + sum_j w_j k_j, its angular velocity, and zeroed outputs. A stage whose x,
 // q and L are the bodies' own (xs is x: stage 0) stores only v of them.
-template <class V>
-void rigid_block_stage(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+template <int Terms, class V>
+void rigid_block_stage_of(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const WeightedStages<Terms, value_t<V>> w(job);
   const Vec<V> zero{{V(0), V(0), V(0)}};
   const bool in_place = job.xs[0] == job.x[0];
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    const Vec<V> x = weighted<V, 3>(job, load3<V>(job.x, i), job.kx, i);
-    const Vec<V> v = weighted<V, 3>(job, load3<V>(job.v, i), as_const<3>(job.kv), i);
-    const Quat4<V> q = weighted<V, 4>(job, load_n<4, V>(job.q, i), as_const<4>(job.kq), i);
-    const Vec<V> l = weighted<V, 3>(job, load3<V>(job.l, i), as_const<3>(job.kl), i);
+    const Vec<V> x = w.template add_to<V>(load3<V>(job.x, i), w.kx, i);
+    const Vec<V> v = w.template add_to<V>(load3<V>(job.v, i), w.kv, i);
+    const Quat4<V> q = w.template add_to<V>(load_n<4, V>(job.q, i), w.kq, i);
+    const Vec<V> l = w.template add_to<V>(load3<V>(job.l, i), w.kl, i);
     store3(job.vs, i, v);
     if (!in_place) {
       store3(job.xs, i, x);
@@ -337,6 +356,13 @@ void rigid_block_stage(const RigidBlockJob<value_t<V>>& job, std::size_t begin, 
     store3(job.force, i, zero);
     store3(job.torque, i, zero);
   }
+}
+
+template <class V>
+void rigid_block_stage(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  static_for<kMaxStages + 1>([&](auto terms) {
+    if (terms == job.terms) rigid_block_stage_of<terms, V>(job, begin, end);
+  });
 }
 
 // The stage's rates from its state and what the callbacks added: kv = local accelerations +
@@ -366,15 +392,23 @@ void rigid_block_rates(const RigidBlockJob<value_t<V>>& job, std::size_t begin, 
 }
 
 // y1 = y0 + sum_j w_j k_j over every stage; q renormalized.
+template <int Terms, class V>
+void rigid_block_finish_of(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  const WeightedStages<Terms, value_t<V>> w(job);
+  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
+    store3(job.x, i, w.template add_to<V>(load3<V>(job.x, i), w.kx, i));
+    store3(job.v, i, w.template add_to<V>(load3<V>(job.v, i), w.kv, i));
+    const Quat4<V> q = w.template add_to<V>(load_n<4, V>(job.q, i), w.kq, i);
+    store_n<4, V>(job.q, i, job.renormalize ? normalized(q) : q);
+    store3(job.l, i, w.template add_to<V>(load3<V>(job.l, i), w.kl, i));
+  }
+}
+
 template <class V>
 void rigid_block_finish(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
-  for (std::size_t i = begin; i < end; i += Lane<V>::width) {
-    store3(job.x, i, weighted<V, 3>(job, load3<V>(job.x, i), job.kx, i));
-    store3(job.v, i, weighted<V, 3>(job, load3<V>(job.v, i), as_const<3>(job.kv), i));
-    const Quat4<V> q = weighted<V, 4>(job, load_n<4, V>(job.q, i), as_const<4>(job.kq), i);
-    store_n<4, V>(job.q, i, job.renormalize ? normalized(q) : q);
-    store3(job.l, i, weighted<V, 3>(job, load3<V>(job.l, i), as_const<3>(job.kl), i));
-  }
+  static_for<kMaxStages + 1>([&](auto terms) {
+    if (terms == job.terms) rigid_block_finish_of<terms, V>(job, begin, end);
+  });
 }
 
 // A drift's turn of q with the current L (Euler, or the midpoint rule), as the fused
