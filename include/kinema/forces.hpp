@@ -86,7 +86,9 @@ struct PointSpring {
 // bodies takes each pair's r^-3 from the CPU's approximate reciprocal square root and one
 // correction instead of an exact root and a division, so that the FMA pipes and the
 // divider work at once: 1.36x the interactions per second with AVX-512 on Zen 4, 1.10x
-// with AVX2, none with SSE2 (bench/README.md). Each pair's pull is then within 1e-6 of its
+// with AVX2, and 0.94x with SSE2, whose FMA is emulated (bench/README.md). There, two
+// distinct bodies closer than about 1e-23 (their squared distance underflows) may pull each
+// other by the softened formula rather than count as one point. Each pair's pull is then within 1e-6 of its
 // exact value, relative, on AVX-512 and the scalar path, and within 2e-6 on SSE2 and AVX2
 // (the exact kernel: 5e-7). The bits are the same on every thread count and job system;
 // unlike the exact sums they differ between instruction sets and may differ between CPU

@@ -41,12 +41,16 @@ struct SourceTile {
     }
   }
 
-  // Whether every pair's factor s <= 2.6 m eps^-3 (either variant) is finite and eps^3 is
-  // normal: then a body's pair with itself (or a twin at its point, dx = dy = dz = 0) adds
-  // exactly +-0 to its sums, and leaving out the mask changes no bit.
+  // Whether every pair's factor and its parts are finite: s <= 2.5 (1 + 1.5 2^-12)^3 m eps^-3
+  // < 2.6 m eps^-3 (fast, with 3/2 m; the exact factor is less), and eps^3 is no denormal.
+  // Then a body's pair with itself (or a twin at its point) adds exactly +-0 to its sums, as
+  // with the mask. Unlike the mask, a pair closer than about 1e-23 (its squared distance
+  // underflows to 0; 1e-19 where the host flushes denormals) pulls by the softened formula
+  // instead of counting as one point.
   bool pairs_vanish_at_zero(T eps2) const {
     const double bound = double(std::numeric_limits<T>::max()) / 8;
-    return double(eps2) >= 1e-20 && 2.6 * double(largest_mass) * std::pow(double(eps2), -1.5) < bound;
+    const double largest_factor = 2.6 * double(largest_mass) * std::max(1.0, std::pow(double(eps2), -1.5));
+    return double(eps2) >= 1e-20 && largest_factor < bound;
   }
 };
 
@@ -62,11 +66,9 @@ KINEMA_INLINE V fast_inverse_cube(V r2, V mass_three_halves) {
 }
 
 // m r2^(-3/2), exact (the only kind for double) or fast.
-template <class V>
-KINEMA_INLINE V pair_factor(bool exact, V r2, value_t<V> mass, value_t<V> mass_three_halves) {
-  if constexpr (std::is_same_v<value_t<V>, float>) {
-    if (!exact) return fast_inverse_cube(r2, V(mass_three_halves));
-  }
+template <bool Exact, class V>
+KINEMA_INLINE V pair_factor(V r2, value_t<V> mass, value_t<V> mass_three_halves) {
+  if constexpr (!Exact && std::is_same_v<value_t<V>, float>) return fast_inverse_cube(r2, V(mass_three_halves));
   return V(mass) / (r2 * root(r2));
 }
 
@@ -88,16 +90,16 @@ KINEMA_INLINE void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2,
   }
   for (std::size_t j = 0; j < tile.count; ++j) {
     const V sx(tile.x[0][j]), sy(tile.x[1][j]), sz(tile.x[2][j]);
-    for (int u = 0; u < U; ++u) {
+    static_for<U>([&](auto u) {
       const V dx = sx - x[u][0], dy = sy - x[u][1], dz = sz - x[u][2];
       const V d2 = mul_add(dx, dx, mul_add(dy, dy, dz * dz)), r2 = d2 + eps2;
-      V s = pair_factor<V>((Exact >> u) & 1, r2, tile.mass[j], tile.mass_three_halves[j]);
+      V s = pair_factor<((Exact >> u) & 1) != 0>(r2, tile.mass[j], tile.mass_three_halves[j]);
       // A body and itself (or a twin at the same point): no force, whatever m / eps^3 is.
       if constexpr (Masked) s = pick(d2 != V(0), s, V(0));
       a[u][0] = mul_add(s, dx, a[u][0]);
       a[u][1] = mul_add(s, dy, a[u][1]);
       a[u][2] = mul_add(s, dz, a[u][2]);
-    }
+    });
   }
   for (int u = 0; u < U; ++u) {
     for (int d = 0; d < 3; ++d) store(sum[d] + at + u * W, a[u][d]);
@@ -108,7 +110,7 @@ KINEMA_INLINE void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2,
 // groups alternate, the even ones (counting from target 0, so a group's kind never depends
 // on where a job's range starts) exact, the odd ones fast.
 template <bool Fast, bool Masked, class V>
-void gravity_from_tile(const SourceTile<value_t<V>>& tile, V eps2, const NBodyJob<value_t<V>>& job,
+void targets_over_tile(const SourceTile<value_t<V>>& tile, V eps2, const NBodyJob<value_t<V>>& job,
                        std::size_t begin, std::size_t end, value_t<V>* sum[3]) {
   constexpr std::size_t W = Lane<V>::width;
   constexpr int U = 4;  // target groups in registers: enough to hide the divider's latency
@@ -137,8 +139,13 @@ void nbody_sums(const NBodyJob<value_t<V>>& job, std::size_t begin, std::size_t 
   for (std::size_t first = 0; first < job.sources; first += kSourceTile) {
     tile.fill(job, first);
     // The mask costs an FMA-pipe operation per group, which the fast variant is bound by.
-    if (Fast && tile.pairs_vanish_at_zero(job.eps2)) gravity_from_tile<Fast, false, V>(tile, eps2, job, begin, end, sum);
-    else gravity_from_tile<Fast, true, V>(tile, eps2, job, begin, end, sum);
+    if constexpr (Fast) {
+      if (tile.pairs_vanish_at_zero(job.eps2)) {
+        targets_over_tile<Fast, false, V>(tile, eps2, job, begin, end, sum);
+        continue;
+      }
+    }
+    targets_over_tile<Fast, true, V>(tile, eps2, job, begin, end, sum);
   }
   const V scale(job.scale_G);
   for (std::size_t i = begin; i < end; i += W) {

@@ -5,6 +5,8 @@
 // R is the rotation of q / |q|, so stage quaternions that drift off unit length still give
 // a true rotation; q is renormalized after each step.
 
+#include <cassert>
+
 #include "kernels/kernel_impl.hpp"
 
 namespace kinema::kernels::KINEMA_ISA_NS {
@@ -360,6 +362,7 @@ void rigid_block_stage_of(const RigidBlockJob<value_t<V>>& job, std::size_t begi
 
 template <class V>
 void rigid_block_stage(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  assert(job.terms >= 0 && job.terms <= kMaxStages);
   static_for<kMaxStages + 1>([&](auto terms) {
     if (terms == job.terms) rigid_block_stage_of<terms, V>(job, begin, end);
   });
@@ -406,6 +409,7 @@ void rigid_block_finish_of(const RigidBlockJob<value_t<V>>& job, std::size_t beg
 
 template <class V>
 void rigid_block_finish(const RigidBlockJob<value_t<V>>& job, std::size_t begin, std::size_t end) {
+  assert(job.terms >= 0 && job.terms <= kMaxStages);
   static_for<kMaxStages + 1>([&](auto terms) {
     if (terms == job.terms) rigid_block_finish_of<terms, V>(job, begin, end);
   });
