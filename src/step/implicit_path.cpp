@@ -37,7 +37,7 @@ void ImplicitPath<T>::reserve(std::size_t padded) {
 template <class T>
 std::size_t ImplicitPath<T>::bytes() const {
   const std::size_t arrays = 9 * 3 + 4 * 3 + 1;  // x0 .. inv_diag, the stages' k, the masses
-  return arrays * capacity_ * sizeof(T) + (k_along_.size() * 7) * sizeof(T) + rates_.bytes();
+  return arrays * capacity_ * sizeof(T) + (k_along_.size() * 7) * sizeof(T) + rates_.bytes() + multigrid_.bytes();
 }
 
 template <class T>
@@ -48,11 +48,20 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
     for (auto& a : unit_) a.resize(slots);
     for (AlignedArray<T>* a : {&k_along_, &k_across_, &a_along_, &a_across_}) a->resize(slots);
   }
+  use_multigrid_ = SpringMultigrid<T>::worth_it(net_);
+  if (use_multigrid_ && !multigrid_.built_for(net_, c.bodies.padded_size())) multigrid_.build(net_, c.bodies.padded_size());
   gh_ = T(method_.rosenbrock.gamma * double(c.h));
   save_start(c);
   step_stats_ = {};
   try {
     build_jacobian(c);
+    if (use_multigrid_) {
+      multigrid_.set_operator(c.workers, {&net_,
+                                          mass_.data(),
+                                          {unit_[0].data(), unit_[1].data(), unit_[2].data()},
+                                          a_along_.data(),
+                                          a_across_.data()});
+    }
     for (int s = 0; s < method_.rosenbrock.stages; ++s) {
       evaluate_stage(c, s);
       solve_stage(c, s);
@@ -251,6 +260,12 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
   });
   ++step_stats_.solves;
   if (!std::isfinite(bb)) return not_finite(c, x);
+  if (use_multigrid_) {
+    rz = precondition(c);
+    for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) {
+      for (int d = 0; d < 3; ++d) std::copy(z_[d].data() + b.begin, z_[d].data() + b.end, p[d] + b.begin);
+    });
+  }
   const double goal = tolerance_ * tolerance_ * bb;
   int iterations = 0;
   for (double rr = bb; rr > goal; ++iterations) {
@@ -269,18 +284,32 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
                                          {q[0], q[1], q[2]},
                                          {inv_diag_[0].data(), inv_diag_[1].data(), inv_diag_[2].data()},
                                          T(rz / pq)};
-    const auto [rz_next, rr_next] = sum_blocks(c, [&](Block b, double* sums) { kernels::cg_update(update, b.begin, b.end, sums); });
-    const T beta = T(rz_next / rz);
-    rz = rz_next, rr = rr_next;
+    auto [rz_next, rr_next] = sum_blocks(c, [&](Block b, double* sums) { kernels::cg_update(update, b.begin, b.end, sums); });
+    rr = rr_next;
     if (rr <= goal) {
       ++iterations;
       break;
     }
+    if (use_multigrid_) rz_next = precondition(c);
+    const T beta = T(rz_next / rz);
+    rz = rz_next;
     const kernels::CgDirectionJob<T> direction{{p[0], p[1], p[2]}, {z_[0].data(), z_[1].data(), z_[2].data()}, beta};
     for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { kernels::cg_direction(direction, b.begin, b.end); });
   }
   step_stats_.iterations += std::uint64_t(iterations);
   step_stats_.max_iterations = std::max(step_stats_.max_iterations, iterations);
+}
+
+template <class T>
+double ImplicitPath<T>::precondition(const StepContext<T>& c) {
+  const T* const r[3] = {r_[0].data(), r_[1].data(), r_[2].data()};
+  T* const z[3] = {z_[0].data(), z_[1].data(), z_[2].data()};
+  multigrid_.apply(c.workers, r, z);
+  return sum_blocks(c, [&](Block b, double* sums) {
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t i = b.begin; i < b.end; ++i) sums[0] += double(r[d][i]) * double(z[d][i]);
+    }
+  })[0];
 }
 
 // A right side that is not finite (a force that was not): no iteration could converge, and

@@ -25,6 +25,7 @@
 #include "kinema/methods.hpp"
 #include "kinema/stepper.hpp"
 #include "parallel/blocks.hpp"
+#include "step/spring_multigrid.hpp"
 #include "step/staged_path.hpp"
 #include "step/step_context.hpp"
 
@@ -58,6 +59,8 @@ class ImplicitPath {
   // The product (kernels/implicit_kernels.hpp): out = cm M p + (the slots' weights along and across) p over block b; returns p . out.
   double product(Block b, const T* const p[3], T* const out[3], T cm, const T* along, const T* across) const;
   void conjugate_gradients(const StepContext<T>& c, Vec3s& x);
+  // z = the multigrid V-cycle of r; returns r . z.
+  double precondition(const StepContext<T>& c);
   void not_finite(const StepContext<T>& c, Vec3s& x);
   // Runs pass(block, sums) over every block, each adding two partial sums; returns their
   // totals, added in block order.
@@ -83,6 +86,8 @@ class ImplicitPath {
   Vec3s unit_;
   AlignedArray<T> k_along_, k_across_, a_along_, a_across_;
   std::vector<double> block_sums_[2];
+  SpringMultigrid<T> multigrid_;
+  bool use_multigrid_ = false;  // SpringMultigrid::worth_it: else Jacobi
   ImplicitStats stats_, step_stats_;  // since the path was made; in the step under way
 };
 

@@ -1,0 +1,505 @@
+#include "step/spring_multigrid.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <type_traits>
+
+#include "kernels/implicit_kernels.hpp"
+#include "kernels/kernels.hpp"
+
+namespace kinema {
+
+using kernels::kSpringSlice;
+
+namespace {
+
+// Jacobi's damping in the V-cycle's sweeps: below 2 / the largest eigenvalue of D^-1 A,
+// which with a body's springs in every direction stays under 3.
+constexpr double kSmoothing = 0.7;
+// Coarsening stops at this many nodes (or when a level no longer shrinks by 1.5), and a
+// coarsest level of at most kCholeskyNodes is solved exactly.
+constexpr std::size_t kCoarsestNodes = 48, kCholeskyNodes = 96, kMaxLevels = 16;
+
+// Calls f(j, slot) for each spring slot of body i (its other end j != i), in layout order.
+template <class T, class F>
+void for_each_slot(const SpringNetwork<T>& net, std::size_t i, F&& f) {
+  if (i >= net.covered) return;
+  const std::size_t slice = i / kSpringSlice, lane = i % kSpringSlice;
+  for (std::size_t e = net.slice_offset[slice]; e < net.slice_offset[slice + 1]; ++e) {
+    const std::size_t at = e * kSpringSlice + lane, j = std::size_t(net.neighbor[at]);
+    if (j != i) f(j, at);
+  }
+}
+
+// A graph's aggregates, in node order: a node whose neighbours are all free starts one with
+// them; a node left over joins the aggregate of its first neighbour that the first pass
+// placed. Nodes without neighbours stay out (-1). neighbors(i, f) calls f(j) for each j != i.
+template <class Neighbors>
+std::vector<std::int32_t> aggregate_nodes(std::size_t n, Neighbors&& neighbors, std::size_t& count) {
+  std::vector<std::int32_t> aggregate(n, -1);
+  std::vector<unsigned char> linked(n, 0);
+  count = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    bool free = true;
+    neighbors(i, [&](std::size_t j) { linked[i] = 1, free = free && aggregate[j] < 0; });
+    if (!linked[i] || aggregate[i] >= 0 || !free) continue;
+    const auto id = std::int32_t(count++);
+    aggregate[i] = id;
+    neighbors(i, [&](std::size_t j) { aggregate[j] = id; });
+  }
+  const std::vector<std::int32_t> first = aggregate;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!linked[i] || aggregate[i] >= 0) continue;
+    neighbors(i, [&](std::size_t j) {
+      if (aggregate[i] < 0) aggregate[i] = first[j];
+    });
+  }
+  return aggregate;
+}
+
+std::int32_t find_edge(const std::vector<std::uint32_t>& row_offset, const std::vector<std::uint32_t>& column,
+                       std::size_t row, std::size_t to) {
+  const auto begin = column.begin() + row_offset[row], end = column.begin() + row_offset[row + 1];
+  const auto at = std::lower_bound(begin, end, std::uint32_t(to));
+  return at != end && *at == to ? std::int32_t(at - column.begin()) : -1;
+}
+
+}  // namespace
+
+// A coarse level's aggregates' members (ascending) and edges (each row's columns ascending)
+// from the finer level's graph and aggregates.
+template <class T>
+template <class Neighbors>
+typename SpringMultigrid<T>::Level SpringMultigrid<T>::make_level(const std::vector<std::int32_t>& aggregate,
+                                                                  std::size_t count, Neighbors&& neighbors) {
+  Level level;
+  level.size = count;
+  level.member_offset.assign(count + 1, 0);
+  for (std::int32_t a : aggregate) {
+    if (a >= 0) ++level.member_offset[std::size_t(a) + 1];
+  }
+  for (std::size_t k = 0; k < count; ++k) level.member_offset[k + 1] += level.member_offset[k];
+  level.members.resize(level.member_offset[count]);
+  std::vector<std::uint32_t> fill(level.member_offset.begin(), level.member_offset.end() - 1);
+  for (std::size_t i = 0; i < aggregate.size(); ++i) {
+    if (aggregate[i] >= 0) level.members[fill[std::size_t(aggregate[i])]++] = std::uint32_t(i);
+  }
+  std::vector<std::int32_t> seen(count, -1);
+  level.row_offset.assign(1, 0);
+  for (std::size_t k = 0; k < count; ++k) {
+    const std::size_t start = level.column.size();
+    for (std::uint32_t m = level.member_offset[k]; m < level.member_offset[k + 1]; ++m) {
+      neighbors(level.members[m], [&](std::size_t j) {
+        const std::int32_t to = aggregate[j];
+        if (to >= 0 && std::size_t(to) != k && seen[std::size_t(to)] != std::int32_t(k)) {
+          seen[std::size_t(to)] = std::int32_t(k), level.column.push_back(std::uint32_t(to));
+        }
+      });
+    }
+    std::sort(level.column.begin() + std::ptrdiff_t(start), level.column.end());
+    level.row_offset.push_back(std::uint32_t(level.column.size()));
+  }
+  level.mirror.resize(level.column.size());
+  for (std::size_t k = 0; k < count; ++k) {
+    for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
+      level.mirror[e] = std::uint32_t(find_edge(level.row_offset, level.column, level.column[e], k));
+    }
+  }
+  return level;
+}
+
+template <class T>
+void SpringMultigrid<T>::build(const SpringNetwork<T>& net, std::size_t padded) {
+  net_ = &net, slots_ = net.neighbor.size(), padded_ = padded;
+  levels_.clear();
+  auto fine_neighbors = [&](std::size_t i, auto&& f) { for_each_slot(net, i, [&](std::size_t j, std::size_t) { f(j); }); };
+  std::size_t count = 0;
+  fine_aggregate_ = aggregate_nodes(net.covered, fine_neighbors, count);
+  levels_.push_back(make_level(fine_aggregate_, count, fine_neighbors));
+  fine_aggregate_.resize(padded, -1);
+  slot_edge_.assign(slots_, -1);
+  for (std::size_t i = 0; i < net.covered; ++i) {
+    for_each_slot(net, i, [&](std::size_t j, std::size_t at) {
+      const std::int32_t from = fine_aggregate_[i], to = fine_aggregate_[j];
+      if (from != to) slot_edge_[at] = find_edge(levels_[0].row_offset, levels_[0].column, std::size_t(from), std::size_t(to));
+    });
+  }
+  while (levels_.back().size > kCoarsestNodes && levels_.size() < kMaxLevels) {
+    Level& finer = levels_.back();
+    auto neighbors = [&finer](std::size_t i, auto&& f) {
+      for (std::uint32_t e = finer.row_offset[i]; e < finer.row_offset[i + 1]; ++e) f(std::size_t(finer.column[e]));
+    };
+    std::vector<std::int32_t> aggregate = aggregate_nodes(finer.size, neighbors, count);
+    if (2 * finer.size < 3 * count) break;  // it no longer shrinks
+    Level next = make_level(aggregate, count, neighbors);
+    finer.edge_down.assign(finer.column.size(), -1);
+    for (std::size_t i = 0; i < finer.size; ++i) {
+      for (std::uint32_t e = finer.row_offset[i]; e < finer.row_offset[i + 1]; ++e) {
+        const std::int32_t from = aggregate[i], to = aggregate[finer.column[e]];
+        if (from != to) finer.edge_down[e] = find_edge(next.row_offset, next.column, std::size_t(from), std::size_t(to));
+      }
+    }
+    finer.aggregate = std::move(aggregate);
+    levels_.push_back(std::move(next));
+  }
+  for (Level& level : levels_) {
+    level.diagonal.resize(level.size), level.smoother.resize(level.size), level.edge.resize(level.column.size());
+    level.b.resize(level.size), level.x.resize(level.size), level.t.resize(level.size);
+  }
+  for (auto& a : t_) a.resize(padded);
+  for (auto& a : block_) a.resize(padded);
+}
+
+template <class T>
+std::size_t SpringMultigrid<T>::bytes() const {
+  std::size_t total = (fine_aggregate_.capacity() + slot_edge_.capacity()) * sizeof(std::int32_t) +
+                      9 * padded_ * sizeof(T) + cholesky_.capacity() * sizeof(double);
+  for (const Level& l : levels_) {
+    total += (l.member_offset.capacity() + l.members.capacity() + l.row_offset.capacity() + l.column.capacity() +
+              l.mirror.capacity() + l.aggregate.capacity() + l.edge_down.capacity()) * 4;
+    total += (l.diagonal.capacity() + l.edge.capacity() + l.smoother.capacity()) * sizeof(Sym3);
+    total += (l.b.capacity() + l.x.capacity() + l.t.capacity()) * sizeof(Vec3);
+  }
+  return total;
+}
+
+namespace {
+
+template <class S>
+void add_to(S& to, const S& from) {
+  for (int k = 0; k < 6; ++k) to.a[k] += from.a[k];
+}
+
+// w u u^T + a I
+template <class S>
+S spring_block(double w, double a, const double u[3]) {
+  return {{w * u[0] * u[0] + a, w * u[1] * u[1] + a, w * u[2] * u[2] + a, w * u[0] * u[1], w * u[0] * u[2],
+           w * u[1] * u[2]}};
+}
+
+template <class S>
+std::array<double, 3> times(const S& m, const std::array<double, 3>& x) {
+  const double* a = m.a;
+  return {a[0] * x[0] + a[3] * x[1] + a[4] * x[2], a[3] * x[0] + a[1] * x[1] + a[5] * x[2],
+          a[4] * x[0] + a[5] * x[1] + a[2] * x[2]};
+}
+
+// The inverse of a symmetric positive definite 3x3 block; zero for one that is not (an
+// aggregate of fixed bodies only).
+template <class S>
+S inverse(const S& m) {
+  const double a = m.a[0], b = m.a[1], c = m.a[2], d = m.a[3], e = m.a[4], f = m.a[5];
+  const double c00 = b * c - f * f, c11 = a * c - e * e, c22 = a * b - d * d;
+  const double c01 = e * f - d * c, c02 = d * f - e * b, c12 = d * e - a * f;
+  const double det = a * c00 + d * c01 + e * c02;
+  if (!(det > 0) || !std::isfinite(det) || !(a > 0)) return {};
+  return {{c00 / det, c11 / det, c22 / det, c01 / det, c02 / det, c12 / det}};
+}
+
+}  // namespace
+
+// Level 0 from the fine system: each aggregate's masses and springs to fixed bodies (D), and
+// per edge the springs from its members into the other aggregate (C), each summed from the
+// lower-numbered end and copied to the other, so that the matrix is exactly symmetric.
+template <class T>
+void SpringMultigrid<T>::fine_galerkin(const FineSystem<T>& fine) {
+  Level& level = levels_[0];
+  std::fill(level.edge.begin(), level.edge.end(), Sym3{});
+  for (std::size_t k = 0; k < level.size; ++k) {
+    Sym3 d{};
+    for (std::uint32_t m = level.member_offset[k]; m < level.member_offset[k + 1]; ++m) {
+      const std::size_t i = level.members[m];
+      const double mass = double(fine.mass[i]);
+      if (mass == 0) continue;
+      d.a[0] += mass, d.a[1] += mass, d.a[2] += mass;
+      for_each_slot(*net_, i, [&](std::size_t j, std::size_t at) {
+        const double u[3] = {double(fine.unit[0][at]), double(fine.unit[1][at]), double(fine.unit[2][at])};
+        const Sym3 block = spring_block<Sym3>(-double(fine.along[at]), -double(fine.across[at]), u);
+        const std::int32_t e = slot_edge_[at];
+        if (fine.mass[j] == 0) {
+          add_to(d, block);
+        } else if (e >= 0 && level.column[std::size_t(e)] > k) {
+          add_to(level.edge[std::size_t(e)], block);
+        }
+      });
+    }
+    level.diagonal[k] = d;
+  }
+  mirror_edges(level);
+}
+
+template <class T>
+void SpringMultigrid<T>::mirror_edges(Level& level) {
+  for (std::size_t k = 0; k < level.size; ++k) {
+    for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
+      if (level.column[e] < k) level.edge[e] = level.edge[level.mirror[e]];
+    }
+  }
+}
+
+// Level l from level l - 1: the members' D summed, and their edges into other aggregates.
+template <class T>
+void SpringMultigrid<T>::coarse_galerkin(std::size_t l) {
+  const Level& finer = levels_[l - 1];
+  Level& level = levels_[l];
+  std::fill(level.edge.begin(), level.edge.end(), Sym3{});
+  for (std::size_t k = 0; k < level.size; ++k) {
+    Sym3 d{};
+    for (std::uint32_t m = level.member_offset[k]; m < level.member_offset[k + 1]; ++m) {
+      const std::size_t i = level.members[m];
+      add_to(d, finer.diagonal[i]);
+      for (std::uint32_t e = finer.row_offset[i]; e < finer.row_offset[i + 1]; ++e) {
+        const std::int32_t down = finer.edge_down[e];
+        if (down >= 0 && level.column[std::size_t(down)] > k) add_to(level.edge[std::size_t(down)], finer.edge[e]);
+      }
+    }
+    level.diagonal[k] = d;
+  }
+  mirror_edges(level);
+}
+
+template <class T>
+void SpringMultigrid<T>::finish_level(Level& level) {
+  for (std::size_t k = 0; k < level.size; ++k) {
+    Sym3 g = level.diagonal[k];
+    for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) add_to(g, level.edge[e]);
+    level.smoother[k] = inverse(g);
+  }
+}
+
+// The coarsest level's dense matrix, factored L L^T (lower, row-major). An unknown whose
+// pivot vanishes (an aggregate of fixed bodies) is left out: its solution is 0.
+template <class T>
+void SpringMultigrid<T>::factor_coarsest() {
+  const Level& level = levels_.back();
+  cholesky_.clear(), dead_.clear();
+  if (level.size > kCholeskyNodes) return;
+  const std::size_t n = 3 * level.size;
+  std::vector<double>& a = cholesky_;
+  a.assign(n * n, 0.0);
+  dead_.assign(n, 0);
+  constexpr int row[6] = {0, 1, 2, 0, 0, 1}, col[6] = {0, 1, 2, 1, 2, 2};
+  auto put = [&](std::size_t i, std::size_t j, const Sym3& s, double sign) {
+    for (int k = 0; k < 6; ++k) {
+      a[(3 * i + row[k]) * n + 3 * j + col[k]] += sign * s.a[k];
+      if (row[k] != col[k]) a[(3 * i + col[k]) * n + 3 * j + row[k]] += sign * s.a[k];
+    }
+  };
+  for (std::size_t i = 0; i < level.size; ++i) {
+    put(i, i, level.diagonal[i], 1);
+    for (std::uint32_t e = level.row_offset[i]; e < level.row_offset[i + 1]; ++e) {
+      put(i, i, level.edge[e], 1);
+      put(i, level.column[e], level.edge[e], -1);
+    }
+  }
+  for (std::size_t k = 0; k < n; ++k) {
+    const double scale = a[k * n + k];
+    double s = scale;
+    for (std::size_t p = 0; p < k; ++p) s -= a[k * n + p] * a[k * n + p];
+    if (!(s > 1e-12 * scale)) {
+      dead_[k] = 1;
+      for (std::size_t i = k; i < n; ++i) a[i * n + k] = 0;
+      continue;
+    }
+    const double pivot = std::sqrt(s);
+    a[k * n + k] = pivot;
+    for (std::size_t i = k + 1; i < n; ++i) {
+      double v = a[i * n + k];
+      for (std::size_t p = 0; p < k; ++p) v -= a[i * n + p] * a[k * n + p];
+      a[i * n + k] = v / pivot;
+    }
+  }
+}
+
+template <class T>
+void SpringMultigrid<T>::solve_coarsest(Level& level) {
+  if (cholesky_.empty()) {  // a level that stopped shrinking: two damped sweeps
+    for (std::size_t k = 0; k < level.size; ++k) level.x[k] = scaled(level.smoother[k], level.b[k]);
+    residual(level, level.t);
+    for (std::size_t k = 0; k < level.size; ++k) add_scaled(level.x[k], level.smoother[k], level.t[k]);
+    return;
+  }
+  const std::size_t n = 3 * level.size;
+  const std::vector<double>& a = cholesky_;
+  std::vector<double> y(n);  // at most 3 kCholeskyNodes
+  for (std::size_t k = 0; k < n; ++k) {
+    double v = level.b[k / 3][k % 3];
+    for (std::size_t p = 0; p < k; ++p) v -= a[k * n + p] * y[p];
+    y[k] = dead_[k] ? 0.0 : v / a[k * n + k];
+  }
+  for (std::size_t k = n; k-- > 0;) {
+    double v = y[k];
+    for (std::size_t i = k + 1; i < n; ++i) v -= a[i * n + k] * y[i];
+    y[k] = dead_[k] ? 0.0 : v / a[k * n + k];
+  }
+  for (std::size_t k = 0; k < n; ++k) level.x[k / 3][k % 3] = y[k];
+}
+
+template <class T>
+void SpringMultigrid<T>::residual(const Level& level, std::vector<Vec3>& out) const {
+  for (std::size_t k = 0; k < level.size; ++k) {
+    Vec3 y = times(level.diagonal[k], level.x[k]);
+    for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
+      const Vec3& other = level.x[level.column[e]];
+      const Vec3 dx{level.x[k][0] - other[0], level.x[k][1] - other[1], level.x[k][2] - other[2]};
+      const Vec3 c = times(level.edge[e], dx);
+      for (int d = 0; d < 3; ++d) y[d] += c[d];
+    }
+    for (int d = 0; d < 3; ++d) out[k][d] = level.b[k][d] - y[d];
+  }
+}
+
+template <class T>
+typename SpringMultigrid<T>::Vec3 SpringMultigrid<T>::scaled(const Sym3& inverse, const Vec3& v) {
+  Vec3 y = times(inverse, v);
+  for (double& c : y) c *= kSmoothing;
+  return y;
+}
+
+template <class T>
+void SpringMultigrid<T>::add_scaled(Vec3& x, const Sym3& inverse, const Vec3& v) {
+  const Vec3 y = scaled(inverse, v);
+  for (int d = 0; d < 3; ++d) x[d] += y[d];
+}
+
+// Each body's 3x3 diagonal block of the fine matrix, inverted: the fine level's smoother.
+// (Jacobi by components sees a body's springs in every component it moves in; a body
+// moving across its springs, as a curved cloth bends, is then smoothed as if it were held.)
+template <class T>
+void SpringMultigrid<T>::fine_blocks(const Workers& workers, const FineSystem<T>& fine) {
+  for_each_block(workers, padded_, [&](Block b) {
+    for (std::size_t i = b.begin; i < b.end; ++i) {
+      const double mass = double(fine.mass[i]);
+      Sym3 g{{mass, mass, mass, 0, 0, 0}};
+      if (mass != 0) {
+        for_each_slot(*net_, i, [&](std::size_t, std::size_t at) {
+          const double u[3] = {double(fine.unit[0][at]), double(fine.unit[1][at]), double(fine.unit[2][at])};
+          add_to(g, spring_block<Sym3>(-double(fine.along[at]), -double(fine.across[at]), u));
+        });
+      }
+      const Sym3 inv = inverse(g);
+      for (int k = 0; k < 6; ++k) block_[k][i] = T(kSmoothing * inv.a[k]);
+    }
+  });
+}
+
+// z = (z +) the damped block inverse of `in`.
+template <class T>
+void SpringMultigrid<T>::smooth(const Workers& workers, const T* const in[3], T* const z[3], bool add) {
+  for_each_block(workers, padded_, [&](Block b) {
+    const T *__restrict xx = block_[0].data(), *__restrict yy = block_[1].data(), *__restrict zz = block_[2].data();
+    const T *__restrict xy = block_[3].data(), *__restrict xz = block_[4].data(), *__restrict yz = block_[5].data();
+    const T *__restrict x = in[0], *__restrict y = in[1], *__restrict w = in[2];
+    T *__restrict zx = z[0], *__restrict zy = z[1], *__restrict zw = z[2];
+    auto sweep = [&](auto adds) {
+      for (std::size_t i = b.begin; i < b.end; ++i) {
+        const T ox = xx[i] * x[i] + xy[i] * y[i] + xz[i] * w[i];
+        const T oy = xy[i] * x[i] + yy[i] * y[i] + yz[i] * w[i];
+        const T ow = xz[i] * x[i] + yz[i] * y[i] + zz[i] * w[i];
+        if constexpr (decltype(adds)::value) {
+          zx[i] += ox, zy[i] += oy, zw[i] += ow;
+        } else {
+          zx[i] = ox, zy[i] = oy, zw[i] = ow;
+        }
+      }
+    };
+    if (add) {
+      sweep(std::true_type{});
+    } else {
+      sweep(std::false_type{});
+    }
+  });
+}
+
+template <class T>
+void SpringMultigrid<T>::set_operator(const Workers& workers, const FineSystem<T>& fine) {
+  fine_ = fine;
+  fine_blocks(workers, fine);
+  fine_galerkin(fine);
+  finish_level(levels_[0]);
+  for (std::size_t l = 1; l < levels_.size(); ++l) {
+    coarse_galerkin(l);
+    finish_level(levels_[l]);
+  }
+  factor_coarsest();
+}
+
+// Coarse level l's V-cycle on its b, into its x.
+template <class T>
+void SpringMultigrid<T>::vcycle(std::size_t l) {
+  Level& level = levels_[l];
+  if (l + 1 == levels_.size()) return solve_coarsest(level);
+  for (std::size_t k = 0; k < level.size; ++k) level.x[k] = scaled(level.smoother[k], level.b[k]);
+  residual(level, level.t);
+  Level& next = levels_[l + 1];
+  for (std::size_t k = 0; k < next.size; ++k) {
+    Vec3 sum{0, 0, 0};
+    for (std::uint32_t m = next.member_offset[k]; m < next.member_offset[k + 1]; ++m) {
+      for (int d = 0; d < 3; ++d) sum[d] += level.t[next.members[m]][d];
+    }
+    next.b[k] = sum;
+  }
+  vcycle(l + 1);
+  for (std::size_t k = 0; k < level.size; ++k) {
+    if (level.aggregate[k] < 0) continue;
+    for (int d = 0; d < 3; ++d) level.x[k][d] += next.x[std::size_t(level.aggregate[k])][d];
+  }
+  residual(level, level.t);
+  for (std::size_t k = 0; k < level.size; ++k) add_scaled(level.x[k], level.smoother[k], level.t[k]);
+}
+
+template <class T>
+void SpringMultigrid<T>::fine_residual(const Workers& workers, const T* const r[3], const T* const z[3]) {
+  const FineSystem<T>& f = fine_;
+  T* const t[3] = {t_[0].data(), t_[1].data(), t_[2].data()};
+  const kernels::SpringProductJob<T> job{{z[0], z[1], z[2]},
+                                         {t[0], t[1], t[2]},
+                                         f.mass,
+                                         net_->covered,
+                                         net_->slice_offset.data(),
+                                         net_->neighbor.data(),
+                                         net_->contiguous.data(),
+                                         {f.unit[0], f.unit[1], f.unit[2]},
+                                         f.along,
+                                         f.across,
+                                         T(1)};
+  for_each_block(workers, padded_, [&](Block b) {
+    kernels::spring_product(job, b.begin, b.end);
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t i = b.begin; i < b.end; ++i) t[d][i] = r[d][i] - t[d][i];
+    }
+  });
+}
+
+template <class T>
+void SpringMultigrid<T>::apply(const Workers& workers, const T* const r[3], T* const z[3]) {
+  const FineSystem<T>& f = fine_;
+  smooth(workers, r, z, false);
+  const T* const tt[3] = {t_[0].data(), t_[1].data(), t_[2].data()};
+  fine_residual(workers, r, z);
+  Level& first = levels_[0];
+  for (std::size_t k = 0; k < first.size; ++k) {
+    Vec3 sum{0, 0, 0};
+    for (std::uint32_t m = first.member_offset[k]; m < first.member_offset[k + 1]; ++m) {
+      const std::size_t i = first.members[m];
+      if (f.mass[i] == 0) continue;
+      for (int d = 0; d < 3; ++d) sum[d] += double(t_[d][i]);
+    }
+    first.b[k] = sum;
+  }
+  vcycle(0);
+  for_each_block(workers, padded_, [&](Block b) {
+    for (std::size_t i = b.begin; i < b.end; ++i) {
+      const std::int32_t k = fine_aggregate_[i];
+      if (k < 0 || f.mass[i] == 0) continue;
+      for (int d = 0; d < 3; ++d) z[d][i] += T(first.x[std::size_t(k)][d]);
+    }
+  });
+  fine_residual(workers, r, z);
+  smooth(workers, tt, z, true);
+}
+
+template class SpringMultigrid<float>;
+template class SpringMultigrid<double>;
+
+}  // namespace kinema

@@ -1,0 +1,108 @@
+#pragma once
+// Aggregation multigrid: the implicit path's preconditioner for large spring networks
+// (src/step/implicit_path.hpp). Jacobi's conjugate gradients need iterations in proportion
+// to gamma h |lambda| (the matrix's condition number grows as its square); one V-cycle of
+// this preconditioner costs two more products an iteration and takes the stiff modes out
+// of that count.
+//
+// The network's bodies are grouped into aggregates (in body order, a body with every
+// neighbour not yet taken: 3 x 3 patches of a grid), those into aggregates again, down to a
+// few dozen. Each coarse level's matrix is the Galerkin product P^T A P with P constant over
+// an aggregate and zero at fixed bodies, which keeps the form of the fine one: per node a
+// symmetric 3x3 block D (the masses, the springs to fixed bodies) and per edge a symmetric
+// 3x3 block C (the springs that cross between two aggregates; those inside one cancel):
+//   (A x)_I = D_I x_I + sum_J C_IJ (x_I - x_J).
+// One V-cycle: damped block Jacobi before and after each coarse correction, a Cholesky solve at the
+// coarsest level; symmetric and positive definite, as conjugate gradients needs. The coarse
+// levels are in double, each pass over nodes in order; the fine level's passes are blocks:
+// the bits depend on neither the thread count nor the instruction set.
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "forces/coupled_forces.hpp"
+#include "kinema/bodies.hpp"
+#include "parallel/blocks.hpp"
+
+namespace kinema {
+
+// The fine level as the implicit path holds it for a step: A p = m p + sum over each body's
+// slots of along u (u . dp) + across dp, dp = p_j - p_i (fixed bodies: rows and columns left
+// out).
+template <class T>
+struct FineSystem {
+  const SpringNetwork<T>* net;
+  const T* mass;  // 0 for fixed bodies
+  const T* unit[3];
+  const T* along;
+  const T* across;
+};
+
+template <class T>
+class SpringMultigrid {
+ public:
+  // Networks over fewer bodies take Jacobi alone: their solves are short, and a V-cycle's
+  // passes would cost more than the iterations they save.
+  static constexpr std::size_t kMinBodies = 1024;
+  static bool worth_it(const SpringNetwork<T>& net) { return net.covered >= kMinBodies; }
+
+  // The aggregates of `net` (laid out) for a set padded to `padded` bodies: once per layout.
+  void build(const SpringNetwork<T>& net, std::size_t padded);
+  bool built_for(const SpringNetwork<T>& net, std::size_t padded) const {
+    return net_ == &net && slots_ == net.neighbor.size() && padded_ == padded;
+  }
+  std::size_t bytes() const;
+  // The coarse levels' matrices for this step's fine one (which must outlive the V-cycles).
+  void set_operator(const Workers& workers, const FineSystem<T>& fine);
+  // z = one V-cycle applied to r.
+  void apply(const Workers& workers, const T* const r[3], T* const z[3]);
+
+ private:
+  using Vec3 = std::array<double, 3>;
+  struct Sym3 {  // xx, yy, zz, xy, xz, yz
+    double a[6];
+  };
+  struct Level {
+    std::size_t size = 0;
+    std::vector<std::uint32_t> member_offset, members;  // the finer level's nodes in each, ascending
+    std::vector<std::uint32_t> row_offset, column, mirror;  // edges both ways; mirror: the other way's
+    std::vector<std::int32_t> aggregate;  // each node's in the next level (-1: none)
+    std::vector<std::int32_t> edge_down;  // each edge's in the next level (-1: inside an aggregate)
+    std::vector<Sym3> diagonal, edge, smoother;  // D, C, the inverse of D + sum C (per step)
+    std::vector<Vec3> b, x, t;
+  };
+
+  template <class Neighbors>
+  static Level make_level(const std::vector<std::int32_t>& aggregate, std::size_t count, Neighbors&& neighbors);
+  static void mirror_edges(Level& level);
+  static Vec3 scaled(const Sym3& inverse, const Vec3& v);  // the damped sweep's step
+  static void add_scaled(Vec3& x, const Sym3& inverse, const Vec3& v);
+  void fine_galerkin(const FineSystem<T>& fine);
+  void fine_blocks(const Workers& workers, const FineSystem<T>& fine);
+  void smooth(const Workers& workers, const T* const in[3], T* const z[3], bool add);
+  void coarse_galerkin(std::size_t l);
+  static void finish_level(Level& level);
+  void factor_coarsest();
+  void solve_coarsest(Level& level);
+  void vcycle(std::size_t l);
+  void residual(const Level& level, std::vector<Vec3>& out) const;  // out = b - A x
+  void fine_residual(const Workers& workers, const T* const r[3], const T* const z[3]);  // t_ = r - A z
+
+  const SpringNetwork<T>* net_ = nullptr;
+  std::size_t slots_ = 0, padded_ = 0;
+  std::vector<std::int32_t> fine_aggregate_;  // each body's level-1 node (-1: no springs)
+  std::vector<std::int32_t> slot_edge_;       // each slot's level-1 edge (-1: none)
+  std::vector<Level> levels_;                 // 0: the first coarse level
+  std::vector<double> cholesky_;              // the coarsest level's factor, dense, or empty
+  std::vector<unsigned char> dead_;           // unknowns of the coarsest level left out (no mass)
+  FineSystem<T> fine_{};
+  std::array<AlignedArray<T>, 6> block_;    // the fine smoother: xx yy zz xy xz yz per body
+  std::array<AlignedArray<T>, 3> t_;          // the fine level's residual
+};
+
+extern template class SpringMultigrid<float>;
+extern template class SpringMultigrid<double>;
+
+}  // namespace kinema
