@@ -26,6 +26,25 @@
 
 namespace kinema {
 
+// How an implicit method's linear solves are preconditioned. Each choice gives its own bits
+// (the same on every thread count and ISA); a checkpoint resumes under the one it was taken with.
+enum class ImplicitPreconditioner : std::uint8_t {
+  automatic,  // multigrid for spring networks over kMultigridBodies bodies or more, else Jacobi
+  jacobi,     // each body's diagonal: no setup, iterations grow as gamma h |lambda|
+  // Aggregation multigrid (one V-cycle an iteration, about three times an iteration's cost):
+  // iterations that grow far more slowly with the springs' stiffness times the step.
+  multigrid,
+};
+// Networks reaching fewer bodies than this solve in few enough iterations that a V-cycle's
+// passes cost more than they save.
+inline constexpr std::size_t kMultigridBodies = 1024;
+// Whether solves over a spring network reaching `network_bodies` (max index + 1) take multigrid.
+inline bool takes_multigrid(ImplicitPreconditioner p, std::size_t network_bodies) {
+  if (network_bodies == 0) return false;
+  return p == ImplicitPreconditioner::multigrid ||
+         (p == ImplicitPreconditioner::automatic && network_bodies >= kMultigridBodies);
+}
+
 // What a stepper does about state that stops being finite (a step past the stability
 // limit, a force that returns NaN).
 enum class FiniteGuard {
@@ -86,6 +105,7 @@ struct StepperOptions {
   // solve then stops where it is and ImplicitStats::unconverged counts it).
   double implicit_tolerance = 0;
   int implicit_max_iterations = 1000;
+  ImplicitPreconditioner implicit_preconditioner = ImplicitPreconditioner::automatic;
   double max_speed = 500;          // clamp: length units per second, finite and > 0
   double max_angular_speed = 50;   // clamp, rigid bodies: radians per second, finite and > 0
 };

@@ -49,7 +49,7 @@ namespace rec {
 constexpr std::size_t kind = 0, scalar = 1, flags = 2, guard = 3, bodies = 8, model = 16, method = 24, origin = 32,
                       steps = 40, h = 48, proposed = 56, max_speed = 64, max_angular = 72, name = 80,
                       // the continuation of an error-controlled call stopped early
-                      continues = 112, rejected = 113, relaxed = 114, t_end = 120, rtol = 128, atol = 136, max_step = 144,
+                      continues = 112, rejected = 113, relaxed = 114, preconditioner = 115, t_end = 120, rtol = 128, atol = 136, max_step = 144,
                       next_h = 152, err_prev = 160, kept_scale = 168,
                       // an implicit method's solves (0 for the others)
                       implicit_tolerance = 176, implicit_iterations = 184, crc = 188;
@@ -90,12 +90,16 @@ std::uint64_t method_fingerprint(const Method& m) {
 struct ImplicitSolves {
   double tolerance = 0;
   std::int32_t iterations = 0;
+  std::uint8_t multigrid = 0;  // 2: multigrid, 1: Jacobi; 0 (checkpoints that predate it): Jacobi
 };
 template <class T>
 ImplicitSolves implicit_solves(const Stepper<T>& stepper) {
   if (stepper.method().kind != MethodKind::linearly_implicit) return {};
   const StepperOptions& o = stepper.options();
-  return {o.implicit_tolerance > 0 ? o.implicit_tolerance : kDefaultImplicitTolerance<T>, o.implicit_max_iterations};
+  std::size_t network = 0;
+  for (const SpringPair& p : stepper.forces().springs()) network = std::max<std::size_t>({network, p.i + 1, p.j + 1});
+  return {o.implicit_tolerance > 0 ? o.implicit_tolerance : kDefaultImplicitTolerance<T>, o.implicit_max_iterations,
+          std::uint8_t(takes_multigrid(o.implicit_preconditioner, network) ? 2 : 1)};
 }
 
 std::string_view guard_name(std::uint8_t g) { return g == 0 ? "off" : g == 1 ? "check" : "clamp"; }
@@ -248,6 +252,7 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   const ImplicitSolves solves = implicit_solves(stepper);
   put(h + rec::implicit_tolerance, solves.tolerance);
   put(h + rec::implicit_iterations, solves.iterations);
+  put(h + rec::preconditioner, solves.multigrid);
   for (const auto& [at, value] : {std::pair{rec::t_end, cont.t_end}, {rec::rtol, cont.rtol}, {rec::atol, cont.atol},
                                   {rec::max_step, cont.max_step}, {rec::next_h, cont.h},
                                   {rec::err_prev, cont.controller.err_prev}, {rec::kept_scale, cont.kept_scale}}) {
@@ -466,6 +471,12 @@ void CheckpointReader::check_record(std::size_t k, bool rigid, const Stepper<T>&
                   "the steps would differ",
                   tolerance, int(iterations), solves.tolerance, int(solves.iterations));
     throw Error(which + text);
+  }
+  const bool multigrid = get<std::uint8_t>(h + rec::preconditioner) == 2;
+  if (solves.iterations > 0 && multigrid != (solves.multigrid == 2)) {
+    throw Error(which + " was taken with implicit solves preconditioned by " + (multigrid ? "multigrid" : "Jacobi") +
+                ", not this stepper's " + (multigrid ? "Jacobi" : "multigrid") +
+                ": the steps would differ (StepperOptions::implicit_preconditioner)");
   }
 }
 

@@ -17,7 +17,8 @@ ImplicitPath<T>::ImplicitPath(const ForceModel<T>& forces, const Method& method,
       net_(lowered.coupled.springs),
       rates_(forces, euler, table, lowered.particle, lowered.coupled),
       tolerance_(options.implicit_tolerance > 0 ? options.implicit_tolerance : kDefaultImplicitTolerance<T>),
-      max_iterations_(options.implicit_max_iterations) {}
+      max_iterations_(options.implicit_max_iterations),
+      preconditioner_(options.implicit_preconditioner) {}
 
 template <class T>
 void ImplicitPath<T>::reserve(std::size_t padded) {
@@ -48,7 +49,7 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
     for (auto& a : unit_) a.resize(slots);
     for (AlignedArray<T>* a : {&k_along_, &k_across_, &a_along_, &a_across_}) a->resize(slots);
   }
-  use_multigrid_ = SpringMultigrid<T>::worth_it(net_);
+  use_multigrid_ = takes_multigrid(preconditioner_, net_.covered);
   if (use_multigrid_ && !multigrid_.built_for(net_, c.bodies.padded_size())) multigrid_.build(net_, c.bodies.padded_size());
   gh_ = T(method_.rosenbrock.gamma * double(c.h));
   save_start(c);
@@ -304,12 +305,7 @@ template <class T>
 double ImplicitPath<T>::precondition(const StepContext<T>& c) {
   const T* const r[3] = {r_[0].data(), r_[1].data(), r_[2].data()};
   T* const z[3] = {z_[0].data(), z_[1].data(), z_[2].data()};
-  multigrid_.apply(c.workers, r, z);
-  return sum_blocks(c, [&](Block b, double* sums) {
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t i = b.begin; i < b.end; ++i) sums[0] += double(r[d][i]) * double(z[d][i]);
-    }
-  })[0];
+  return multigrid_.apply(c.workers, r, z);
 }
 
 // A right side that is not finite (a force that was not): no iteration could converge, and

@@ -7,8 +7,10 @@
 // for the velocity part alone:
 //   (M - gamma h D - (gamma h)^2 K) k_v = M r_v + gamma h K r_x,   k_x = r_x + gamma h k_v.
 // Its matrix is symmetric and, with the geometric stiffness kept for stretched springs
-// only, positive definite: preconditioned conjugate gradients (Jacobi), matrix-free, its
-// products summed per body over the spring network's slots in their fixed order. Bodies
+// only, positive definite: preconditioned conjugate gradients, matrix-free, its
+// products summed per body over the spring network's slots in their fixed order; the
+// preconditioner is each body's diagonal (Jacobi) or a multigrid V-cycle
+// (src/step/spring_multigrid.hpp). Bodies
 // with inv_mass 0 keep k_v = 0 (their rows are left out). Dot products are summed per block,
 // then over the blocks in order: the bits depend on neither threads nor instruction set
 // (this path's arithmetic is plain C++, one rounding per operation, no fused multiply-add).
@@ -87,7 +89,8 @@ class ImplicitPath {
   AlignedArray<T> k_along_, k_across_, a_along_, a_across_;
   std::vector<double> block_sums_[2];
   SpringMultigrid<T> multigrid_;
-  bool use_multigrid_ = false;  // SpringMultigrid::worth_it: else Jacobi
+  ImplicitPreconditioner preconditioner_;
+  bool use_multigrid_ = false;  // takes_multigrid: else Jacobi
   ImplicitStats stats_, step_stats_;  // since the path was made; in the step under way
 };
 

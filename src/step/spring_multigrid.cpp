@@ -148,12 +148,14 @@ void SpringMultigrid<T>::build(const SpringNetwork<T>& net, std::size_t padded) 
   }
   for (auto& a : t_) a.resize(padded);
   for (auto& a : block_) a.resize(padded);
+  for (auto& a : y_) a.resize(padded);
+  block_dots_.assign(block_count(padded), 0.0);
 }
 
 template <class T>
 std::size_t SpringMultigrid<T>::bytes() const {
   std::size_t total = (fine_aggregate_.capacity() + slot_edge_.capacity()) * sizeof(std::int32_t) +
-                      9 * padded_ * sizeof(T) + cholesky_.capacity() * sizeof(double);
+                      12 * padded_ * sizeof(T) + cholesky_.capacity() * sizeof(double);
   for (const Level& l : levels_) {
     total += (l.member_offset.capacity() + l.members.capacity() + l.row_offset.capacity() + l.column.capacity() +
               l.mirror.capacity() + l.aggregate.capacity() + l.edge_down.capacity()) * 4;
@@ -383,32 +385,24 @@ void SpringMultigrid<T>::fine_blocks(const Workers& workers, const FineSystem<T>
   });
 }
 
-// z = (z +) the damped block inverse of `in`.
+// out = base + the damped block inverse of `in` over block b (base null: 0).
 template <class T>
-void SpringMultigrid<T>::smooth(const Workers& workers, const T* const in[3], T* const z[3], bool add) {
-  for_each_block(workers, padded_, [&](Block b) {
-    const T *__restrict xx = block_[0].data(), *__restrict yy = block_[1].data(), *__restrict zz = block_[2].data();
-    const T *__restrict xy = block_[3].data(), *__restrict xz = block_[4].data(), *__restrict yz = block_[5].data();
-    const T *__restrict x = in[0], *__restrict y = in[1], *__restrict w = in[2];
-    T *__restrict zx = z[0], *__restrict zy = z[1], *__restrict zw = z[2];
-    auto sweep = [&](auto adds) {
-      for (std::size_t i = b.begin; i < b.end; ++i) {
-        const T ox = xx[i] * x[i] + xy[i] * y[i] + xz[i] * w[i];
-        const T oy = xy[i] * x[i] + yy[i] * y[i] + yz[i] * w[i];
-        const T ow = xz[i] * x[i] + yz[i] * y[i] + zz[i] * w[i];
-        if constexpr (decltype(adds)::value) {
-          zx[i] += ox, zy[i] += oy, zw[i] += ow;
-        } else {
-          zx[i] = ox, zy[i] = oy, zw[i] = ow;
-        }
-      }
-    };
-    if (add) {
-      sweep(std::true_type{});
-    } else {
-      sweep(std::false_type{});
-    }
-  });
+void SpringMultigrid<T>::smooth(Block b, const T* const in[3], const T* const base[3], T* const out[3]) const {
+  const T *__restrict xx = block_[0].data(), *__restrict yy = block_[1].data(), *__restrict zz = block_[2].data();
+  const T *__restrict xy = block_[3].data(), *__restrict xz = block_[4].data(), *__restrict yz = block_[5].data();
+  const T *__restrict x = in[0], *__restrict y = in[1], *__restrict w = in[2];
+  T *__restrict ox = out[0], *__restrict oy = out[1], *__restrict ow = out[2];
+  for (std::size_t i = b.begin; i < b.end; ++i) {
+    ox[i] = xx[i] * x[i] + xy[i] * y[i] + xz[i] * w[i];
+    oy[i] = xy[i] * x[i] + yy[i] * y[i] + yz[i] * w[i];
+    ow[i] = xz[i] * x[i] + yz[i] * y[i] + zz[i] * w[i];
+  }
+  if (base == nullptr) return;
+  for (int d = 0; d < 3; ++d) {
+    const T* __restrict from = base[d];
+    T* __restrict to = out[d];
+    for (std::size_t i = b.begin; i < b.end; ++i) to[i] = from[i] + to[i];
+  }
 }
 
 template <class T>
@@ -448,11 +442,12 @@ void SpringMultigrid<T>::vcycle(std::size_t l) {
   for (std::size_t k = 0; k < level.size; ++k) add_scaled(level.x[k], level.smoother[k], level.t[k]);
 }
 
+// t_ = r - A y over block b (y is read at the block's bodies' neighbours too).
 template <class T>
-void SpringMultigrid<T>::fine_residual(const Workers& workers, const T* const r[3], const T* const z[3]) {
+void SpringMultigrid<T>::fine_residual(Block b, const T* const r[3], const T* const y[3]) {
   const FineSystem<T>& f = fine_;
   T* const t[3] = {t_[0].data(), t_[1].data(), t_[2].data()};
-  const kernels::SpringProductJob<T> job{{z[0], z[1], z[2]},
+  const kernels::SpringProductJob<T> job{{y[0], y[1], y[2]},
                                          {t[0], t[1], t[2]},
                                          f.mass,
                                          net_->covered,
@@ -463,27 +458,29 @@ void SpringMultigrid<T>::fine_residual(const Workers& workers, const T* const r[
                                          f.along,
                                          f.across,
                                          T(1)};
-  for_each_block(workers, padded_, [&](Block b) {
-    kernels::spring_product(job, b.begin, b.end);
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t i = b.begin; i < b.end; ++i) t[d][i] = r[d][i] - t[d][i];
-    }
-  });
+  kernels::spring_product(job, b.begin, b.end);
+  for (int d = 0; d < 3; ++d) {
+    for (std::size_t i = b.begin; i < b.end; ++i) t[d][i] = r[d][i] - t[d][i];
+  }
 }
 
+// y = S r; the residual to level 0; its V-cycle; y += P x; z = y + S (r - A y); r . z, summed
+// per block, then over the blocks in order. y is its own array: the last pass reads it at
+// other blocks' bodies while writing z.
 template <class T>
-void SpringMultigrid<T>::apply(const Workers& workers, const T* const r[3], T* const z[3]) {
+double SpringMultigrid<T>::apply(const Workers& workers, const T* const r[3], T* const z[3]) {
   const FineSystem<T>& f = fine_;
-  smooth(workers, r, z, false);
-  const T* const tt[3] = {t_[0].data(), t_[1].data(), t_[2].data()};
-  fine_residual(workers, r, z);
+  T* const y[3] = {y_[0].data(), y_[1].data(), y_[2].data()};
+  const T* const t[3] = {t_[0].data(), t_[1].data(), t_[2].data()};
+  for_each_block(workers, padded_, [&](Block b) { smooth(b, r, nullptr, y); });
+  for_each_block(workers, padded_, [&](Block b) { fine_residual(b, r, y); });
   Level& first = levels_[0];
   for (std::size_t k = 0; k < first.size; ++k) {
     Vec3 sum{0, 0, 0};
     for (std::uint32_t m = first.member_offset[k]; m < first.member_offset[k + 1]; ++m) {
       const std::size_t i = first.members[m];
       if (f.mass[i] == 0) continue;
-      for (int d = 0; d < 3; ++d) sum[d] += double(t_[d][i]);
+      for (int d = 0; d < 3; ++d) sum[d] += double(t[d][i]);
     }
     first.b[k] = sum;
   }
@@ -492,11 +489,21 @@ void SpringMultigrid<T>::apply(const Workers& workers, const T* const r[3], T* c
     for (std::size_t i = b.begin; i < b.end; ++i) {
       const std::int32_t k = fine_aggregate_[i];
       if (k < 0 || f.mass[i] == 0) continue;
-      for (int d = 0; d < 3; ++d) z[d][i] += T(first.x[std::size_t(k)][d]);
+      for (int d = 0; d < 3; ++d) y[d][i] += T(first.x[std::size_t(k)][d]);
     }
   });
-  fine_residual(workers, r, z);
-  smooth(workers, tt, z, true);
+  for_each_block(workers, padded_, [&](Block b) {
+    fine_residual(b, r, y);
+    smooth(b, t, y, z);
+    double dot = 0;
+    for (int d = 0; d < 3; ++d) {
+      for (std::size_t i = b.begin; i < b.end; ++i) dot += double(r[d][i]) * double(z[d][i]);
+    }
+    block_dots_[b.begin / kBlockBodies] = dot;
+  });
+  double total = 0;
+  for (std::size_t k = 0; k < block_count(padded_); ++k) total += block_dots_[k];
+  return total;
 }
 
 template class SpringMultigrid<float>;

@@ -1,6 +1,6 @@
 #pragma once
 // Aggregation multigrid: the implicit path's preconditioner for large spring networks
-// (src/step/implicit_path.hpp). Jacobi's conjugate gradients need iterations in proportion
+// (src/step/implicit_path.hpp; ImplicitPreconditioner in kinema/stepper.hpp). Jacobi's conjugate gradients need iterations in proportion
 // to gamma h |lambda| (the matrix's condition number grows as its square); one V-cycle of
 // this preconditioner costs two more products an iteration and takes the stiff modes out
 // of that count.
@@ -43,11 +43,6 @@ struct FineSystem {
 template <class T>
 class SpringMultigrid {
  public:
-  // Networks over fewer bodies take Jacobi alone: their solves are short, and a V-cycle's
-  // passes would cost more than the iterations they save.
-  static constexpr std::size_t kMinBodies = 1024;
-  static bool worth_it(const SpringNetwork<T>& net) { return net.covered >= kMinBodies; }
-
   // The aggregates of `net` (laid out) for a set padded to `padded` bodies: once per layout.
   void build(const SpringNetwork<T>& net, std::size_t padded);
   bool built_for(const SpringNetwork<T>& net, std::size_t padded) const {
@@ -56,8 +51,8 @@ class SpringMultigrid {
   std::size_t bytes() const;
   // The coarse levels' matrices for this step's fine one (which must outlive the V-cycles).
   void set_operator(const Workers& workers, const FineSystem<T>& fine);
-  // z = one V-cycle applied to r.
-  void apply(const Workers& workers, const T* const r[3], T* const z[3]);
+  // z = one V-cycle applied to r; returns r . z (the same sum on every thread count).
+  double apply(const Workers& workers, const T* const r[3], T* const z[3]);
 
  private:
   using Vec3 = std::array<double, 3>;
@@ -81,14 +76,14 @@ class SpringMultigrid {
   static void add_scaled(Vec3& x, const Sym3& inverse, const Vec3& v);
   void fine_galerkin(const FineSystem<T>& fine);
   void fine_blocks(const Workers& workers, const FineSystem<T>& fine);
-  void smooth(const Workers& workers, const T* const in[3], T* const z[3], bool add);
+  void smooth(Block b, const T* const in[3], const T* const base[3], T* const out[3]) const;
   void coarse_galerkin(std::size_t l);
   static void finish_level(Level& level);
   void factor_coarsest();
   void solve_coarsest(Level& level);
   void vcycle(std::size_t l);
   void residual(const Level& level, std::vector<Vec3>& out) const;  // out = b - A x
-  void fine_residual(const Workers& workers, const T* const r[3], const T* const z[3]);  // t_ = r - A z
+  void fine_residual(Block b, const T* const r[3], const T* const y[3]);
 
   const SpringNetwork<T>* net_ = nullptr;
   std::size_t slots_ = 0, padded_ = 0;
@@ -99,6 +94,8 @@ class SpringMultigrid {
   std::vector<unsigned char> dead_;           // unknowns of the coarsest level left out (no mass)
   FineSystem<T> fine_{};
   std::array<AlignedArray<T>, 6> block_;    // the fine smoother: xx yy zz xy xz yz per body
+  std::array<AlignedArray<T>, 3> y_;          // the fine level's iterate
+  std::vector<double> block_dots_;
   std::array<AlignedArray<T>, 3> t_;          // the fine level's residual
 };
 

@@ -117,6 +117,10 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_option("--implicit-iterations", o.implicit_iterations,
                   "Implicit methods: the most conjugate-gradient iterations a solve takes (default 1000)")
       ->check(CLI::Range(1, 1 << 30));
+  run->add_option("--implicit-preconditioner", o.implicit_preconditioner,
+                  "Implicit methods: automatic (multigrid for spring networks of 1024 bodies or more, "
+                  "else Jacobi), jacobi or multigrid")
+      ->check(CLI::IsMember({"automatic", "jacobi", "multigrid"}));
   run->add_flag("--relaxed-fma", o.relaxed_fma,
                 "Scalar and SSE2 paths: multiply then add instead of an exact fused "
                 "multiply-add (faster without an FMA unit; results then differ in the last "

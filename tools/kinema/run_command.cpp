@@ -230,6 +230,9 @@ StepperOptions stepper_options(const RunOptions& o) {
   options.relaxed_fma = o.relaxed_fma;
   options.implicit_tolerance = o.implicit_tolerance.value_or(options.implicit_tolerance);
   options.implicit_max_iterations = o.implicit_iterations.value_or(options.implicit_max_iterations);
+  options.implicit_preconditioner = o.implicit_preconditioner == "jacobi"      ? ImplicitPreconditioner::jacobi
+                                    : o.implicit_preconditioner == "multigrid" ? ImplicitPreconditioner::multigrid
+                                                                               : ImplicitPreconditioner::automatic;
   return options;
 }
 
@@ -394,9 +397,11 @@ std::string implicit_fingerprint(const RunOptions& o, const Scene& scene) {
   const double given = options.implicit_tolerance, tolerance = given > 0 ? given
                        : scene.precision == Precision::single ? kDefaultImplicitTolerance<float>
                                                               : kDefaultImplicitTolerance<double>;
-  char text[100];
-  std::snprintf(text, sizeof text, " implicit_tolerance=%a implicit_iterations=%d", tolerance,
-                options.implicit_max_iterations);
+  char text[140];
+  // automatic keeps the fingerprint it had before the choice existed.
+  const std::string preconditioner = o.implicit_preconditioner == "automatic" ? "" : " implicit_preconditioner=" + o.implicit_preconditioner;
+  std::snprintf(text, sizeof text, " implicit_tolerance=%a implicit_iterations=%d%s", tolerance,
+                options.implicit_max_iterations, preconditioner.c_str());
   return text;
 }
 
