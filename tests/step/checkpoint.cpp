@@ -45,11 +45,13 @@ template <class Set, class T, class Make, class Call>
 void check_resume(Make&& make, const ForceModel<T>& forces, const Method& method, Call&& call, int calls, int k,
                   const StepperOptions& resumed_options) {
   Set straight = make();
-  Stepper<T> a(forces, method, test::serial_options());
+  StepperOptions writer = test::serial_options();  // solves as the resumed stepper's
+  writer.implicit_preconditioner = resumed_options.implicit_preconditioner;
+  Stepper<T> a(forces, method, writer);
   for (int c = 0; c < calls; ++c) call(a, straight, c);
 
   Set first = make();
-  Stepper<T> b(forces, method, test::serial_options());
+  Stepper<T> b(forces, method, writer);
   for (int c = 0; c < k; ++c) call(b, first, c);
   const std::vector<std::byte> saved = bits(first, b);
 
@@ -115,9 +117,12 @@ TEST_CASE("a checkpoint resumes implicit steps bit for bit and refuses other sol
   const ForceModel<float> forces = make_forces<float>(scene);
   const auto frames = [](auto& stepper, auto& bodies, int) { stepper.advance(bodies, float(1.0 / 60), 2); };
   for (const Method* m : {&implicit_euler, &ros2}) {
-    for (const StepperOptions& o : resumed_options()) {
-      INFO(m->name << ", isa " << isa_name(o.isa) << ", " << (o.jobs ? "2 threads" : "serial"));
-      check_resume<ParticleSet<float>>([&] { return make_particles<float>(scene); }, forces, *m, frames, 4, 1, o);
+    for (StepperOptions o : resumed_options()) {
+      for (const ImplicitPreconditioner p : {ImplicitPreconditioner::automatic, ImplicitPreconditioner::multigrid}) {
+        o.implicit_preconditioner = p;
+        INFO(m->name << ", isa " << isa_name(o.isa) << ", " << (o.jobs ? "2 threads" : "serial") << ", preconditioner " << int(p));
+        check_resume<ParticleSet<float>>([&] { return make_particles<float>(scene); }, forces, *m, frames, 4, 1, o);
+      }
     }
   }
   ParticleSet<float> bodies = make_particles<float>(scene);
@@ -139,6 +144,14 @@ TEST_CASE("a checkpoint resumes implicit steps bit for bit and refuses other sol
   Stepper<float> spelled_stepper(forces, implicit_euler, spelled_out);
   CHECK_NOTHROW(CheckpointReader(saved).restore(0, restored, spelled_stepper));
   CHECK(bits(restored, spelled_stepper) == saved);
+  // 100 bodies: the default preconditioner is Jacobi's, the same as naming it.
+  StepperOptions jacobi = test::serial_options(), multigrid = jacobi;
+  jacobi.implicit_preconditioner = ImplicitPreconditioner::jacobi;
+  multigrid.implicit_preconditioner = ImplicitPreconditioner::multigrid;
+  Stepper<float> jacobi_stepper(forces, implicit_euler, jacobi), multigrid_stepper(forces, implicit_euler, multigrid);
+  CHECK_NOTHROW(CheckpointReader(saved).restore(0, restored, jacobi_stepper));
+  CHECK_THROWS_WITH(CheckpointReader(saved).restore(0, restored, multigrid_stepper),
+                    Catch::Contains("preconditioned by Jacobi, not this stepper's multigrid"));
 }
 
 TEST_CASE("a checkpoint resumes error-controlled steps bit for bit", "[checkpoint][adaptive]") {
