@@ -155,7 +155,85 @@ template <class T>
   }
 }
 
+template <class T>
+[[gnu::always_inline]] inline void block_smooth_of(const BlockSmoothJob<T>& job, std::size_t begin, std::size_t end) {
+  const T *__restrict xx = job.block[0], *__restrict yy = job.block[1], *__restrict zz = job.block[2];
+  const T *__restrict xy = job.block[3], *__restrict xz = job.block[4], *__restrict yz = job.block[5];
+  const T *__restrict x = job.in[0], *__restrict y = job.in[1], *__restrict z = job.in[2];
+  T *__restrict ox = job.out[0], *__restrict oy = job.out[1], *__restrict oz = job.out[2];
+  if (job.base[0] == nullptr) {
+    for (std::size_t i = begin; i < end; ++i) {
+      ox[i] = xx[i] * x[i] + xy[i] * y[i] + xz[i] * z[i];
+      oy[i] = xy[i] * x[i] + yy[i] * y[i] + yz[i] * z[i];
+      oz[i] = xz[i] * x[i] + yz[i] * y[i] + zz[i] * z[i];
+    }
+    return;
+  }
+  const T *__restrict bx = job.base[0], *__restrict by = job.base[1], *__restrict bz = job.base[2];
+  for (std::size_t i = begin; i < end; ++i) {
+    ox[i] = bx[i] + (xx[i] * x[i] + xy[i] * y[i] + xz[i] * z[i]);
+    oy[i] = by[i] + (xy[i] * x[i] + yy[i] * y[i] + yz[i] * z[i]);
+    oz[i] = bz[i] + (xz[i] * x[i] + yz[i] * y[i] + zz[i] * z[i]);
+  }
+}
+
+template <class T>
+[[gnu::always_inline]] inline void prolong_of(const ProlongJob<T>& job, std::size_t begin, std::size_t end) {
+  const std::int32_t* __restrict node = job.node;
+  for (int d = 0; d < 3; ++d) {
+    const T* __restrict values = job.values[d];
+    T* __restrict out = job.out[d];
+    for (std::size_t i = begin; i < end; ++i) out[i] += values[node[i]];
+  }
+}
+
+template <class T>
+[[gnu::always_inline]] inline void subtract_of(const T* const r[3], T* const out[3], std::size_t begin, std::size_t end) {
+  for (int d = 0; d < 3; ++d) {
+    const T* __restrict from = r[d];
+    T* __restrict to = out[d];
+    for (std::size_t i = begin; i < end; ++i) to[i] = from[i] - to[i];
+  }
+}
+
+template <class T>
+[[gnu::always_inline]] inline double dot_of(const T* const a[3], const T* const b[3], std::size_t begin, std::size_t end) {
+  double sums[kLanes] = {};
+  for (int d = 0; d < 3; ++d) {
+    const T *__restrict x = a[d], *__restrict y = b[d];
+    std::size_t first = begin;
+    for (; first + kLanes <= end; first += kLanes) {
+      for (std::size_t l = 0; l < kLanes; ++l) sums[l] += double(x[first + l]) * double(y[first + l]);
+    }
+    for (std::size_t l = 0; first + l < end; ++l) sums[l] += double(x[first + l]) * double(y[first + l]);
+  }
+  double total = 0;
+  for (double s : sums) total += s;
+  return total;
+}
+
 }  // namespace
+
+KINEMA_CLONED void block_smooth(const BlockSmoothJob<float>& job, std::size_t begin, std::size_t end) {
+  block_smooth_of(job, begin, end);
+}
+KINEMA_CLONED void block_smooth(const BlockSmoothJob<double>& job, std::size_t begin, std::size_t end) {
+  block_smooth_of(job, begin, end);
+}
+KINEMA_CLONED void prolong_add(const ProlongJob<float>& job, std::size_t begin, std::size_t end) { prolong_of(job, begin, end); }
+KINEMA_CLONED void prolong_add(const ProlongJob<double>& job, std::size_t begin, std::size_t end) { prolong_of(job, begin, end); }
+KINEMA_CLONED void subtract_from(const float* const r[3], float* const out[3], std::size_t begin, std::size_t end) {
+  subtract_of(r, out, begin, end);
+}
+KINEMA_CLONED void subtract_from(const double* const r[3], double* const out[3], std::size_t begin, std::size_t end) {
+  subtract_of(r, out, begin, end);
+}
+KINEMA_CLONED double dot3(const float* const a[3], const float* const b[3], std::size_t begin, std::size_t end) {
+  return dot_of(a, b, begin, end);
+}
+KINEMA_CLONED double dot3(const double* const a[3], const double* const b[3], std::size_t begin, std::size_t end) {
+  return dot_of(a, b, begin, end);
+}
 
 KINEMA_CLONED double spring_product(const SpringProductJob<float>& job, std::size_t begin, std::size_t end) {
   return product_of(job, begin, end);

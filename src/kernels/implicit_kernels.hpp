@@ -60,4 +60,35 @@ struct CgDirectionJob {
 void cg_direction(const CgDirectionJob<float>& job, std::size_t begin, std::size_t end);
 void cg_direction(const CgDirectionJob<double>& job, std::size_t begin, std::size_t end);
 
+// The multigrid preconditioner's fine passes (src/step/spring_multigrid.hpp), over
+// [begin, end) of each of three arrays.
+// out = base + B in, B a symmetric 3x3 block per body (xx yy zz xy xz yz); base null: 0.
+template <class T>
+struct BlockSmoothJob {
+  const T* block[6];
+  const T* in[3];
+  const T* base[3];
+  T* out[3];
+};
+void block_smooth(const BlockSmoothJob<float>& job, std::size_t begin, std::size_t end);
+void block_smooth(const BlockSmoothJob<double>& job, std::size_t begin, std::size_t end);
+
+// out_i += values[node_i] (node_i indexes a zero for bodies outside every aggregate).
+template <class T>
+struct ProlongJob {
+  const std::int32_t* node;
+  const T* values[3];
+  T* out[3];
+};
+void prolong_add(const ProlongJob<float>& job, std::size_t begin, std::size_t end);
+void prolong_add(const ProlongJob<double>& job, std::size_t begin, std::size_t end);
+
+// out = r - out (a residual from a product in out).
+void subtract_from(const float* const r[3], float* const out[3], std::size_t begin, std::size_t end);
+void subtract_from(const double* const r[3], double* const out[3], std::size_t begin, std::size_t end);
+
+// a . b in double, summed as spring_product sums (a running sum per lane over the slices).
+double dot3(const float* const a[3], const float* const b[3], std::size_t begin, std::size_t end);
+double dot3(const double* const a[3], const double* const b[3], std::size_t begin, std::size_t end);
+
 }  // namespace kinema::kernels

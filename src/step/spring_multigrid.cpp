@@ -156,11 +156,13 @@ void SpringMultigrid<T>::build(const SpringNetwork<T>& net, std::size_t padded) 
   for (auto& a : block_) a.resize(padded);
   for (auto& a : y_) a.resize(padded);
   block_dots_.assign(block_count(padded), 0.0);
+  prolong_node_.resize(padded);
+  for (auto& a : correction_) a.assign(levels_[0].size + 1, T(0));
 }
 
 template <class T>
 std::size_t SpringMultigrid<T>::bytes() const {
-  std::size_t total = (fine_aggregate_.capacity() + slot_edge_.capacity()) * sizeof(std::int32_t) +
+  std::size_t total = (fine_aggregate_.capacity() + slot_edge_.capacity() + prolong_node_.capacity()) * sizeof(std::int32_t) +
                       12 * padded_ * sizeof(T) + cholesky_.capacity() * sizeof(double);
   for (const Level& l : levels_) {
     total += (l.member_offset.capacity() + l.members.capacity() + l.row_offset.capacity() + l.column.capacity() +
@@ -402,27 +404,22 @@ void SpringMultigrid<T>::fine_blocks(const Workers& workers, const FineSystem<T>
 // out = base + the damped block inverse of `in` over block b (base null: 0).
 template <class T>
 void SpringMultigrid<T>::smooth(Block b, const T* const in[3], const T* const base[3], T* const out[3]) const {
-  const T *__restrict xx = block_[0].data(), *__restrict yy = block_[1].data(), *__restrict zz = block_[2].data();
-  const T *__restrict xy = block_[3].data(), *__restrict xz = block_[4].data(), *__restrict yz = block_[5].data();
-  const T *__restrict x = in[0], *__restrict y = in[1], *__restrict w = in[2];
-  T *__restrict ox = out[0], *__restrict oy = out[1], *__restrict ow = out[2];
-  for (std::size_t i = b.begin; i < b.end; ++i) {
-    ox[i] = xx[i] * x[i] + xy[i] * y[i] + xz[i] * w[i];
-    oy[i] = xy[i] * x[i] + yy[i] * y[i] + yz[i] * w[i];
-    ow[i] = xz[i] * x[i] + yz[i] * y[i] + zz[i] * w[i];
-  }
-  if (base == nullptr) return;
-  for (int d = 0; d < 3; ++d) {
-    const T* __restrict from = base[d];
-    T* __restrict to = out[d];
-    for (std::size_t i = b.begin; i < b.end; ++i) to[i] = from[i] + to[i];
-  }
+  const kernels::BlockSmoothJob<T> job{{block_[0].data(), block_[1].data(), block_[2].data(), block_[3].data(),
+                                        block_[4].data(), block_[5].data()},
+                                       {in[0], in[1], in[2]},
+                                       {base ? base[0] : nullptr, base ? base[1] : nullptr, base ? base[2] : nullptr},
+                                       {out[0], out[1], out[2]}};
+  kernels::block_smooth(job, b.begin, b.end);
 }
 
 template <class T>
 void SpringMultigrid<T>::set_operator(const Workers& workers, const FineSystem<T>& fine) {
   fine_ = fine;
   fine_blocks(workers, fine);
+  const auto zero = std::int32_t(levels_[0].size);  // the correction's last value: 0
+  for (std::size_t i = 0; i < padded_; ++i) {
+    prolong_node_[i] = fine_aggregate_[i] >= 0 && fine.mass[i] != 0 ? fine_aggregate_[i] : zero;
+  }
   fine_galerkin(fine);
   finish_level(levels_[0]);
   for (std::size_t l = 1; l < levels_.size(); ++l) {
@@ -473,9 +470,7 @@ void SpringMultigrid<T>::fine_residual(Block b, const T* const r[3], const T* co
                                          f.across,
                                          T(1)};
   kernels::spring_product(job, b.begin, b.end);
-  for (int d = 0; d < 3; ++d) {
-    for (std::size_t i = b.begin; i < b.end; ++i) t[d][i] = r[d][i] - t[d][i];
-  }
+  kernels::subtract_from(r, t, b.begin, b.end);
 }
 
 // y = S r; the residual to level 0; its V-cycle; y += P x; z = y + S (r - A y); r . z, summed
@@ -499,21 +494,18 @@ double SpringMultigrid<T>::apply(const Workers& workers, const T* const r[3], T*
     first.b[k] = sum;
   }
   vcycle(0);
-  for_each_block(workers, padded_, [&](Block b) {
-    for (std::size_t i = b.begin; i < b.end; ++i) {
-      const std::int32_t k = fine_aggregate_[i];
-      if (k < 0 || f.mass[i] == 0) continue;
-      for (int d = 0; d < 3; ++d) y[d][i] += T(first.x[std::size_t(k)][d]);
-    }
-  });
+  for (std::size_t k = 0; k < first.size; ++k) {
+    for (int d = 0; d < 3; ++d) correction_[d][k] = T(first.x[k][d]);
+  }
+  const kernels::ProlongJob<T> prolong{prolong_node_.data(),
+                                       {correction_[0].data(), correction_[1].data(), correction_[2].data()},
+                                       {y[0], y[1], y[2]}};
+  for_each_block(workers, padded_, [&](Block b) { kernels::prolong_add(prolong, b.begin, b.end); });
+  const T* const zr[3] = {z[0], z[1], z[2]};
   for_each_block(workers, padded_, [&](Block b) {
     fine_residual(b, r, y);
     smooth(b, t, y, z);
-    double dot = 0;
-    for (int d = 0; d < 3; ++d) {
-      for (std::size_t i = b.begin; i < b.end; ++i) dot += double(r[d][i]) * double(z[d][i]);
-    }
-    block_dots_[b.begin / kBlockBodies] = dot;
+    block_dots_[b.begin / kBlockBodies] = kernels::dot3(r, zr, b.begin, b.end);
   });
   double total = 0;
   for (std::size_t k = 0; k < block_count(padded_); ++k) total += block_dots_[k];

@@ -96,6 +96,8 @@ class SpringMultigrid {
   std::array<AlignedArray<T>, 6> block_;    // the fine smoother: xx yy zz xy xz yz per body
   std::array<AlignedArray<T>, 3> y_;          // the fine level's iterate
   std::vector<double> block_dots_;
+  std::vector<std::int32_t> prolong_node_;    // each body's level-0 node, or the zero past them
+  std::array<std::vector<T>, 3> correction_;  // level 0's x in T, and a zero
   std::array<AlignedArray<T>, 3> t_;          // the fine level's residual
 };
 
