@@ -136,7 +136,7 @@ void SpringMultigrid<T>::build(const SpringNetwork<T>& net, std::size_t padded) 
       for (std::uint32_t e = finer.row_offset[i]; e < finer.row_offset[i + 1]; ++e) f(std::size_t(finer.column[e]));
     };
     std::vector<std::int32_t> aggregate = aggregate_nodes(finer.size, neighbors, count);
-    if (2 * finer.size < 3 * count) break;  // it no longer shrinks
+    if (count == 0 || 2 * finer.size < 3 * count) break;  // it no longer shrinks (or has no edges left)
     Level next = make_level(aggregate, count, neighbors);
     finer.edge_down.assign(finer.column.size(), -1);
     for (std::size_t i = 0; i < finer.size; ++i) {
