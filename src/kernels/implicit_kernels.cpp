@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstdint>
 #include <type_traits>
 
@@ -156,6 +157,88 @@ template <class T>
 }
 
 template <class T>
+[[gnu::always_inline]] inline void jacobian_entry(const JacobianJob<T>& job, std::size_t first, std::size_t entry,
+                                                  std::size_t lanes) {
+  const std::size_t at0 = entry * kLanes;
+  const std::int32_t* __restrict neighbor = job.neighbor + at0;
+  const T *__restrict x = job.x[0], *__restrict y = job.x[1], *__restrict z = job.x[2];
+  const T *__restrict rest = job.rest + at0, *__restrict kk = job.k + at0, *__restrict damping = job.damping + at0;
+  T *__restrict ux = job.unit[0] + at0, *__restrict uy = job.unit[1] + at0, *__restrict uz = job.unit[2] + at0;
+  T *__restrict k_along = job.k_along + at0, *__restrict k_across = job.k_across + at0;
+  T *__restrict a_along = job.a_along + at0, *__restrict a_across = job.a_across + at0;
+  T *__restrict dx_ = job.diag[0] + first, *__restrict dy_ = job.diag[1] + first, *__restrict dz_ = job.diag[2] + first;
+  for (std::size_t l = 0; l < lanes; ++l) {
+    const std::size_t i = first + l, j = std::size_t(neighbor[l]);
+    const T dx = x[j] - x[i], dy = y[j] - y[i], dz = z[j] - z[i];
+    const T length2 = ((T(0) + dx * dx) + dy * dy) + dz * dz;
+    // A k of -0 counts as +0: no zero's sign in the products hangs on how k was written.
+    const T length = std::sqrt(length2), k = kk[l] + T(0);
+    // Stretched: the geometric stiffness k (1 - rest / length) across the spring. Under
+    // compression it would be negative: left out, so the matrix stays definite.
+    const T r = rest[l] < T(0) ? T(0) : rest[l], g = T(1) - r / length;
+    const T across = length > 0 ? (g > T(0) ? g : T(0)) : T(0);
+    const T along_k = k * (T(1) - across), across_k = k * across;
+    k_along[l] = along_k, k_across[l] = across_k;
+    const T w = job.sc * damping[l] + job.sk * along_k, wa = job.sk * across_k;
+    a_along[l] = w, a_across[l] = wa;
+    const T u0 = length > 0 ? dx / length : T(0), u1 = length > 0 ? dy / length : T(0), u2 = length > 0 ? dz / length : T(0);
+    ux[l] = u0, uy[l] = u1, uz[l] = u2;
+    dx_[l] -= w * u0 * u0 + wa, dy_[l] -= w * u1 * u1 + wa, dz_[l] -= w * u2 * u2 + wa;
+  }
+}
+
+template <class T>
+[[gnu::always_inline]] inline void jacobian_of(const JacobianJob<T>& job, std::size_t begin, std::size_t end) {
+  const std::size_t stop = std::min(end, job.covered);
+  for (std::size_t slice = begin / kLanes; slice * kLanes < stop; ++slice) {
+    // A set padded to fewer than kLanes bodies past its last slice's first.
+    const std::size_t lanes = std::min(kLanes, end - slice * kLanes);
+    for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
+      if (lanes == kLanes) {
+        jacobian_entry(job, slice * kLanes, e, kLanes);
+      } else {
+        jacobian_entry(job, slice * kLanes, e, lanes);
+      }
+    }
+  }
+}
+
+template <class T>
+[[gnu::always_inline]] inline void smoother_slice(const SmootherJob<T>& job, std::size_t first, std::size_t lanes) {
+  double g[6][kLanes];
+  for (std::size_t l = 0; l < kLanes; ++l) {
+    const double m = l < lanes ? double(job.mass[first + l]) : 0.0;
+    g[0][l] = m, g[1][l] = m, g[2][l] = m, g[3][l] = 0, g[4][l] = 0, g[5][l] = 0;
+  }
+  if (first < job.covered) {
+    const std::size_t slice = first / kLanes;
+    for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
+      const std::size_t at = e * kLanes;
+      const T *__restrict ux = job.unit[0] + at, *__restrict uy = job.unit[1] + at, *__restrict uz = job.unit[2] + at;
+      const T *__restrict along = job.along + at, *__restrict across = job.across + at;
+      for (std::size_t l = 0; l < kLanes; ++l) {  // an empty slot's weights are 0
+        const double w = -double(along[l]), a = -double(across[l]);
+        const double u0 = double(ux[l]), u1 = double(uy[l]), u2 = double(uz[l]);
+        g[0][l] += w * u0 * u0 + a, g[1][l] += w * u1 * u1 + a, g[2][l] += w * u2 * u2 + a;
+        g[3][l] += w * u0 * u1, g[4][l] += w * u0 * u2, g[5][l] += w * u1 * u2;
+      }
+    }
+  }
+  for (std::size_t l = 0; l < lanes; ++l) {
+    const double a = g[0][l], b = g[1][l], c = g[2][l], d = g[3][l], e = g[4][l], f = g[5][l];
+    const double cof[6] = {b * c - f * f, a * c - e * e, a * b - d * d, e * f - d * c, d * f - e * b, d * e - a * f};
+    const double det = a * cof[0] + d * cof[3] + e * cof[4];
+    const bool definite = det > 0 && det < HUGE_VAL && a > 0 && job.mass[first + l] != T(0);
+    for (int k = 0; k < 6; ++k) job.block[k][first + l] = definite ? T(job.scale * (cof[k] / det)) : T(0);
+  }
+}
+
+template <class T>
+[[gnu::always_inline]] inline void smoother_of(const SmootherJob<T>& job, std::size_t begin, std::size_t end) {
+  for (std::size_t first = begin; first < end; first += kLanes) smoother_slice(job, first, std::min(kLanes, end - first));
+}
+
+template <class T>
 [[gnu::always_inline]] inline void block_smooth_of(const BlockSmoothJob<T>& job, std::size_t begin, std::size_t end) {
   const T *__restrict xx = job.block[0], *__restrict yy = job.block[1], *__restrict zz = job.block[2];
   const T *__restrict xy = job.block[3], *__restrict xz = job.block[4], *__restrict yz = job.block[5];
@@ -214,6 +297,18 @@ template <class T>
 
 }  // namespace
 
+KINEMA_CLONED void spring_jacobian(const JacobianJob<float>& job, std::size_t begin, std::size_t end) {
+  jacobian_of(job, begin, end);
+}
+KINEMA_CLONED void spring_jacobian(const JacobianJob<double>& job, std::size_t begin, std::size_t end) {
+  jacobian_of(job, begin, end);
+}
+KINEMA_CLONED void smoother_blocks(const SmootherJob<float>& job, std::size_t begin, std::size_t end) {
+  smoother_of(job, begin, end);
+}
+KINEMA_CLONED void smoother_blocks(const SmootherJob<double>& job, std::size_t begin, std::size_t end) {
+  smoother_of(job, begin, end);
+}
 KINEMA_CLONED void block_smooth(const BlockSmoothJob<float>& job, std::size_t begin, std::size_t end) {
   block_smooth_of(job, begin, end);
 }

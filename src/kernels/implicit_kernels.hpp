@@ -60,8 +60,49 @@ struct CgDirectionJob {
 void cg_direction(const CgDirectionJob<float>& job, std::size_t begin, std::size_t end);
 void cg_direction(const CgDirectionJob<double>& job, std::size_t begin, std::size_t end);
 
+// Each spring slot's unit vector toward its other end at positions x, its stiffness along it
+// (k (1 - g)) and across (k g), g = max(0, 1 - rest / length), and the system's weights along
+// (sc damping + sk k_along) and across (sk k_across); each body's diagonal loses its slots'
+// weights, in layout order. Bodies [begin, end), begin a multiple of kSpringSlice.
+template <class T>
+struct JacobianJob {
+  const T* x[3];
+  std::size_t covered;
+  const std::uint32_t* slice_offset;
+  const std::int32_t* neighbor;
+  const T* rest;
+  const T* k;
+  const T* damping;
+  T sc, sk;
+  T* unit[3];
+  T* k_along;
+  T* k_across;
+  T* a_along;
+  T* a_across;
+  T* diag[3];
+};
+void spring_jacobian(const JacobianJob<float>& job, std::size_t begin, std::size_t end);
+void spring_jacobian(const JacobianJob<double>& job, std::size_t begin, std::size_t end);
+
 // The multigrid preconditioner's fine passes (src/step/spring_multigrid.hpp), over
 // [begin, end) of each of three arrays.
+// Each body's 3x3 diagonal block of the system (mass, and per slot in layout order
+// -(along u u^T + across I)), in double, inverted and scaled into block (xx yy zz xy xz yz);
+// zero for bodies of mass 0 and blocks that are not positive definite.
+template <class T>
+struct SmootherJob {
+  const T* mass;
+  std::size_t covered;
+  const std::uint32_t* slice_offset;
+  const T* unit[3];
+  const T* along;
+  const T* across;
+  double scale;
+  T* block[6];
+};
+void smoother_blocks(const SmootherJob<float>& job, std::size_t begin, std::size_t end);
+void smoother_blocks(const SmootherJob<double>& job, std::size_t begin, std::size_t end);
+
 // out = base + B in, B a symmetric 3x3 block per body (xx yy zz xy xz yz); base null: 0.
 template <class T>
 struct BlockSmoothJob {

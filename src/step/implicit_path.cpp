@@ -113,31 +113,22 @@ void ImplicitPath<T>::build_jacobian(const StepContext<T>& c) {
     for (std::size_t i = b.begin; i < b.end; ++i) {
       for (int d = 0; d < 3; ++d) inv_diag_[d][i] = mass_[i];
     }
-    const std::size_t stop = std::min(b.end, net_.covered);
-    for (std::size_t slice = b.begin / kSpringSlice; slice * kSpringSlice < stop; ++slice) {
-      // A set padded to fewer than kSpringSlice bodies past its last slice's first.
-      const std::size_t lanes = std::min(kSpringSlice, b.end - slice * kSpringSlice);
-      for (std::size_t e = net_.slice_offset[slice]; e < net_.slice_offset[slice + 1]; ++e) {
-        for (std::size_t lane = 0; lane < lanes; ++lane) {
-          const std::size_t i = slice * kSpringSlice + lane, at = e * kSpringSlice + lane;
-          const std::size_t j = std::size_t(net_.neighbor[at]);
-          T dx[3], length2 = 0;
-          for (int d = 0; d < 3; ++d) dx[d] = x0_[d][j] - x0_[d][i], length2 += dx[d] * dx[d];
-          // A k of -0 counts as +0: no zero's sign in the products hangs on how k was written.
-          const T length = std::sqrt(length2), k = net_.k[at] + T(0);
-          // Stretched: the geometric stiffness k (1 - rest / length) across the spring. Under
-          // compression it would be negative: left out, so the matrix stays definite.
-          const T across = length > 0 ? std::max(T(0), T(1) - std::max(net_.rest[at], T(0)) / length) : T(0);
-          k_along_[at] = k * (T(1) - across), k_across_[at] = k * across;
-          const T w = sc * net_.damping[at] + sk * k_along_[at];
-          a_along_[at] = w, a_across_[at] = sk * k_across_[at];
-          for (int d = 0; d < 3; ++d) {
-            unit_[d][at] = length > 0 ? dx[d] / length : T(0);
-            inv_diag_[d][i] -= w * unit_[d][at] * unit_[d][at] + a_across_[at];
-          }
-        }
-      }
-    }
+    const kernels::JacobianJob<T> job{{x0_[0].data(), x0_[1].data(), x0_[2].data()},
+                                      net_.covered,
+                                      net_.slice_offset.data(),
+                                      net_.neighbor.data(),
+                                      net_.rest.data(),
+                                      net_.k.data(),
+                                      net_.damping.data(),
+                                      sc,
+                                      sk,
+                                      {unit_[0].data(), unit_[1].data(), unit_[2].data()},
+                                      k_along_.data(),
+                                      k_across_.data(),
+                                      a_along_.data(),
+                                      a_across_.data(),
+                                      {inv_diag_[0].data(), inv_diag_[1].data(), inv_diag_[2].data()}};
+    kernels::spring_jacobian(job, b.begin, b.end);
     for (std::size_t i = b.begin; i < b.end; ++i) {
       for (int d = 0; d < 3; ++d) inv_diag_[d][i] = mass_[i] == 0 ? T(0) : T(1) / inv_diag_[d][i];
     }

@@ -223,14 +223,11 @@ void SpringMultigrid<T>::fine_galerkin(const FineSystem<T>& fine) {
       if (mass == 0) continue;
       d.a[0] += mass, d.a[1] += mass, d.a[2] += mass;
       for_each_slot(*net_, i, [&](std::size_t j, std::size_t at) {
-        const double u[3] = {double(fine.unit[0][at]), double(fine.unit[1][at]), double(fine.unit[2][at])};
-        const Sym3 block = spring_block<Sym3>(-double(fine.along[at]), -double(fine.across[at]), u);
         const std::int32_t e = slot_edge_[at];
-        if (fine.mass[j] == 0) {
-          add_to(d, block);
-        } else if (e >= 0 && level.column[std::size_t(e)] > k) {
-          add_to(level.edge[std::size_t(e)], block);
-        }
+        const bool anchor = fine.mass[j] == 0;
+        if (!anchor && (e < 0 || level.column[std::size_t(e)] < k)) return;  // inside, or summed from the other end
+        const double u[3] = {double(fine.unit[0][at]), double(fine.unit[1][at]), double(fine.unit[2][at])};
+        add_to(anchor ? d : level.edge[std::size_t(e)], spring_block<Sym3>(-double(fine.along[at]), -double(fine.across[at]), u));
       });
     }
     level.diagonal[k] = d;
@@ -385,20 +382,16 @@ void SpringMultigrid<T>::add_scaled(Vec3& x, const Sym3& inverse, const Vec3& v)
 // moving across its springs, as a curved cloth bends, is then smoothed as if it were held.)
 template <class T>
 void SpringMultigrid<T>::fine_blocks(const Workers& workers, const FineSystem<T>& fine) {
-  for_each_block(workers, padded_, [&](Block b) {
-    for (std::size_t i = b.begin; i < b.end; ++i) {
-      const double mass = double(fine.mass[i]);
-      Sym3 g{{mass, mass, mass, 0, 0, 0}};
-      if (mass != 0) {
-        for_each_slot(*net_, i, [&](std::size_t, std::size_t at) {
-          const double u[3] = {double(fine.unit[0][at]), double(fine.unit[1][at]), double(fine.unit[2][at])};
-          add_to(g, spring_block<Sym3>(-double(fine.along[at]), -double(fine.across[at]), u));
-        });
-      }
-      const Sym3 inv = inverse(g);
-      for (int k = 0; k < 6; ++k) block_[k][i] = T(kSmoothing * inv.a[k]);
-    }
-  });
+  const kernels::SmootherJob<T> job{fine.mass,
+                                    net_->covered,
+                                    net_->slice_offset.data(),
+                                    {fine.unit[0], fine.unit[1], fine.unit[2]},
+                                    fine.along,
+                                    fine.across,
+                                    kSmoothing,
+                                    {block_[0].data(), block_[1].data(), block_[2].data(), block_[3].data(),
+                                     block_[4].data(), block_[5].data()}};
+  for_each_block(workers, padded_, [&](Block b) { kernels::smoother_blocks(job, b.begin, b.end); });
 }
 
 // out = base + the damped block inverse of `in` over block b (base null: 0).
