@@ -482,6 +482,9 @@ TEST_CASE("implicit methods lose an undamped mode's energy at their stability fu
 }
 
 TEST_CASE("a solve tolerance of 1e-2 moves the cloth at 60 Hz far less than the step's own error", "[implicit]") {
+#ifdef KINEMA_SANITIZED
+  return;  // 5000 reference steps of 4096 bodies; the release run checks it
+#endif
   // The shipped 64 x 64 cloth (multigrid) for half a second of its fall: implicit_euler at 1/60
   // s is 47 mm from rk4 at 1e-4 s (measured); solving each system to 1e-2 of its right side
   // instead of 1e-5 moves it by 9 mm, with 288 iterations instead of 813.
