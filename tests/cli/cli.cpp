@@ -710,6 +710,13 @@ TEST_CASE("run: the cloth at 60 Hz blows up under rk4, which names the implicit 
   CHECK(loose.first != tight.first);
   CHECK(loose.second < tight.second);
   CHECK(crc(" --implicit-iterations 5").second == 5 * 16);
+  // The 4096-body cloth takes multigrid by default: naming it changes nothing, Jacobi's solves
+  // take more iterations to other bits.
+  const auto jacobi = crc(" --implicit-preconditioner jacobi");
+  CHECK(crc(" --implicit-preconditioner multigrid") == tight);
+  CHECK(jacobi.first != tight.first);
+  CHECK(jacobi.second > 3 * tight.second);
+  CHECK(kinema_cli("run " + scene("cloth.json") + " -q --steps 1 --implicit-preconditioner ilu").code != 0);
   // What an implicit method steps explicitly can still break it: a stiff drag is euler's to it.
   const fs::path drag = write("stiff_drag.json", R"({"precision": "double", "method": "implicit_euler", "dt": 0.01,
       "steps": 100, "particles": [{"position": [0,0,0], "velocity": [1,0,0]}], "forces": [{"type": "linear_drag", "k": 300}]})");
