@@ -163,7 +163,7 @@ void SpringMultigrid<T>::build(const SpringNetwork<T>& net, std::size_t padded) 
 template <class T>
 std::size_t SpringMultigrid<T>::bytes() const {
   std::size_t total = (fine_aggregate_.capacity() + slot_edge_.capacity() + prolong_node_.capacity()) * sizeof(std::int32_t) +
-                      12 * padded_ * sizeof(T) + cholesky_.capacity() * sizeof(double);
+                      12 * padded_ * sizeof(T) + (cholesky_.capacity() + coarsest_y_.capacity()) * sizeof(double);
   for (const Level& l : levels_) {
     total += (l.member_offset.capacity() + l.members.capacity() + l.row_offset.capacity() + l.column.capacity() +
               l.mirror.capacity() + l.aggregate.capacity() + l.edge_down.capacity()) * 4;
@@ -293,6 +293,7 @@ void SpringMultigrid<T>::factor_coarsest() {
   std::vector<double>& a = cholesky_;
   a.assign(n * n, 0.0);
   dead_.assign(n, 0);
+  coarsest_y_.assign(n, 0.0);
   constexpr int row[6] = {0, 1, 2, 0, 0, 1}, col[6] = {0, 1, 2, 1, 2, 2};
   auto put = [&](std::size_t i, std::size_t j, const Sym3& s, double sign) {
     for (int k = 0; k < 6; ++k) {
@@ -336,7 +337,7 @@ void SpringMultigrid<T>::solve_coarsest(Level& level) {
   }
   const std::size_t n = 3 * level.size;
   const std::vector<double>& a = cholesky_;
-  std::vector<double> y(n);  // at most 3 kCholeskyNodes
+  std::vector<double>& y = coarsest_y_;  // sized with the factor: no allocation in a step
   for (std::size_t k = 0; k < n; ++k) {
     double v = level.b[k / 3][k % 3];
     for (std::size_t p = 0; p < k; ++p) v -= a[k * n + p] * y[p];

@@ -91,6 +91,7 @@ class SpringMultigrid {
   std::vector<std::int32_t> slot_edge_;       // each slot's level-1 edge (-1: none)
   std::vector<Level> levels_;                 // 0: the first coarse level
   std::vector<double> cholesky_;              // the coarsest level's factor, dense, or empty
+  std::vector<double> coarsest_y_;            // its solve's unknowns
   std::vector<unsigned char> dead_;           // unknowns of the coarsest level left out (no mass)
   FineSystem<T> fine_{};
   std::array<AlignedArray<T>, 6> block_;    // the fine smoother: xx yy zz xy xz yz per body
