@@ -50,7 +50,7 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
     for (AlignedArray<T>* a : {&k_along_, &k_across_, &a_along_, &a_across_}) a->resize(slots);
   }
   use_multigrid_ = takes_multigrid(preconditioner_, net_.covered);
-  if (use_multigrid_ && !multigrid_.built_for(net_, c.bodies.padded_size())) multigrid_.build(net_, c.bodies.padded_size());
+  if (use_multigrid_ && !multigrid_.built_for(net_)) multigrid_.build(net_);
   gh_ = T(method_.rosenbrock.gamma * double(c.h));
   save_start(c);
   step_stats_ = {};
@@ -61,7 +61,8 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
                                           mass_.data(),
                                           {unit_[0].data(), unit_[1].data(), unit_[2].data()},
                                           a_along_.data(),
-                                          a_across_.data()});
+                                          a_across_.data()},
+                              c.bodies.padded_size());
     }
     for (int s = 0; s < method_.rosenbrock.stages; ++s) {
       evaluate_stage(c, s);

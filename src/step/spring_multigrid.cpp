@@ -115,15 +115,14 @@ typename SpringMultigrid<T>::Level SpringMultigrid<T>::make_level(const std::vec
 }
 
 template <class T>
-void SpringMultigrid<T>::build(const SpringNetwork<T>& net, std::size_t padded) {
-  net_ = &net, slots_ = net.neighbor.size(), padded_ = padded;
+void SpringMultigrid<T>::build(const SpringNetwork<T>& net) {
+  net_ = nullptr;  // until the levels are whole (an allocation may throw)
   levels_.clear();
   auto fine_neighbors = [&](std::size_t i, auto&& f) { for_each_slot(net, i, [&](std::size_t j, std::size_t) { f(j); }); };
   std::size_t count = 0;
   fine_aggregate_ = aggregate_nodes(net.covered, fine_neighbors, count);
   levels_.push_back(make_level(fine_aggregate_, count, fine_neighbors));
-  fine_aggregate_.resize(padded, -1);
-  slot_edge_.assign(slots_, -1);
+  slot_edge_.assign(net.neighbor.size(), -1);
   for (std::size_t i = 0; i < net.covered; ++i) {
     for_each_slot(net, i, [&](std::size_t j, std::size_t at) {
       const std::int32_t from = fine_aggregate_[i], to = fine_aggregate_[j];
@@ -152,18 +151,28 @@ void SpringMultigrid<T>::build(const SpringNetwork<T>& net, std::size_t padded) 
     level.diagonal.resize(level.size), level.smoother.resize(level.size), level.edge.resize(level.column.size());
     level.b.resize(level.size), level.x.resize(level.size), level.t.resize(level.size);
   }
-  for (auto& a : t_) a.resize(padded);
-  for (auto& a : block_) a.resize(padded);
-  for (auto& a : y_) a.resize(padded);
-  block_dots_.assign(block_count(padded), 0.0);
-  prolong_node_.resize(padded);
   for (auto& a : correction_) a.assign(levels_[0].size + 1, T(0));
+  net_ = &net, slots_ = net.neighbor.size();
+}
+
+// The fine level's arrays for sets padded to `padded` bodies: they only grow.
+template <class T>
+void SpringMultigrid<T>::reserve(std::size_t padded) {
+  if (padded <= capacity_) return;
+  for (auto* arrays : {&t_, &y_}) {
+    for (auto& a : *arrays) a.resize(padded);
+  }
+  for (auto& a : block_) a.resize(padded);
+  block_dots_.resize(block_count(padded));
+  prolong_node_.resize(padded);
+  capacity_ = padded;
 }
 
 template <class T>
 std::size_t SpringMultigrid<T>::bytes() const {
   std::size_t total = (fine_aggregate_.capacity() + slot_edge_.capacity() + prolong_node_.capacity()) * sizeof(std::int32_t) +
-                      12 * padded_ * sizeof(T) + (cholesky_.capacity() + coarsest_y_.capacity()) * sizeof(double);
+                      12 * capacity_ * sizeof(T) + block_dots_.capacity() * sizeof(double) +
+                      3 * correction_[0].capacity() * sizeof(T) + (cholesky_.capacity() + coarsest_y_.capacity()) * sizeof(double);
   for (const Level& l : levels_) {
     total += (l.member_offset.capacity() + l.members.capacity() + l.row_offset.capacity() + l.column.capacity() +
               l.mirror.capacity() + l.aggregate.capacity() + l.edge_down.capacity()) * 4;
@@ -407,12 +416,14 @@ void SpringMultigrid<T>::smooth(Block b, const T* const in[3], const T* const ba
 }
 
 template <class T>
-void SpringMultigrid<T>::set_operator(const Workers& workers, const FineSystem<T>& fine) {
-  fine_ = fine;
+void SpringMultigrid<T>::set_operator(const Workers& workers, const FineSystem<T>& fine, std::size_t padded) {
+  reserve(padded);
+  padded_ = padded, fine_ = fine;
   fine_blocks(workers, fine);
   const auto zero = std::int32_t(levels_[0].size);  // the correction's last value: 0
   for (std::size_t i = 0; i < padded_; ++i) {
-    prolong_node_[i] = fine_aggregate_[i] >= 0 && fine.mass[i] != 0 ? fine_aggregate_[i] : zero;
+    const std::int32_t k = i < fine_aggregate_.size() ? fine_aggregate_[i] : -1;
+    prolong_node_[i] = k >= 0 && fine.mass[i] != 0 ? k : zero;
   }
   fine_galerkin(fine);
   finish_level(levels_[0]);

@@ -43,14 +43,13 @@ struct FineSystem {
 template <class T>
 class SpringMultigrid {
  public:
-  // The aggregates of `net` (laid out) for a set padded to `padded` bodies: once per layout.
-  void build(const SpringNetwork<T>& net, std::size_t padded);
-  bool built_for(const SpringNetwork<T>& net, std::size_t padded) const {
-    return net_ == &net && slots_ == net.neighbor.size() && padded_ == padded;
-  }
+  // The aggregates of `net` (laid out): once per layout, whatever the sets stepped.
+  void build(const SpringNetwork<T>& net);
+  bool built_for(const SpringNetwork<T>& net) const { return net_ == &net && slots_ == net.neighbor.size(); }
   std::size_t bytes() const;
-  // The coarse levels' matrices for this step's fine one (which must outlive the V-cycles).
-  void set_operator(const Workers& workers, const FineSystem<T>& fine);
+  // The coarse levels' matrices for this step's fine one (which must outlive the V-cycles),
+  // over a set padded to `padded` bodies (the fine arrays grow to the largest seen).
+  void set_operator(const Workers& workers, const FineSystem<T>& fine, std::size_t padded);
   // z = one V-cycle applied to r; returns r . z (the same sum on every thread count).
   double apply(const Workers& workers, const T* const r[3], T* const z[3]);
 
@@ -74,6 +73,7 @@ class SpringMultigrid {
   static void mirror_edges(Level& level);
   static Vec3 scaled(const Sym3& inverse, const Vec3& v);  // the damped sweep's step
   static void add_scaled(Vec3& x, const Sym3& inverse, const Vec3& v);
+  void reserve(std::size_t padded);
   void fine_galerkin(const FineSystem<T>& fine);
   void fine_blocks(const Workers& workers, const FineSystem<T>& fine);
   void smooth(Block b, const T* const in[3], const T* const base[3], T* const out[3]) const;
@@ -86,9 +86,10 @@ class SpringMultigrid {
   void fine_residual(Block b, const T* const r[3], const T* const y[3]);
 
   const SpringNetwork<T>* net_ = nullptr;
-  std::size_t slots_ = 0, padded_ = 0;
-  std::vector<std::int32_t> fine_aggregate_;  // each body's level-1 node (-1: no springs)
-  std::vector<std::int32_t> slot_edge_;       // each slot's level-1 edge (-1: none)
+  std::size_t slots_ = 0;
+  std::size_t capacity_ = 0, padded_ = 0;     // the fine arrays' length; this step's set's
+  std::vector<std::int32_t> fine_aggregate_;  // each covered body's level-0 node (-1: no springs)
+  std::vector<std::int32_t> slot_edge_;       // each slot's level-0 edge (-1: none)
   std::vector<Level> levels_;                 // 0: the first coarse level
   std::vector<double> cholesky_;              // the coarsest level's factor, dense, or empty
   std::vector<double> coarsest_y_;            // its solve's unknowns

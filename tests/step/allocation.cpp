@@ -113,6 +113,22 @@ TEST_CASE("implicit steps allocate nothing after the first", "[allocation][impli
   }
 }
 
+TEST_CASE("implicit steps of a smaller set after a larger one allocate nothing", "[allocation][implicit]") {
+  // A chain of 3000 bodies (multigrid) stepped on a set of 3100, then on one of 3000.
+  Springs chain;
+  for (std::uint32_t i = 1; i < 3000; ++i) chain.pairs.push_back({i - 1, i, 0.5, 2, 0.1});
+  ForceModel<float> forces;
+  forces.add(chain);
+  Stepper<float> stepper(forces, implicit_euler, test::serial_options());
+  ParticleSet<float> larger = test::cloud<float>(3100), smaller = test::cloud<float>(3000);
+  stepper.step(larger, 0.01f);
+  const long before = g_allocations.load();
+  stepper.step(smaller, 0.01f);
+  stepper.step(larger, 0.01f);
+  CHECK(g_allocations.load() - before == 0);
+  CHECK(stepper.implicit_stats().solves == 3);
+}
+
 TEST_CASE("step and advance allocate nothing", "[allocation]") {
   for (bool tbb : {false, true}) {
     for (const Method* m : builtin_methods) {
