@@ -472,11 +472,16 @@ void CheckpointReader::check_record(std::size_t k, bool rigid, const Stepper<T>&
                   tolerance, int(iterations), solves.tolerance, int(solves.iterations));
     throw Error(which + text);
   }
-  const bool multigrid = get<std::uint8_t>(h + rec::preconditioner) == 2;
+  const auto preconditioner = get<std::uint8_t>(h + rec::preconditioner);
+  if (preconditioner > 2) {
+    throw Error(which + " names an unknown preconditioner (" + std::to_string(preconditioner) + ")");
+  }
+  const bool multigrid = preconditioner == 2;  // 0: a record from before it was kept, Jacobi's
   if (solves.iterations > 0 && multigrid != (solves.multigrid == 2)) {
     throw Error(which + " was taken with implicit solves preconditioned by " + (multigrid ? "multigrid" : "Jacobi") +
                 ", not this stepper's " + (multigrid ? "Jacobi" : "multigrid") +
-                ": the steps would differ (StepperOptions::implicit_preconditioner)");
+                ": the steps would differ (StepperOptions::implicit_preconditioner, kinema run "
+                "--implicit-preconditioner " + (multigrid ? "multigrid" : "jacobi") + ")");
   }
 }
 

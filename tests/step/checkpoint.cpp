@@ -393,6 +393,36 @@ TEST_CASE("an implicit record without its solve options is refused by name", "[c
   CHECK(restored.size() == 0);
 }
 
+TEST_CASE("an implicit record keeps its preconditioner: older records read as Jacobi's, others are refused", "[checkpoint][implicit]") {
+  // The shipped 64 x 64 cloth: 4096 bodies, multigrid by default.
+  const Scene scene = load_scene(std::string(KINEMA_SCENES) + "/cloth.json");
+  const ForceModel<float> forces = make_forces<float>(scene);
+  StepperOptions jacobi = test::serial_options();
+  jacobi.implicit_preconditioner = ImplicitPreconditioner::jacobi;
+  const auto taken = [&](const StepperOptions& o) {
+    ParticleSet<float> bodies = make_particles<float>(scene);
+    Stepper<float> stepper(forces, implicit_euler, o);
+    stepper.advance(bodies, float(1.0 / 60), 1);
+    return bits(bodies, stepper);
+  };
+  ParticleSet<float> restored;
+  Stepper<float> jacobi_stepper(forces, implicit_euler, jacobi), default_stepper(forces, implicit_euler, test::serial_options());
+  CHECK_THROWS_WITH(CheckpointReader(taken(test::serial_options())).restore(0, restored, jacobi_stepper),
+                    Catch::Contains("preconditioned by multigrid, not this stepper's Jacobi"));
+  // A record from before the byte was kept: its solves were Jacobi's.
+  std::vector<std::byte> old = taken(jacobi);
+  patch(old, kCheckpointHeaderBytes + 115, std::uint8_t(0));
+  reseal(old);
+  CHECK_NOTHROW(CheckpointReader(old).restore(0, restored, jacobi_stepper));
+  CHECK_THROWS_WITH(CheckpointReader(old).restore(0, restored, default_stepper),
+                    Catch::Contains("preconditioned by Jacobi, not this stepper's multigrid"));
+  std::vector<std::byte> unknown = taken(jacobi);
+  patch(unknown, kCheckpointHeaderBytes + 115, std::uint8_t(7));
+  reseal(unknown);
+  CHECK_THROWS_WITH(CheckpointReader(unknown).restore(0, restored, jacobi_stepper),
+                    Catch::Contains("an unknown preconditioner (7)"));
+}
+
 TEST_CASE("a checkpoint made to pass its checksums with a state no set can hold is refused", "[checkpoint]") {
   const Saved saved = small_checkpoint();
   std::vector<std::byte> bad = saved.bytes;

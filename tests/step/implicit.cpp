@@ -159,16 +159,18 @@ TEST_CASE("implicit_euler is backward Euler on a long chain, mode by mode, under
 }
 
 TEST_CASE("multigrid solves what Jacobi solves on networks it cannot coarsen far", "[implicit]") {
-  // 300 separate chains of four (each collapses to one node, and coarsening stops there),
-  // some with a fixed end, beside 100 bodies with no spring: both preconditioners take the
-  // same steps, to 1e-12 of each solve's right side.
-  const auto run = [](ImplicitPreconditioner p) {
+  // Separate chains of four, some with a fixed end, some fixed throughout, beside 100 bodies
+  // with no spring: both preconditioners take the same steps, to 1e-12 of each solve's right
+  // side. 300 chains collapse to 300 nodes without edges, where coarsening stops and two
+  // sweeps stand in for the solve; 12 chains (multigrid named) to a coarsest level small
+  // enough for Cholesky, where the fixed chains' aggregates are unknowns it leaves out.
+  const auto run = [](ImplicitPreconditioner p, std::uint32_t chains) {
     ParticleSet<double> b;
     Springs springs;
-    for (std::uint32_t c = 0; c < 300; ++c) {
+    for (std::uint32_t c = 0; c < chains; ++c) {
       for (std::uint32_t i = 0; i < 4; ++i) {
         const double x = 0.1 * c, y = 0.25 * i + 0.01 * std::sin(c + i);
-        if (i == 0 && c % 3 == 0) {
+        if ((i == 0 && c % 3 == 0) || c % 5 == 1) {
           b.add_kinematic({x, y, 0});
         } else {
           b.add({x, y, 0.02 * std::cos(3.0 * c + i)}, {0, 0.1 * std::sin(c * 0.7), 0}, 0.01 + 0.001 * (c % 7));
@@ -188,16 +190,21 @@ TEST_CASE("multigrid solves what Jacobi solves on networks it cannot coarsen far
     CHECK(s.implicit_stats().unconverged == 0);
     return std::pair{std::move(b), s.implicit_stats().iterations};
   };
-  const auto [jacobi, jacobi_iterations] = run(ImplicitPreconditioner::jacobi);
-  const auto [multigrid, multigrid_iterations] = run(ImplicitPreconditioner::automatic);
-  // Each chain is one coarse node, solved exactly: 393 iterations against 19622.
-  CHECK(10 * multigrid_iterations < jacobi_iterations);
-  double worst = 0;
-  for (std::size_t i = 0; i < jacobi.size(); ++i) {
-    for (int d = 0; d < 3; ++d) worst = std::max(worst, std::abs(jacobi.position(i)[d] - multigrid.position(i)[d]));
+  for (const std::uint32_t chains : {300u, 12u}) {
+    INFO(chains << " chains");
+    const auto [jacobi, jacobi_iterations] = run(ImplicitPreconditioner::jacobi, chains);
+    const auto [multigrid, multigrid_iterations] =
+        run(chains < 256 ? ImplicitPreconditioner::multigrid : ImplicitPreconditioner::automatic, chains);
+    // 300 chains: each chain's two levels take its stiff modes out (measured 393 iterations
+    // against 19017).
+    if (chains == 300) CHECK(10 * multigrid_iterations < jacobi_iterations);
+    double worst = 0;
+    for (std::size_t i = 0; i < jacobi.size(); ++i) {
+      for (int d = 0; d < 3; ++d) worst = std::max(worst, std::abs(jacobi.position(i)[d] - multigrid.position(i)[d]));
+    }
+    INFO("worst " << worst);
+    CHECK(worst <= 1e-9);
   }
-  INFO("worst " << worst);
-  CHECK(worst <= 1e-9);
 }
 
 TEST_CASE("implicit methods converge at their orders on a spring chain's normal mode", "[implicit]") {
