@@ -258,6 +258,18 @@ TEST_CASE("run --resume refuses what is not this run's checkpoint, in one line",
   }
 }
 
+TEST_CASE("run --resume of implicit steps takes the preconditioner they took, named or not", "[cli][checkpoint][implicit]") {
+  // The 4096-body cloth: multigrid by default, so naming it resumes the run and Jacobi does not.
+  const fs::path dir = work_dir(), ckpt = dir / "implicit.ckpt";
+  const std::vector<std::string> cloth{"run", scene("cloth.json"), "-q", "--method", "implicit_euler",
+                                       "--dt", "0.016666666666666666", "--steps", "3"};
+  REQUIRE(run_kinema(with(cloth, {"--checkpoint", ckpt.string()})).code == 0);
+  CHECK(run_kinema(with(cloth, {"--resume", ckpt.string(), "--implicit-preconditioner", "multigrid"})).code == 0);
+  const Result jacobi = run_kinema(with(cloth, {"--resume", ckpt.string(), "--implicit-preconditioner", "jacobi"}));
+  CHECK(jacobi.code == 1);
+  CHECK_THAT(jacobi.err, Catch::Contains("taken under another scene or other options"));
+}
+
 TEST_CASE("outputs never overwrite the scene or each other", "[cli][checkpoint][hostile]") {
   const fs::path dir = work_dir();
   const fs::path scene_copy = write("mine.json", read(scene("projectiles.json")));

@@ -398,8 +398,16 @@ std::string implicit_fingerprint(const RunOptions& o, const Scene& scene) {
                        : scene.precision == Precision::single ? kDefaultImplicitTolerance<float>
                                                               : kDefaultImplicitTolerance<double>;
   char text[140];
-  // automatic keeps the fingerprint it had before the choice existed.
-  const std::string preconditioner = o.implicit_preconditioner == "automatic" ? "" : " implicit_preconditioner=" + o.implicit_preconditioner;
+  // The preconditioner the solves take, named only where it is not the default's choice:
+  // the fingerprints of runs that keep the default stay as they were.
+  std::size_t network = 0;
+  for (const Springs& springs : scene.springs) {
+    for (const SpringPair& p : springs.pairs) network = std::max<std::size_t>({network, p.i + 1, p.j + 1});
+  }
+  const bool multigrid = takes_multigrid(options.implicit_preconditioner, network);
+  const std::string preconditioner = multigrid == takes_multigrid(ImplicitPreconditioner::automatic, network)
+                                         ? ""
+                                         : multigrid ? " implicit_preconditioner=multigrid" : " implicit_preconditioner=jacobi";
   std::snprintf(text, sizeof text, " implicit_tolerance=%a implicit_iterations=%d%s", tolerance,
                 options.implicit_max_iterations, preconditioner.c_str());
   return text;
