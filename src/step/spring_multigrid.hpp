@@ -1,9 +1,9 @@
 #pragma once
 // Aggregation multigrid: the implicit path's preconditioner for large spring networks
-// (src/step/implicit_path.hpp; ImplicitPreconditioner in kinema/stepper.hpp). Jacobi's conjugate gradients need iterations in proportion
-// to gamma h |lambda| (the matrix's condition number grows as its square); one V-cycle of
-// this preconditioner costs two more products an iteration and takes the stiff modes out
-// of that count.
+// (src/step/implicit_path.hpp; ImplicitPreconditioner in kinema/stepper.hpp). Jacobi's
+// conjugate gradients need iterations in proportion to gamma h |lambda| (the matrix's
+// condition number grows as its square); one V-cycle of this preconditioner costs two more
+// products an iteration and takes most stiff modes out of that count.
 //
 // The network's bodies are grouped into aggregates (in body order, a body with every
 // neighbour not yet taken: 3 x 3 patches of a grid), those into aggregates again, down to a
@@ -11,11 +11,12 @@
 // an aggregate and zero at fixed bodies, which keeps the form of the fine one: per node a
 // symmetric 3x3 block D (the masses, the springs to fixed bodies) and per edge a symmetric
 // 3x3 block C (the springs that cross between two aggregates; those inside one cancel):
-//   (A x)_I = D_I x_I + sum_J C_IJ (x_I - x_J).
-// One V-cycle: damped block Jacobi before and after each coarse correction, a Cholesky solve at the
-// coarsest level; symmetric and positive definite, as conjugate gradients needs. The coarse
-// levels are in double, each pass over nodes in order; the fine level's passes are blocks:
-// the bits depend on neither the thread count nor the instruction set.
+//   (A x)_I = D_I x_I + sum_J C_IJ (x_I - x_J),
+// with C scaled by kCoarseStiffness (the .cpp says why). One V-cycle: damped block Jacobi
+// before and after each coarse correction, a Cholesky solve at the coarsest level; symmetric
+// and positive definite, as conjugate gradients needs. The coarse levels are in double, each
+// pass over nodes in order on the calling thread; the fine level's passes are blocks: the
+// bits depend on neither the thread count nor the instruction set.
 
 #include <array>
 #include <cstddef>
