@@ -224,7 +224,7 @@ template <class T>
 void SpringMultigrid<T>::fine_galerkin(const FineSystem<T>& fine) {
   Level& level = levels_[0];
   std::fill(level.edge.begin(), level.edge.end(), Sym3{});
-  for (std::size_t k = 0; k < level.size; ++k) {
+  for_nodes(level.size, [&](std::size_t k) {  // each node writes its own row
     Sym3 d{};
     for (std::uint32_t m = level.member_offset[k]; m < level.member_offset[k + 1]; ++m) {
       const std::size_t i = level.members[m];
@@ -240,25 +240,25 @@ void SpringMultigrid<T>::fine_galerkin(const FineSystem<T>& fine) {
       });
     }
     level.diagonal[k] = d;
-  }
+  });
   mirror_edges(level);
 }
 
 // The summed edges scaled by kCoarseStiffness, then each copied to its mirror.
 template <class T>
-void SpringMultigrid<T>::mirror_edges(Level& level) {
-  for (std::size_t k = 0; k < level.size; ++k) {
+void SpringMultigrid<T>::mirror_edges(Level& level) const {
+  for_nodes(level.size, [&](std::size_t k) {
     for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
       if (level.column[e] > k) {
         for (double& v : level.edge[e].a) v *= kCoarseStiffness;
       }
     }
-  }
-  for (std::size_t k = 0; k < level.size; ++k) {
+  });
+  for_nodes(level.size, [&](std::size_t k) {  // reads only edges the first pass finished
     for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
       if (level.column[e] < k) level.edge[e] = level.edge[level.mirror[e]];
     }
-  }
+  });
 }
 
 // Level l from level l - 1: the members' D summed, and their edges into other aggregates.
@@ -267,7 +267,7 @@ void SpringMultigrid<T>::coarse_galerkin(std::size_t l) {
   const Level& finer = levels_[l - 1];
   Level& level = levels_[l];
   std::fill(level.edge.begin(), level.edge.end(), Sym3{});
-  for (std::size_t k = 0; k < level.size; ++k) {
+  for_nodes(level.size, [&](std::size_t k) {
     Sym3 d{};
     for (std::uint32_t m = level.member_offset[k]; m < level.member_offset[k + 1]; ++m) {
       const std::size_t i = level.members[m];
@@ -278,17 +278,17 @@ void SpringMultigrid<T>::coarse_galerkin(std::size_t l) {
       }
     }
     level.diagonal[k] = d;
-  }
+  });
   mirror_edges(level);
 }
 
 template <class T>
-void SpringMultigrid<T>::finish_level(Level& level) {
-  for (std::size_t k = 0; k < level.size; ++k) {
+void SpringMultigrid<T>::finish_level(Level& level) const {
+  for_nodes(level.size, [&](std::size_t k) {
     Sym3 g = level.diagonal[k];
     for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) add_to(g, level.edge[e]);
     level.smoother[k] = inverse(g);
-  }
+  });
 }
 
 // The coarsest level's dense matrix, factored L L^T (lower, row-major). An unknown whose
@@ -339,9 +339,9 @@ void SpringMultigrid<T>::factor_coarsest() {
 template <class T>
 void SpringMultigrid<T>::solve_coarsest(Level& level) {
   if (cholesky_.empty()) {  // a level that stopped shrinking: two damped sweeps
-    for (std::size_t k = 0; k < level.size; ++k) level.x[k] = scaled(level.smoother[k], level.b[k]);
+    for_nodes(level.size, [&](std::size_t k) { level.x[k] = scaled(level.smoother[k], level.b[k]); });
     residual(level, level.t);
-    for (std::size_t k = 0; k < level.size; ++k) add_scaled(level.x[k], level.smoother[k], level.t[k]);
+    for_nodes(level.size, [&](std::size_t k) { add_scaled(level.x[k], level.smoother[k], level.t[k]); });
     return;
   }
   const std::size_t n = 3 * level.size;
@@ -362,7 +362,7 @@ void SpringMultigrid<T>::solve_coarsest(Level& level) {
 
 template <class T>
 void SpringMultigrid<T>::residual(const Level& level, std::vector<Vec3>& out) const {
-  for (std::size_t k = 0; k < level.size; ++k) {
+  for_nodes(level.size, [&](std::size_t k) {
     Vec3 y = times(level.diagonal[k], level.x[k]);
     for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
       const Vec3& other = level.x[level.column[e]];
@@ -371,7 +371,7 @@ void SpringMultigrid<T>::residual(const Level& level, std::vector<Vec3>& out) co
       for (int d = 0; d < 3; ++d) y[d] += c[d];
     }
     for (int d = 0; d < 3; ++d) out[k][d] = level.b[k][d] - y[d];
-  }
+  });
 }
 
 template <class T>
@@ -418,7 +418,7 @@ void SpringMultigrid<T>::smooth(Block b, const T* const in[3], const T* const ba
 template <class T>
 void SpringMultigrid<T>::set_operator(const Workers& workers, const FineSystem<T>& fine, std::size_t padded) {
   reserve(padded);
-  padded_ = padded, fine_ = fine;
+  padded_ = padded, fine_ = fine, workers_ = workers;
   fine_blocks(workers, fine);
   const auto zero = std::int32_t(levels_[0].size);  // the correction's last value: 0
   for (std::size_t i = 0; i < padded_; ++i) {
@@ -439,23 +439,23 @@ template <class T>
 void SpringMultigrid<T>::vcycle(std::size_t l) {
   Level& level = levels_[l];
   if (l + 1 == levels_.size()) return solve_coarsest(level);
-  for (std::size_t k = 0; k < level.size; ++k) level.x[k] = scaled(level.smoother[k], level.b[k]);
+  for_nodes(level.size, [&](std::size_t k) { level.x[k] = scaled(level.smoother[k], level.b[k]); });
   residual(level, level.t);
   Level& next = levels_[l + 1];
-  for (std::size_t k = 0; k < next.size; ++k) {
+  for_nodes(next.size, [&](std::size_t k) {
     Vec3 sum{0, 0, 0};
     for (std::uint32_t m = next.member_offset[k]; m < next.member_offset[k + 1]; ++m) {
       for (int d = 0; d < 3; ++d) sum[d] += level.t[next.members[m]][d];
     }
     next.b[k] = sum;
-  }
+  });
   vcycle(l + 1);
-  for (std::size_t k = 0; k < level.size; ++k) {
-    if (level.aggregate[k] < 0) continue;
+  for_nodes(level.size, [&](std::size_t k) {
+    if (level.aggregate[k] < 0) return;
     for (int d = 0; d < 3; ++d) level.x[k][d] += next.x[std::size_t(level.aggregate[k])][d];
-  }
+  });
   residual(level, level.t);
-  for (std::size_t k = 0; k < level.size; ++k) add_scaled(level.x[k], level.smoother[k], level.t[k]);
+  for_nodes(level.size, [&](std::size_t k) { add_scaled(level.x[k], level.smoother[k], level.t[k]); });
 }
 
 // t_ = r - A y over block b (y is read at the block's bodies' neighbours too).
@@ -483,13 +483,14 @@ void SpringMultigrid<T>::fine_residual(Block b, const T* const r[3], const T* co
 // other blocks' bodies while writing z.
 template <class T>
 double SpringMultigrid<T>::apply(const Workers& workers, const T* const r[3], T* const z[3]) {
+  workers_ = workers;
   const FineSystem<T>& f = fine_;
   T* const y[3] = {y_[0].data(), y_[1].data(), y_[2].data()};
   const T* const t[3] = {t_[0].data(), t_[1].data(), t_[2].data()};
   for_each_block(workers, padded_, [&](Block b) { smooth(b, r, nullptr, y); });
   for_each_block(workers, padded_, [&](Block b) { fine_residual(b, r, y); });
   Level& first = levels_[0];
-  for (std::size_t k = 0; k < first.size; ++k) {
+  for_nodes(first.size, [&](std::size_t k) {
     Vec3 sum{0, 0, 0};
     for (std::uint32_t m = first.member_offset[k]; m < first.member_offset[k + 1]; ++m) {
       const std::size_t i = first.members[m];
@@ -497,11 +498,11 @@ double SpringMultigrid<T>::apply(const Workers& workers, const T* const r[3], T*
       for (int d = 0; d < 3; ++d) sum[d] += double(t[d][i]);
     }
     first.b[k] = sum;
-  }
+  });
   vcycle(0);
-  for (std::size_t k = 0; k < first.size; ++k) {
+  for_nodes(first.size, [&](std::size_t k) {
     for (int d = 0; d < 3; ++d) correction_[d][k] = T(first.x[k][d]);
-  }
+  });
   const kernels::ProlongJob<T> prolong{prolong_node_.data(),
                                        {correction_[0].data(), correction_[1].data(), correction_[2].data()},
                                        {y[0], y[1], y[2]}};

@@ -15,8 +15,8 @@
 // with C scaled by kCoarseStiffness (the .cpp says why). One V-cycle: damped block Jacobi
 // before and after each coarse correction, a Cholesky solve at the coarsest level; symmetric
 // and positive definite, as conjugate gradients needs. The coarse levels are in double, each
-// pass over nodes in order on the calling thread; the fine level's passes are blocks: the
-// bits depend on neither the thread count nor the instruction set.
+// pass over nodes computing each node's values alone; every pass is blocks of the job system:
+// the bits depend on neither the thread count nor the instruction set.
 
 #include <array>
 #include <cstddef>
@@ -71,7 +71,7 @@ class SpringMultigrid {
 
   template <class Neighbors>
   static Level make_level(const std::vector<std::int32_t>& aggregate, std::size_t count, Neighbors&& neighbors);
-  static void mirror_edges(Level& level);
+  void mirror_edges(Level& level) const;
   static Vec3 scaled(const Sym3& inverse, const Vec3& v);  // the damped sweep's step
   static void add_scaled(Vec3& x, const Sym3& inverse, const Vec3& v);
   void reserve(std::size_t padded);
@@ -79,7 +79,15 @@ class SpringMultigrid {
   void fine_blocks(const Workers& workers, const FineSystem<T>& fine);
   void smooth(Block b, const T* const in[3], const T* const base[3], T* const out[3]) const;
   void coarse_galerkin(std::size_t l);
-  static void finish_level(Level& level);
+  void finish_level(Level& level) const;
+  // fn(k) for each of n nodes, as blocks of this call's workers: each node writes only its
+  // own values, so any split gives the same bits.
+  template <class F>
+  void for_nodes(std::size_t n, F&& fn) const {
+    for_each_block(workers_, n, [&](Block b) {
+      for (std::size_t k = b.begin; k < b.end; ++k) fn(k);
+    });
+  }
   void factor_coarsest();
   void solve_coarsest(Level& level);
   void vcycle(std::size_t l);
@@ -96,6 +104,7 @@ class SpringMultigrid {
   std::vector<double> coarsest_y_;            // its solve's unknowns
   std::vector<unsigned char> dead_;           // unknowns of the coarsest level left out (no mass)
   FineSystem<T> fine_{};
+  Workers workers_{};                         // this call's
   std::array<AlignedArray<T>, 6> block_;    // the fine smoother: xx yy zz xy xz yz per body
   std::array<AlignedArray<T>, 3> y_;          // the fine level's iterate
   std::vector<double> block_dots_;
