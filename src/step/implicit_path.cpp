@@ -57,8 +57,7 @@ void ImplicitPath<T>::step(const StepContext<T>& c) {
   try {
     build_jacobian(c);
     if (use_multigrid_) {
-      multigrid_.set_operator(c.workers, {&net_,
-                                          mass_.data(),
+      multigrid_.set_operator(c.workers, {mass_.data(),
                                           {unit_[0].data(), unit_[1].data(), unit_[2].data()},
                                           a_along_.data(),
                                           a_across_.data()},

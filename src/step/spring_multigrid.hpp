@@ -29,12 +29,11 @@
 
 namespace kinema {
 
-// The fine level as the implicit path holds it for a step: A p = m p + sum over each body's
-// slots of along u (u . dp) + across dp, dp = p_j - p_i (fixed bodies: rows and columns left
-// out).
+// The fine level as the implicit path holds it for a step, over the network the levels were
+// built for: A p = m p + sum over each body's slots of along u (u . dp) + across dp,
+// dp = p_j - p_i (fixed bodies: rows and columns left out).
 template <class T>
 struct FineSystem {
-  const SpringNetwork<T>* net;
   const T* mass;  // 0 for fixed bodies
   const T* unit[3];
   const T* along;
