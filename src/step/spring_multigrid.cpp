@@ -15,8 +15,7 @@ namespace {
 // Block Jacobi's damping in the V-cycle's sweeps. Each spring's term is at most twice its
 // share of the two bodies' diagonal blocks, so A <= 2 B and the sweeps converge below 1; 0.7
 // keeps a margin (0.9 took 10-14% fewer iterations than 0.6 on the cloths, measured before
-// the coarse springs were scaled; Jacobi by components, whose
-// bound is looser, failed at 0.7).
+// the coarse springs were scaled; Jacobi by components, whose bound is looser, failed at 0.7).
 constexpr double kSmoothing = 0.7;
 // A smooth error, constant over each aggregate, jumps between aggregates by about their width
 // (3 bodies) times a body's difference, where only one spring in that width is stretched: the
