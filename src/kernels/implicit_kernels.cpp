@@ -64,8 +64,9 @@ template <bool Full, class T>
   }
 }
 
-// One slice: its own values and sums in local arrays; p . out to a running sum per lane.
-template <bool Full, class T>
+// One slice: its own values and sums in local arrays; p . out to a running sum per lane
+// (Residual: out = minuend - the product, no sum).
+template <bool Full, bool Residual, class T>
 [[gnu::always_inline]] inline void product_slice(const SpringProductJob<T>& job, std::size_t first, std::size_t lanes,
                                                  double (&dots)[kLanes]) {
   const std::size_t n = Full ? kLanes : lanes;
@@ -88,23 +89,28 @@ template <bool Full, class T>
   for (int d = 0; d < 3; ++d) {
     T* __restrict out = job.out[d] + first;
     const T *__restrict own_d = own[d], *__restrict sum_d = sum[d];
+    const T* __restrict minuend = Residual ? job.minuend[d] + first : nullptr;
     for (std::size_t l = 0; l < n; ++l) {
       const Bits keep = std::bit_cast<Bits>(mass[l]) << 1 == 0 ? Bits(0) : ~Bits(0);
       const T value = std::bit_cast<T>(std::bit_cast<Bits>(sum_d[l]) & keep);
-      out[l] = value;
-      dots[l] += double(own_d[l]) * double(value);
+      if constexpr (Residual) {
+        out[l] = minuend[l] - value;
+      } else {
+        out[l] = value;
+        dots[l] += double(own_d[l]) * double(value);
+      }
     }
   }
 }
 
 // Slice by slice (a set padded to less than a slice ends in a partial one); the lanes' sums
 // added in lane order at the end.
-template <class T>
+template <bool Residual, class T>
 [[gnu::always_inline]] inline double product_of(const SpringProductJob<T>& job, std::size_t begin, std::size_t end) {
   double dots[kLanes] = {};
   std::size_t first = begin;
-  for (; first + kLanes <= end; first += kLanes) product_slice<true>(job, first, kLanes, dots);
-  if (first < end) product_slice<false>(job, first, end - first, dots);
+  for (; first + kLanes <= end; first += kLanes) product_slice<true, Residual>(job, first, kLanes, dots);
+  if (first < end) product_slice<false, Residual>(job, first, end - first, dots);
   double total = 0;
   for (double x : dots) total += x;
   return total;
@@ -112,7 +118,8 @@ template <class T>
 
 // One slice's lanes of one array, through restrict locals: stores through the job's pointers
 // could otherwise alias alpha and each other, and the loop would not vectorize.
-template <bool Full, class T>
+// WithZ false: z and r . z are left to another preconditioner.
+template <bool Full, bool WithZ, class T>
 [[gnu::always_inline]] inline void update_lanes(T* __restrict x, T* __restrict r, T* __restrict z,
                                                 const T* __restrict p, const T* __restrict q,
                                                 const T* __restrict inv_diag, T alpha, std::size_t lanes,
@@ -120,13 +127,18 @@ template <bool Full, class T>
   const std::size_t n = Full ? kLanes : lanes;
   for (std::size_t l = 0; l < n; ++l) {
     x[l] += alpha * p[l];
-    const T rl = r[l] - alpha * q[l], zl = inv_diag[l] * rl;
-    r[l] = rl, z[l] = zl;
-    rz[l] += double(rl) * double(zl), rr[l] += double(rl) * double(rl);
+    const T rl = r[l] - alpha * q[l];
+    r[l] = rl;
+    if constexpr (WithZ) {
+      const T zl = inv_diag[l] * rl;
+      z[l] = zl;
+      rz[l] += double(rl) * double(zl);
+    }
+    rr[l] += double(rl) * double(rl);
   }
 }
 
-template <class T>
+template <bool WithZ, class T>
 [[gnu::always_inline]] inline void update_of(const CgUpdateJob<T>& job, std::size_t begin, std::size_t end,
                                              double sums[2]) {
   double rz[kLanes] = {}, rr[kLanes] = {};
@@ -134,12 +146,12 @@ template <class T>
   for (std::size_t first = begin; first < end; first += kLanes) {
     const std::size_t lanes = std::min(kLanes, end - first);
     for (int d = 0; d < 3; ++d) {
-      T *x = job.x[d] + first, *r = job.r[d] + first, *z = job.z[d] + first;
+      T *x = job.x[d] + first, *r = job.r[d] + first, *z = WithZ ? job.z[d] + first : nullptr;
       const T *p = job.p[d] + first, *q = job.q[d] + first, *inv_diag = job.inv_diag[d] + first;
       if (lanes == kLanes) {
-        update_lanes<true>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
+        update_lanes<true, WithZ>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
       } else {
-        update_lanes<false>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
+        update_lanes<false, WithZ>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
       }
     }
   }
@@ -147,44 +159,67 @@ template <class T>
 }
 
 template <class T>
-[[gnu::always_inline]] inline void direction_of(const CgDirectionJob<T>& job, std::size_t begin, std::size_t end) {
-  const T beta = job.beta;
-  for (int d = 0; d < 3; ++d) {
-    T* __restrict p = job.p[d];
-    const T* __restrict z = job.z[d];
-    for (std::size_t i = begin; i < end; ++i) p[i] = z[i] + beta * p[i];
-  }
+[[gnu::always_inline]] inline void direction_lanes(T* __restrict p, const T* __restrict z, T beta, std::size_t begin,
+                                                   std::size_t end) {
+  for (std::size_t i = begin; i < end; ++i) p[i] = z[i] + beta * p[i];
 }
 
 template <class T>
-[[gnu::always_inline]] inline void jacobian_entry(const JacobianJob<T>& job, std::size_t first, std::size_t entry,
-                                                  std::size_t lanes) {
-  const std::size_t at0 = entry * kLanes;
-  const std::int32_t* __restrict neighbor = job.neighbor + at0;
-  const T *__restrict x = job.x[0], *__restrict y = job.x[1], *__restrict z = job.x[2];
-  const T *__restrict rest = job.rest + at0, *__restrict kk = job.k + at0, *__restrict damping = job.damping + at0;
-  T *__restrict ux = job.unit[0] + at0, *__restrict uy = job.unit[1] + at0, *__restrict uz = job.unit[2] + at0;
-  T *__restrict k_along = job.k_along + at0, *__restrict k_across = job.k_across + at0;
-  T *__restrict a_along = job.a_along + at0, *__restrict a_across = job.a_across + at0;
-  T *__restrict dx_ = job.diag[0] + first, *__restrict dy_ = job.diag[1] + first, *__restrict dz_ = job.diag[2] + first;
-  for (std::size_t l = 0; l < lanes; ++l) {
-    const std::size_t i = first + l, j = std::size_t(neighbor[l]);
-    const T dx = x[j] - x[i], dy = y[j] - y[i], dz = z[j] - z[i];
+[[gnu::always_inline]] inline void direction_of(const CgDirectionJob<T>& job, std::size_t begin, std::size_t end) {
+  for (int d = 0; d < 3; ++d) direction_lanes(job.p[d], job.z[d], job.beta, begin, end);
+}
+
+// One entry's lanes, each pointer a parameter of its own: GCC keeps restrict parameters apart
+// where restrict locals of an inlined function were not, and the loop vectorizes. The lengths'
+// zero tests select after dividing by a safe length (a division under a branch does not run
+// for all lanes at once); each lane's operations are those of the plain formula.
+template <class T>
+[[gnu::always_inline]] inline void jacobian_lanes(const T* __restrict ox, const T* __restrict oy, const T* __restrict oz,
+                                                  const T* __restrict x, const T* __restrict y, const T* __restrict z,
+                                                  const T* __restrict rest, const T* __restrict kk,
+                                                  const T* __restrict damping, T sc, T sk, T* __restrict ux,
+                                                  T* __restrict uy, T* __restrict uz, T* __restrict k_along,
+                                                  T* __restrict k_across, T* __restrict a_along, T* __restrict a_across,
+                                                  T* __restrict dx_, T* __restrict dy_, T* __restrict dz_, std::size_t n) {
+  for (std::size_t l = 0; l < n; ++l) {
+    const T dx = ox[l] - x[l], dy = oy[l] - y[l], dz = oz[l] - z[l];
     const T length2 = ((T(0) + dx * dx) + dy * dy) + dz * dz;
     // A k of -0 counts as +0: no zero's sign in the products hangs on how k was written.
     const T length = std::sqrt(length2), k = kk[l] + T(0);
+    const bool apart = length > 0;
+    const T safe = apart ? length : T(1);
     // Stretched: the geometric stiffness k (1 - rest / length) across the spring. Under
     // compression it would be negative: left out, so the matrix stays definite.
     const T r = rest[l] < T(0) ? T(0) : rest[l], g = T(1) - r / length;
-    const T across = length > 0 ? (g > T(0) ? g : T(0)) : T(0);
+    const T across = apart ? (g > T(0) ? g : T(0)) : T(0);
     const T along_k = k * (T(1) - across), across_k = k * across;
     k_along[l] = along_k, k_across[l] = across_k;
-    const T w = job.sc * damping[l] + job.sk * along_k, wa = job.sk * across_k;
+    const T w = sc * damping[l] + sk * along_k, wa = sk * across_k;
     a_along[l] = w, a_across[l] = wa;
-    const T u0 = length > 0 ? dx / length : T(0), u1 = length > 0 ? dy / length : T(0), u2 = length > 0 ? dz / length : T(0);
+    const T q0 = dx / safe, q1 = dy / safe, q2 = dz / safe;
+    const T u0 = apart ? q0 : T(0), u1 = apart ? q1 : T(0), u2 = apart ? q2 : T(0);
     ux[l] = u0, uy[l] = u1, uz[l] = u2;
     dx_[l] -= w * u0 * u0 + wa, dy_[l] -= w * u1 * u1 + wa, dz_[l] -= w * u2 * u2 + wa;
   }
+}
+
+// One entry's slots: the other ends gathered, then the lanes.
+template <bool Full, class T>
+[[gnu::always_inline]] inline void jacobian_entry(const JacobianJob<T>& job, std::size_t first, std::size_t entry,
+                                                  std::size_t lanes) {
+  const std::size_t n = Full ? kLanes : lanes;
+  const std::size_t at = entry * kLanes;
+  alignas(64) T other[3][kLanes];
+  for (int d = 0; d < 3; ++d) {
+    const std::int32_t* __restrict neighbor = job.neighbor + at;
+    const T* __restrict x = job.x[d];
+    T* __restrict o = other[d];
+    for (std::size_t l = 0; l < n; ++l) o[l] = x[std::size_t(neighbor[l])];
+  }
+  jacobian_lanes(other[0], other[1], other[2], job.x[0] + first, job.x[1] + first, job.x[2] + first, job.rest + at,
+                 job.k + at, job.damping + at, job.sc, job.sk, job.unit[0] + at, job.unit[1] + at, job.unit[2] + at,
+                 job.k_along + at, job.k_across + at, job.a_along + at, job.a_across + at, job.diag[0] + first,
+                 job.diag[1] + first, job.diag[2] + first, n);
 }
 
 template <class T>
@@ -195,9 +230,9 @@ template <class T>
     const std::size_t lanes = std::min(kLanes, end - slice * kLanes);
     for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
       if (lanes == kLanes) {
-        jacobian_entry(job, slice * kLanes, e, kLanes);
+        jacobian_entry<true>(job, slice * kLanes, e, kLanes);
       } else {
-        jacobian_entry(job, slice * kLanes, e, lanes);
+        jacobian_entry<false>(job, slice * kLanes, e, lanes);
       }
     }
   }
@@ -238,45 +273,48 @@ template <class T>
   for (std::size_t first = begin; first < end; first += kLanes) smoother_slice(job, first, std::min(kLanes, end - first));
 }
 
+// out = base + B in over [begin, end): every pointer a parameter of its own, so that GCC keeps
+// them apart and vectorizes (restrict locals of an inlined function did not vectorize).
+template <bool WithBase, class T>
+[[gnu::always_inline]] inline void smooth_lanes(const T* __restrict xx, const T* __restrict yy, const T* __restrict zz,
+                                                const T* __restrict xy, const T* __restrict xz, const T* __restrict yz,
+                                                const T* __restrict x, const T* __restrict y, const T* __restrict z,
+                                                const T* __restrict bx, const T* __restrict by, const T* __restrict bz,
+                                                T* __restrict ox, T* __restrict oy, T* __restrict oz, std::size_t begin,
+                                                std::size_t end) {
+  for (std::size_t i = begin; i < end; ++i) {
+    const T sx = xx[i] * x[i] + xy[i] * y[i] + xz[i] * z[i];
+    const T sy = xy[i] * x[i] + yy[i] * y[i] + yz[i] * z[i];
+    const T sz = xz[i] * x[i] + yz[i] * y[i] + zz[i] * z[i];
+    if constexpr (WithBase) {
+      ox[i] = bx[i] + sx, oy[i] = by[i] + sy, oz[i] = bz[i] + sz;
+    } else {
+      ox[i] = sx, oy[i] = sy, oz[i] = sz;
+    }
+  }
+}
+
 template <class T>
 [[gnu::always_inline]] inline void block_smooth_of(const BlockSmoothJob<T>& job, std::size_t begin, std::size_t end) {
-  const T *__restrict xx = job.block[0], *__restrict yy = job.block[1], *__restrict zz = job.block[2];
-  const T *__restrict xy = job.block[3], *__restrict xz = job.block[4], *__restrict yz = job.block[5];
-  const T *__restrict x = job.in[0], *__restrict y = job.in[1], *__restrict z = job.in[2];
-  T *__restrict ox = job.out[0], *__restrict oy = job.out[1], *__restrict oz = job.out[2];
+  const T* const* m = job.block;
   if (job.base[0] == nullptr) {
-    for (std::size_t i = begin; i < end; ++i) {
-      ox[i] = xx[i] * x[i] + xy[i] * y[i] + xz[i] * z[i];
-      oy[i] = xy[i] * x[i] + yy[i] * y[i] + yz[i] * z[i];
-      oz[i] = xz[i] * x[i] + yz[i] * y[i] + zz[i] * z[i];
-    }
-    return;
+    smooth_lanes<false>(m[0], m[1], m[2], m[3], m[4], m[5], job.in[0], job.in[1], job.in[2], job.in[0], job.in[1],
+                        job.in[2], job.out[0], job.out[1], job.out[2], begin, end);
+  } else {
+    smooth_lanes<true>(m[0], m[1], m[2], m[3], m[4], m[5], job.in[0], job.in[1], job.in[2], job.base[0], job.base[1],
+                       job.base[2], job.out[0], job.out[1], job.out[2], begin, end);
   }
-  const T *__restrict bx = job.base[0], *__restrict by = job.base[1], *__restrict bz = job.base[2];
-  for (std::size_t i = begin; i < end; ++i) {
-    ox[i] = bx[i] + (xx[i] * x[i] + xy[i] * y[i] + xz[i] * z[i]);
-    oy[i] = by[i] + (xy[i] * x[i] + yy[i] * y[i] + yz[i] * z[i]);
-    oz[i] = bz[i] + (xz[i] * x[i] + yz[i] * y[i] + zz[i] * z[i]);
-  }
+}
+
+template <class T>
+[[gnu::always_inline]] inline void prolong_lanes(const std::int32_t* __restrict node, const T* __restrict values,
+                                                 T* __restrict out, std::size_t begin, std::size_t end) {
+  for (std::size_t i = begin; i < end; ++i) out[i] += values[node[i]];
 }
 
 template <class T>
 [[gnu::always_inline]] inline void prolong_of(const ProlongJob<T>& job, std::size_t begin, std::size_t end) {
-  const std::int32_t* __restrict node = job.node;
-  for (int d = 0; d < 3; ++d) {
-    const T* __restrict values = job.values[d];
-    T* __restrict out = job.out[d];
-    for (std::size_t i = begin; i < end; ++i) out[i] += values[node[i]];
-  }
-}
-
-template <class T>
-[[gnu::always_inline]] inline void subtract_of(const T* const r[3], T* const out[3], std::size_t begin, std::size_t end) {
-  for (int d = 0; d < 3; ++d) {
-    const T* __restrict from = r[d];
-    T* __restrict to = out[d];
-    for (std::size_t i = begin; i < end; ++i) to[i] = from[i] - to[i];
-  }
+  for (int d = 0; d < 3; ++d) prolong_lanes(job.node, job.values[d], job.out[d], begin, end);
 }
 
 template <class T>
@@ -317,12 +355,6 @@ KINEMA_CLONED void block_smooth(const BlockSmoothJob<double>& job, std::size_t b
 }
 KINEMA_CLONED void prolong_add(const ProlongJob<float>& job, std::size_t begin, std::size_t end) { prolong_of(job, begin, end); }
 KINEMA_CLONED void prolong_add(const ProlongJob<double>& job, std::size_t begin, std::size_t end) { prolong_of(job, begin, end); }
-KINEMA_CLONED void subtract_from(const float* const r[3], float* const out[3], std::size_t begin, std::size_t end) {
-  subtract_of(r, out, begin, end);
-}
-KINEMA_CLONED void subtract_from(const double* const r[3], double* const out[3], std::size_t begin, std::size_t end) {
-  subtract_of(r, out, begin, end);
-}
 KINEMA_CLONED double dot3(const float* const a[3], const float* const b[3], std::size_t begin, std::size_t end) {
   return dot_of(a, b, begin, end);
 }
@@ -331,16 +363,16 @@ KINEMA_CLONED double dot3(const double* const a[3], const double* const b[3], st
 }
 
 KINEMA_CLONED double spring_product(const SpringProductJob<float>& job, std::size_t begin, std::size_t end) {
-  return product_of(job, begin, end);
+  return job.minuend[0] ? product_of<true>(job, begin, end) : product_of<false>(job, begin, end);
 }
 KINEMA_CLONED double spring_product(const SpringProductJob<double>& job, std::size_t begin, std::size_t end) {
-  return product_of(job, begin, end);
+  return job.minuend[0] ? product_of<true>(job, begin, end) : product_of<false>(job, begin, end);
 }
 KINEMA_CLONED void cg_update(const CgUpdateJob<float>& job, std::size_t begin, std::size_t end, double sums[2]) {
-  update_of(job, begin, end, sums);
+  job.z[0] ? update_of<true>(job, begin, end, sums) : update_of<false>(job, begin, end, sums);
 }
 KINEMA_CLONED void cg_update(const CgUpdateJob<double>& job, std::size_t begin, std::size_t end, double sums[2]) {
-  update_of(job, begin, end, sums);
+  job.z[0] ? update_of<true>(job, begin, end, sums) : update_of<false>(job, begin, end, sums);
 }
 KINEMA_CLONED void cg_direction(const CgDirectionJob<float>& job, std::size_t begin, std::size_t end) {
   direction_of(job, begin, end);

@@ -15,11 +15,13 @@ namespace kinema::kernels {
 //   along u (u . dp) + across dp,   dp = p_j - p_i,
 // and 0 for bodies of mass 0, with `along` and `across` per slot (the caller's weights of the
 // stiffness and damping along the spring and of the stiffness across it). The slots are the
-// spring network's layout (kernels::SpringJob).
+// spring network's layout (kernels::SpringJob). With `minuend` (else null), out = minuend -
+// that instead: a residual in the same pass.
 template <class T>
 struct SpringProductJob {
   const T* p[3];
   T* out[3];
+  const T* minuend[3];
   const T* mass;
   std::size_t covered;
   const std::uint32_t* slice_offset;
@@ -31,12 +33,14 @@ struct SpringProductJob {
   T cm;
 };
 
-// Bodies [begin, end): begin a multiple of kSpringSlice. Returns sum of p_i . out_i (double).
+// Bodies [begin, end): begin a multiple of kSpringSlice. Returns sum of p_i . out_i (double;
+// 0 with a minuend).
 double spring_product(const SpringProductJob<float>& job, std::size_t begin, std::size_t end);
 double spring_product(const SpringProductJob<double>& job, std::size_t begin, std::size_t end);
 
 // x += alpha p, r -= alpha q, z = inv_diag r over [begin, end) of each of three arrays; adds
-// r . z and r . r (double, summed as spring_product sums) to sums[0] and sums[1].
+// r . z and r . r (double, summed as spring_product sums) to sums[0] and sums[1]. z null
+// (another preconditioner makes it): neither z nor r . z.
 template <class T>
 struct CgUpdateJob {
   T* x[3];
@@ -123,10 +127,6 @@ struct ProlongJob {
 };
 void prolong_add(const ProlongJob<float>& job, std::size_t begin, std::size_t end);
 void prolong_add(const ProlongJob<double>& job, std::size_t begin, std::size_t end);
-
-// out = r - out (a residual from a product in out).
-void subtract_from(const float* const r[3], float* const out[3], std::size_t begin, std::size_t end);
-void subtract_from(const double* const r[3], double* const out[3], std::size_t begin, std::size_t end);
 
 // a . b in double, summed as spring_product sums (a running sum per lane over the slices).
 double dot3(const float* const a[3], const float* const b[3], std::size_t begin, std::size_t end);

@@ -140,6 +140,7 @@ double ImplicitPath<T>::product(Block b, const T* const p[3], T* const out[3], T
                                 const T* across) const {
   const kernels::SpringProductJob<T> job{{p[0], p[1], p[2]},
                                          {out[0], out[1], out[2]},
+                                         {nullptr, nullptr, nullptr},
                                          mass_.data(),
                                          net_.covered,
                                          net_.slice_offset.data(),
@@ -269,9 +270,11 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
     const double pq = sum_blocks(c, [&](Block b, double* sums) {
       sums[0] = product(b, p, q, T(1), a_along_.data(), a_across_.data());
     })[0];
+    // Under multigrid the V-cycle makes z (and r . z): the update leaves them.
+    T* const z = use_multigrid_ ? nullptr : z_[0].data();
     const kernels::CgUpdateJob<T> update{{x[0].data(), x[1].data(), x[2].data()},
                                          {r_[0].data(), r_[1].data(), r_[2].data()},
-                                         {z_[0].data(), z_[1].data(), z_[2].data()},
+                                         {z, z ? z_[1].data() : nullptr, z ? z_[2].data() : nullptr},
                                          {p[0], p[1], p[2]},
                                          {q[0], q[1], q[2]},
                                          {inv_diag_[0].data(), inv_diag_[1].data(), inv_diag_[2].data()},

@@ -466,6 +466,7 @@ void SpringMultigrid<T>::fine_residual(Block b, const T* const r[3], const T* co
   T* const t[3] = {t_[0].data(), t_[1].data(), t_[2].data()};
   const kernels::SpringProductJob<T> job{{y[0], y[1], y[2]},
                                          {t[0], t[1], t[2]},
+                                         {r[0], r[1], r[2]},
                                          f.mass,
                                          net_->covered,
                                          net_->slice_offset.data(),
@@ -476,7 +477,6 @@ void SpringMultigrid<T>::fine_residual(Block b, const T* const r[3], const T* co
                                          f.across,
                                          T(1)};
   kernels::spring_product(job, b.begin, b.end);
-  kernels::subtract_from(r, t, b.begin, b.end);
 }
 
 // y = S r; the residual to level 0; its V-cycle; y += P x; z = y + S (r - A y); r . z, summed
