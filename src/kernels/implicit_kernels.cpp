@@ -317,6 +317,57 @@ template <class T>
   for (int d = 0; d < 3; ++d) prolong_lanes(job.node, job.values[d], job.out[d], begin, end);
 }
 
+constexpr std::size_t kGroup = kCoarseGroup;
+
+// One row of a group's edges: y += C (x_k - x_j) where the lane has an edge (a lane without
+// one names its own node, which no edge joins).
+[[gnu::always_inline]] inline void coarse_row(const std::uint32_t* __restrict column, const double* __restrict a0,
+                                              const double* __restrict a1, const double* __restrict a2,
+                                              const double* __restrict a3, const double* __restrict a4,
+                                              const double* __restrict a5, const double* __restrict x,
+                                              const double (&own)[3][kGroup], double (&y)[3][kGroup],
+                                              std::size_t first) {
+  for (std::size_t l = 0; l < kGroup; ++l) {
+    const std::size_t j = std::size_t(column[l]);
+    const bool edge = j != first + l;
+    const double d0 = own[0][l] - x[3 * j], d1 = own[1][l] - x[3 * j + 1], d2 = own[2][l] - x[3 * j + 2];
+    const double c0 = a0[l] * d0 + a3[l] * d1 + a4[l] * d2;
+    const double c1 = a3[l] * d0 + a1[l] * d1 + a5[l] * d2;
+    const double c2 = a4[l] * d0 + a5[l] * d1 + a2[l] * d2;
+    // Selected on the bits: a float select here kept a branch and the loop scalar.
+    const std::uint64_t keep = edge ? ~std::uint64_t(0) : 0;
+    const double y0 = y[0][l], y1 = y[1][l], y2 = y[2][l];
+    y[0][l] = std::bit_cast<double>((std::bit_cast<std::uint64_t>(y0 + c0) & keep) | (std::bit_cast<std::uint64_t>(y0) & ~keep));
+    y[1][l] = std::bit_cast<double>((std::bit_cast<std::uint64_t>(y1 + c1) & keep) | (std::bit_cast<std::uint64_t>(y1) & ~keep));
+    y[2][l] = std::bit_cast<double>((std::bit_cast<std::uint64_t>(y2 + c2) & keep) | (std::bit_cast<std::uint64_t>(y2) & ~keep));
+  }
+}
+
+[[gnu::always_inline]] inline void coarse_group(const CoarseResidualJob& job, std::size_t g) {
+  const std::size_t first = g * kGroup;
+  const double* __restrict x = job.x;
+  const double* __restrict m = job.diagonal + 6 * first;
+  alignas(64) double own[3][kGroup], y[3][kGroup];
+  for (std::size_t l = 0; l < kGroup; ++l) {
+    const double x0 = x[3 * (first + l)], x1 = x[3 * (first + l) + 1], x2 = x[3 * (first + l) + 2];
+    own[0][l] = x0, own[1][l] = x1, own[2][l] = x2;
+    const double* a = m + 6 * l;
+    y[0][l] = a[0] * x0 + a[3] * x1 + a[4] * x2;
+    y[1][l] = a[3] * x0 + a[1] * x1 + a[5] * x2;
+    y[2][l] = a[4] * x0 + a[5] * x1 + a[2] * x2;
+  }
+  for (std::uint32_t r = job.group_row[g]; r < job.group_row[g + 1]; ++r) {
+    const std::size_t at = std::size_t(r) * kGroup;
+    coarse_row(job.column + at, job.edge[0] + at, job.edge[1] + at, job.edge[2] + at, job.edge[3] + at,
+               job.edge[4] + at, job.edge[5] + at, x, own, y, first);
+  }
+  const double* __restrict b = job.b + 3 * first;
+  double* __restrict out = job.out + 3 * first;
+  for (std::size_t l = 0; l < kGroup; ++l) {
+    for (int d = 0; d < 3; ++d) out[3 * l + d] = b[3 * l + d] - y[d][l];
+  }
+}
+
 template <class T>
 [[gnu::always_inline]] inline double dot_of(const T* const a[3], const T* const b[3], std::size_t begin, std::size_t end) {
   double sums[kLanes] = {};
@@ -360,6 +411,10 @@ KINEMA_CLONED double dot3(const float* const a[3], const float* const b[3], std:
 }
 KINEMA_CLONED double dot3(const double* const a[3], const double* const b[3], std::size_t begin, std::size_t end) {
   return dot_of(a, b, begin, end);
+}
+
+KINEMA_CLONED void coarse_residual(const CoarseResidualJob& job, std::size_t begin, std::size_t end) {
+  for (std::size_t g = begin / kGroup; g * kGroup < end; ++g) coarse_group(job, g);
 }
 
 KINEMA_CLONED double spring_product(const SpringProductJob<float>& job, std::size_t begin, std::size_t end) {

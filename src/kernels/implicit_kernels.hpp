@@ -128,6 +128,24 @@ struct ProlongJob {
 void prolong_add(const ProlongJob<float>& job, std::size_t begin, std::size_t end);
 void prolong_add(const ProlongJob<double>& job, std::size_t begin, std::size_t end);
 
+// A coarse level's residual out = b - A x (src/step/spring_multigrid.hpp), its nodes in groups
+// of kCoarseGroup, each group's edges in rows: row r holds the r-th edge of each node (in the
+// node's order), the node's own index where it has fewer. Per node, in order:
+//   y = D x_k, then y += C (x_k - x_j) for each edge, out = b - y,
+// D and C symmetric 3x3 (xx yy zz xy xz yz); x, b and out three doubles a node, D six.
+inline constexpr std::size_t kCoarseGroup = 8;
+struct CoarseResidualJob {
+  const std::uint32_t* group_row;  // each group's first row; group g's rows end at group_row[g + 1]
+  const std::uint32_t* column;     // kCoarseGroup per row
+  const double* edge[6];           // kCoarseGroup per row, each of the six entries
+  const double* diagonal;
+  const double* x;
+  const double* b;
+  double* out;
+};
+// Nodes [begin, end): begin a multiple of kCoarseGroup; x, b and out hold whole groups.
+void coarse_residual(const CoarseResidualJob& job, std::size_t begin, std::size_t end);
+
 // a . b in double, summed as spring_product sums (a running sum per lane over the slices).
 double dot3(const float* const a[3], const float* const b[3], std::size_t begin, std::size_t end);
 double dot3(const double* const a[3], const double* const b[3], std::size_t begin, std::size_t end);

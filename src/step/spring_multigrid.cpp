@@ -71,6 +71,8 @@ std::int32_t find_edge(const std::vector<std::uint32_t>& row_offset, const std::
   return at != end && *at == to ? std::int32_t(at - column.begin()) : -1;
 }
 
+std::size_t groups(std::size_t nodes) { return (nodes + kernels::kCoarseGroup - 1) / kernels::kCoarseGroup; }
+
 }  // namespace
 
 // A coarse level's aggregates' members (ascending) and edges (each row's columns ascending)
@@ -149,8 +151,10 @@ void SpringMultigrid<T>::build(const SpringNetwork<T>& net) {
     levels_.push_back(std::move(next));
   }
   for (Level& level : levels_) {
-    level.diagonal.resize(level.size), level.smoother.resize(level.size), level.edge.resize(level.column.size());
-    level.b.resize(level.size), level.x.resize(level.size), level.t.resize(level.size);
+    const std::size_t padded = groups(level.size) * kernels::kCoarseGroup;
+    level.diagonal.resize(padded), level.smoother.resize(level.size), level.edge.resize(level.column.size());
+    level.b.resize(padded), level.x.resize(padded), level.t.resize(padded);
+    lay_out_rows(level);
   }
   for (auto& a : correction_) a.assign(levels_[0].size + 1, T(0));
   net_ = &net, slots_ = net.neighbor.size();
@@ -179,6 +183,7 @@ std::size_t SpringMultigrid<T>::bytes() const {
               l.mirror.capacity() + l.aggregate.capacity() + l.edge_down.capacity()) * 4;
     total += (l.diagonal.capacity() + l.edge.capacity() + l.smoother.capacity()) * sizeof(Sym3);
     total += (l.b.capacity() + l.x.capacity() + l.t.capacity()) * sizeof(Vec3);
+    total += (l.group_row.capacity() + l.row_column.capacity()) * 4 + 6 * l.row_edge[0].capacity() * sizeof(double);
   }
   return total;
 }
@@ -361,18 +366,56 @@ void SpringMultigrid<T>::solve_coarsest(Level& level) {
   for (std::size_t k = 0; k < n; ++k) level.x[k / 3][k % 3] = y[k];
 }
 
+// The rows of each group of nodes: as many as its nodes' most edges; a lane past a node's
+// edges (or past the last node) names its own node, with C = 0.
+template <class T>
+void SpringMultigrid<T>::lay_out_rows(Level& level) {
+  constexpr std::size_t G = kernels::kCoarseGroup;
+  const std::size_t n = groups(level.size);
+  level.group_row.assign(n + 1, 0);
+  for (std::size_t g = 0; g < n; ++g) {
+    std::uint32_t rows = 0;
+    for (std::size_t k = g * G; k < std::min(level.size, (g + 1) * G); ++k) rows = std::max(rows, level.row_offset[k + 1] - level.row_offset[k]);
+    level.group_row[g + 1] = level.group_row[g] + rows;
+  }
+  level.row_column.resize(std::size_t(level.group_row[n]) * G);
+  for (std::size_t g = 0; g < n; ++g) {
+    for (std::uint32_t r = level.group_row[g]; r < level.group_row[g + 1]; ++r) {
+      for (std::size_t l = 0; l < G; ++l) {
+        const std::size_t k = g * G + l, e = k < level.size ? level.row_offset[k] + (r - level.group_row[g]) : 0;
+        const bool has = k < level.size && e < level.row_offset[k + 1];
+        level.row_column[r * G + l] = has ? level.column[e] : std::uint32_t(k);
+      }
+    }
+  }
+  for (auto& a : level.row_edge) a.assign(level.row_column.size(), 0.0);
+}
+
+// This step's C of each edge into its row and lane.
+template <class T>
+void SpringMultigrid<T>::fill_rows(Level& level) const {
+  constexpr std::size_t G = kernels::kCoarseGroup;
+  for_nodes(level.size, [&](std::size_t k) {
+    const std::size_t first = level.group_row[k / G] * G + k % G;
+    for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
+      const std::size_t at = first + (e - level.row_offset[k]) * G;
+      for (int i = 0; i < 6; ++i) level.row_edge[i][at] = level.edge[e].a[i];
+    }
+  });
+}
+
+// out = b - A x, node by node as the kernel's groups.
 template <class T>
 void SpringMultigrid<T>::residual(const Level& level, std::vector<Vec3>& out) const {
-  for_nodes(level.size, [&](std::size_t k) {
-    Vec3 y = times(level.diagonal[k], level.x[k]);
-    for (std::uint32_t e = level.row_offset[k]; e < level.row_offset[k + 1]; ++e) {
-      const Vec3& other = level.x[level.column[e]];
-      const Vec3 dx{level.x[k][0] - other[0], level.x[k][1] - other[1], level.x[k][2] - other[2]};
-      const Vec3 c = times(level.edge[e], dx);
-      for (int d = 0; d < 3; ++d) y[d] += c[d];
-    }
-    for (int d = 0; d < 3; ++d) out[k][d] = level.b[k][d] - y[d];
-  });
+  const kernels::CoarseResidualJob job{level.group_row.data(),
+                                       level.row_column.data(),
+                                       {level.row_edge[0].data(), level.row_edge[1].data(), level.row_edge[2].data(),
+                                        level.row_edge[3].data(), level.row_edge[4].data(), level.row_edge[5].data()},
+                                       level.diagonal.data()->a,
+                                       level.x.data()->data(),
+                                       level.b.data()->data(),
+                                       out.data()->data()};
+  for_each_block(workers_, level.size, [&](Block b) { kernels::coarse_residual(job, b.begin, b.end); });
 }
 
 template <class T>
@@ -428,9 +471,11 @@ void SpringMultigrid<T>::set_operator(const Workers& workers, const FineSystem<T
   }
   fine_galerkin(fine);
   finish_level(levels_[0]);
+  fill_rows(levels_[0]);
   for (std::size_t l = 1; l < levels_.size(); ++l) {
     coarse_galerkin(l);
     finish_level(levels_[l]);
+    fill_rows(levels_[l]);
   }
   factor_coarsest();
 }

@@ -65,12 +65,18 @@ class SpringMultigrid {
     std::vector<std::int32_t> aggregate;  // each node's in the next level (-1: none)
     std::vector<std::int32_t> edge_down;  // each edge's in the next level (-1: inside an aggregate)
     std::vector<Sym3> diagonal, edge, smoother;  // D, C, the inverse of D + sum C (per step)
-    std::vector<Vec3> b, x, t;
+    std::vector<Vec3> b, x, t;  // b, x, t and diagonal padded to whole groups
+    // The residual's layout (kernels::CoarseResidualJob): each group's first row, each row's
+    // columns, and C's six entries per row and lane (per step).
+    std::vector<std::uint32_t> group_row, row_column;
+    std::array<std::vector<double>, 6> row_edge;
   };
 
   template <class Neighbors>
   static Level make_level(const std::vector<std::int32_t>& aggregate, std::size_t count, Neighbors&& neighbors);
   void mirror_edges(Level& level) const;
+  static void lay_out_rows(Level& level);
+  void fill_rows(Level& level) const;
   static Vec3 scaled(const Sym3& inverse, const Vec3& v);  // the damped sweep's step
   static void add_scaled(Vec3& x, const Sym3& inverse, const Vec3& v);
   void reserve(std::size_t padded);
