@@ -7,6 +7,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <type_traits>
 
 #include "kernels/cloned.hpp"
@@ -103,13 +104,82 @@ template <bool Full, bool Residual, class T>
   }
 }
 
+// A whole slice as vectors of its kLanes lanes (GCC's vector extension: every clone splits
+// them into its own registers). The same operations per lane as product_slice, but the sums
+// stay in registers across the slice's entries, where the arrays of product_slice went to
+// memory and back at every entry.
+template <class T>
+struct SliceVectors {
+  typedef T V __attribute__((vector_size(kLanes * sizeof(T))));
+  using Bits = std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>;
+  typedef Bits B __attribute__((vector_size(kLanes * sizeof(T))));
+  typedef double D __attribute__((vector_size(kLanes * sizeof(double))));
+};
+
+// V from kLanes values at p (through an out-parameter: a vector returned by value warns of
+// its ABI in the clones without wide registers, although every call is inlined).
+#define KINEMA_LOAD_LANES(v, p) std::memcpy(&(v), (p), sizeof(v))
+
+template <bool Residual, class T>
+[[gnu::always_inline]] inline void product_slice_full(const SpringProductJob<T>& job, std::size_t first,
+                                                      double (&dots)[kLanes]) {
+  using V = typename SliceVectors<T>::V;
+  using B = typename SliceVectors<T>::B;
+  using D = typename SliceVectors<T>::D;
+  V own[3], sum[3], mass;
+  KINEMA_LOAD_LANES(mass, job.mass + first);
+  const V cm_mass = job.cm * mass;
+  for (int d = 0; d < 3; ++d) KINEMA_LOAD_LANES(own[d], job.p[d] + first), sum[d] = cm_mass * own[d];
+  if (first < job.covered) {
+    const std::size_t slice = first / kLanes;
+    alignas(64) T gathered[3][kLanes];
+    for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
+      const T* other[3];
+      other_ends<true>(job, e, kLanes, gathered, other);
+      const std::size_t at = e * kLanes;
+      constexpr std::size_t ahead = 32 * kLanes;
+      for (const T* a : {job.unit[0] + at, job.unit[1] + at, job.unit[2] + at, job.along + at, job.across + at}) {
+        __builtin_prefetch(a + ahead);
+      }
+      V ux, uy, uz, ox, oy, oz, along, across;
+      KINEMA_LOAD_LANES(ux, job.unit[0] + at), KINEMA_LOAD_LANES(uy, job.unit[1] + at), KINEMA_LOAD_LANES(uz, job.unit[2] + at);
+      KINEMA_LOAD_LANES(ox, other[0]), KINEMA_LOAD_LANES(oy, other[1]), KINEMA_LOAD_LANES(oz, other[2]);
+      KINEMA_LOAD_LANES(along, job.along + at), KINEMA_LOAD_LANES(across, job.across + at);
+      const V dx = ox - own[0], dy = oy - own[1], dz = oz - own[2];
+      const V s = along * (ux * dx + uy * dy + uz * dz);
+      sum[0] += s * ux + across * dx;
+      sum[1] += s * uy + across * dy;
+      sum[2] += s * uz + across * dz;
+    }
+  }
+  B mass_bits;
+  KINEMA_LOAD_LANES(mass_bits, job.mass + first);
+  const B keep = (mass_bits << 1) != 0;
+  for (int d = 0; d < 3; ++d) {
+    const V value = (V)((B)sum[d] & keep);
+    if constexpr (Residual) {
+      V minuend;
+      KINEMA_LOAD_LANES(minuend, job.minuend[d] + first);
+      const V out = minuend - value;
+      std::memcpy(job.out[d] + first, &out, sizeof out);
+    } else {
+      std::memcpy(job.out[d] + first, &value, sizeof value);
+      D dot;
+      KINEMA_LOAD_LANES(dot, dots);
+      dot += __builtin_convertvector(own[d], D) * __builtin_convertvector(value, D);
+      std::memcpy(dots, &dot, sizeof dot);
+    }
+  }
+}
+#undef KINEMA_LOAD_LANES
+
 // Slice by slice (a set padded to less than a slice ends in a partial one); the lanes' sums
 // added in lane order at the end.
 template <bool Residual, class T>
 [[gnu::always_inline]] inline double product_of(const SpringProductJob<T>& job, std::size_t begin, std::size_t end) {
   double dots[kLanes] = {};
   std::size_t first = begin;
-  for (; first + kLanes <= end; first += kLanes) product_slice<true, Residual>(job, first, kLanes, dots);
+  for (; first + kLanes <= end; first += kLanes) product_slice_full<Residual>(job, first, dots);
   if (first < end) product_slice<false, Residual>(job, first, end - first, dots);
   double total = 0;
   for (double x : dots) total += x;
