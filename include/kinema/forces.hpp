@@ -7,6 +7,7 @@
 // Coupled terms (forces between bodies) take the staged path: one pass per stage, all
 // bodies' stage state in memory.
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -116,6 +117,12 @@ struct SpringPair {
 struct Springs {
   std::vector<SpringPair> pairs;
 };
+// The bodies a set of spring pairs reaches: its largest index + 1 (0 without pairs).
+inline std::size_t network_reach(std::span<const SpringPair> pairs) {
+  std::size_t reach = 0;
+  for (const SpringPair& p : pairs) reach = std::max<std::size_t>({reach, p.i + 1, p.j + 1});
+  return reach;
+}
 inline constexpr std::size_t kMaxSpringBodies = std::size_t(1) << 30;
 inline constexpr std::size_t kMaxSpringsPerBody = 1024;
 inline constexpr std::size_t kMaxSpringPairs = std::size_t(1) << 31;

@@ -96,8 +96,7 @@ template <class T>
 ImplicitSolves implicit_solves(const Stepper<T>& stepper) {
   if (stepper.method().kind != MethodKind::linearly_implicit) return {};
   const StepperOptions& o = stepper.options();
-  std::size_t network = 0;
-  for (const SpringPair& p : stepper.forces().springs()) network = std::max<std::size_t>({network, p.i + 1, p.j + 1});
+  const std::size_t network = network_reach(stepper.forces().springs());
   return {o.implicit_tolerance > 0 ? o.implicit_tolerance : kDefaultImplicitTolerance<T>, o.implicit_max_iterations,
           std::uint8_t(takes_multigrid(o.implicit_preconditioner, network) ? 2 : 1)};
 }

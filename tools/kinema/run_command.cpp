@@ -401,9 +401,7 @@ std::string implicit_fingerprint(const RunOptions& o, const Scene& scene) {
   // The preconditioner the solves take, named only where it is not the default's choice:
   // the fingerprints of runs that keep the default stay as they were.
   std::size_t network = 0;
-  for (const Springs& springs : scene.springs) {
-    for (const SpringPair& p : springs.pairs) network = std::max<std::size_t>({network, p.i + 1, p.j + 1});
-  }
+  for (const Springs& springs : scene.springs) network = std::max(network, network_reach(springs.pairs));
   const bool multigrid = takes_multigrid(options.implicit_preconditioner, network);
   const std::string preconditioner = multigrid == takes_multigrid(ImplicitPreconditioner::automatic, network)
                                          ? ""
