@@ -120,7 +120,7 @@ struct Springs {
 // The bodies a set of spring pairs reaches: its largest index + 1 (0 without pairs).
 inline std::size_t network_reach(std::span<const SpringPair> pairs) {
   std::size_t reach = 0;
-  for (const SpringPair& p : pairs) reach = std::max<std::size_t>({reach, p.i + 1, p.j + 1});
+  for (const SpringPair& p : pairs) reach = std::max({reach, std::size_t(p.i) + 1, std::size_t(p.j) + 1});
   return reach;
 }
 inline constexpr std::size_t kMaxSpringBodies = std::size_t(1) << 30;

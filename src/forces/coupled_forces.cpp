@@ -125,8 +125,8 @@ template <class T>
 SpringNetwork<T> lower_springs(std::span<const SpringPair> pairs) {
   SpringNetwork<T> net;
   net.pairs = pairs;
+  net.covered = network_reach(pairs);
   for (const SpringPair& p : pairs) {
-    net.covered = std::max<std::size_t>(net.covered, std::max(p.i, p.j) + 1);
     check_in<T>(p.rest, "springs.rest"), check_in<T>(p.k, "springs.k");
     check_in<T>(p.damping, "springs.damping");
   }

@@ -40,13 +40,12 @@ template <bool Full, class T>
   }
 }
 
-// Through restrict locals: the sums are stores the compiler could not otherwise keep apart
-// from the job's pointers, and it would load them again for every lane.
-template <bool Full, class T>
+// One entry of a partial slice (its first `lanes` lanes).
+template <class T>
 [[gnu::always_inline]] inline void add_entry(const SpringProductJob<T>& job, std::size_t entry, std::size_t lanes,
                                              const T (&own)[3][kLanes], const T* const (&other)[3],
                                              T (&sum)[3][kLanes]) {
-  const std::size_t n = Full ? kLanes : lanes;
+  const std::size_t n = lanes;
   const std::size_t at = entry * kLanes;
   const T *__restrict ux = job.unit[0] + at, *__restrict uy = job.unit[1] + at, *__restrict uz = job.unit[2] + at;
   const T *__restrict along_w = job.along + at, *__restrict across_w = job.across + at;
@@ -65,12 +64,13 @@ template <bool Full, class T>
   }
 }
 
-// One slice: its own values and sums in local arrays; p . out to a running sum per lane
-// (Residual: out = minuend - the product, no sum).
-template <bool Full, bool Residual, class T>
+// The partial slice that ends a set padded to less than a slice (whole slices:
+// product_slice_full): its own values and sums in local arrays; p . out to a running sum per
+// lane (Residual: out = minuend - the product, no sum).
+template <bool Residual, class T>
 [[gnu::always_inline]] inline void product_slice(const SpringProductJob<T>& job, std::size_t first, std::size_t lanes,
                                                  double (&dots)[kLanes]) {
-  const std::size_t n = Full ? kLanes : lanes;
+  const std::size_t n = lanes;
   alignas(64) T own[3][kLanes], sum[3][kLanes], gathered[3][kLanes];
   for (int d = 0; d < 3; ++d) {
     for (std::size_t l = 0; l < n; ++l) own[d][l] = job.p[d][first + l], sum[d][l] = job.cm * job.mass[first + l] * own[d][l];
@@ -79,8 +79,8 @@ template <bool Full, bool Residual, class T>
     const std::size_t slice = first / kLanes;
     for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
       const T* other[3];
-      other_ends<Full>(job, e, lanes, gathered, other);
-      add_entry<Full>(job, e, lanes, own, other, sum);
+      other_ends<false>(job, e, lanes, gathered, other);
+      add_entry(job, e, lanes, own, other, sum);
     }
   }
   // Fixed bodies' out is 0: selected on the bits (a mass is never negative, so it is 0 when
@@ -116,9 +116,12 @@ struct SliceVectors {
   typedef double D __attribute__((vector_size(kLanes * sizeof(double))));
 };
 
-// V from kLanes values at p (through an out-parameter: a vector returned by value warns of
-// its ABI in the clones without wide registers, although every call is inlined).
-#define KINEMA_LOAD_LANES(v, p) std::memcpy(&(v), (p), sizeof(v))
+// v from the values at p (an out-parameter: a vector returned by value warns of its ABI in
+// the clones without wide registers, although every call is inlined).
+template <class V, class T>
+[[gnu::always_inline]] inline void load_lanes(V& v, const T* p) {
+  std::memcpy(&v, p, sizeof v);
+}
 
 template <bool Residual, class T>
 [[gnu::always_inline]] inline void product_slice_full(const SpringProductJob<T>& job, std::size_t first,
@@ -127,9 +130,9 @@ template <bool Residual, class T>
   using B = typename SliceVectors<T>::B;
   using D = typename SliceVectors<T>::D;
   V own[3], sum[3], mass;
-  KINEMA_LOAD_LANES(mass, job.mass + first);
+  load_lanes(mass, job.mass + first);
   const V cm_mass = job.cm * mass;
-  for (int d = 0; d < 3; ++d) KINEMA_LOAD_LANES(own[d], job.p[d] + first), sum[d] = cm_mass * own[d];
+  for (int d = 0; d < 3; ++d) load_lanes(own[d], job.p[d] + first), sum[d] = cm_mass * own[d];
   if (first < job.covered) {
     const std::size_t slice = first / kLanes;
     alignas(64) T gathered[3][kLanes];
@@ -142,9 +145,9 @@ template <bool Residual, class T>
         __builtin_prefetch(a + ahead);
       }
       V ux, uy, uz, ox, oy, oz, along, across;
-      KINEMA_LOAD_LANES(ux, job.unit[0] + at), KINEMA_LOAD_LANES(uy, job.unit[1] + at), KINEMA_LOAD_LANES(uz, job.unit[2] + at);
-      KINEMA_LOAD_LANES(ox, other[0]), KINEMA_LOAD_LANES(oy, other[1]), KINEMA_LOAD_LANES(oz, other[2]);
-      KINEMA_LOAD_LANES(along, job.along + at), KINEMA_LOAD_LANES(across, job.across + at);
+      load_lanes(ux, job.unit[0] + at), load_lanes(uy, job.unit[1] + at), load_lanes(uz, job.unit[2] + at);
+      load_lanes(ox, other[0]), load_lanes(oy, other[1]), load_lanes(oz, other[2]);
+      load_lanes(along, job.along + at), load_lanes(across, job.across + at);
       const V dx = ox - own[0], dy = oy - own[1], dz = oz - own[2];
       const V s = along * (ux * dx + uy * dy + uz * dz);
       sum[0] += s * ux + across * dx;
@@ -153,25 +156,24 @@ template <bool Residual, class T>
     }
   }
   B mass_bits;
-  KINEMA_LOAD_LANES(mass_bits, job.mass + first);
+  load_lanes(mass_bits, job.mass + first);
   const B keep = (mass_bits << 1) != 0;
   for (int d = 0; d < 3; ++d) {
     const V value = (V)((B)sum[d] & keep);
     if constexpr (Residual) {
       V minuend;
-      KINEMA_LOAD_LANES(minuend, job.minuend[d] + first);
+      load_lanes(minuend, job.minuend[d] + first);
       const V out = minuend - value;
       std::memcpy(job.out[d] + first, &out, sizeof out);
     } else {
       std::memcpy(job.out[d] + first, &value, sizeof value);
       D dot;
-      KINEMA_LOAD_LANES(dot, dots);
+      load_lanes(dot, dots);
       dot += __builtin_convertvector(own[d], D) * __builtin_convertvector(value, D);
       std::memcpy(dots, &dot, sizeof dot);
     }
   }
 }
-#undef KINEMA_LOAD_LANES
 
 // Slice by slice (a set padded to less than a slice ends in a partial one); the lanes' sums
 // added in lane order at the end.
@@ -180,14 +182,14 @@ template <bool Residual, class T>
   double dots[kLanes] = {};
   std::size_t first = begin;
   for (; first + kLanes <= end; first += kLanes) product_slice_full<Residual>(job, first, dots);
-  if (first < end) product_slice<false, Residual>(job, first, end - first, dots);
+  if (first < end) product_slice<Residual>(job, first, end - first, dots);
   double total = 0;
   for (double x : dots) total += x;
   return total;
 }
 
-// One slice's lanes of one array, through restrict locals: stores through the job's pointers
-// could otherwise alias alpha and each other, and the loop would not vectorize.
+// One slice's lanes of one array, through restrict parameters: stores through the job's
+// pointers could otherwise alias alpha and each other, and the loop would not vectorize.
 // WithZ false: z and r . z are left to another preconditioner.
 template <bool Full, bool WithZ, class T>
 [[gnu::always_inline]] inline void update_lanes(T* __restrict x, T* __restrict r, T* __restrict z,

@@ -1,6 +1,7 @@
 #include "step/spring_multigrid.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 
 #include "kernels/implicit_kernels.hpp"
@@ -72,6 +73,8 @@ std::int32_t find_edge(const std::vector<std::uint32_t>& row_offset, const std::
 }
 
 std::size_t groups(std::size_t nodes) { return (nodes + kernels::kCoarseGroup - 1) / kernels::kCoarseGroup; }
+// A block of nodes holds whole groups, so no two blocks write one group's values.
+static_assert(kBlockBodies % kernels::kCoarseGroup == 0);
 
 }  // namespace
 
@@ -384,6 +387,7 @@ void SpringMultigrid<T>::lay_out_rows(Level& level) {
       for (std::size_t l = 0; l < G; ++l) {
         const std::size_t k = g * G + l, e = k < level.size ? level.row_offset[k] + (r - level.group_row[g]) : 0;
         const bool has = k < level.size && e < level.row_offset[k + 1];
+        assert(!has || level.column[e] != k);  // the kernel takes its own index for "no edge"
         level.row_column[r * G + l] = has ? level.column[e] : std::uint32_t(k);
       }
     }
@@ -404,9 +408,11 @@ void SpringMultigrid<T>::fill_rows(Level& level) const {
   });
 }
 
-// out = b - A x, node by node as the kernel's groups.
+// out = b - A x, node by node as the kernel's groups (which read the blocks and vectors as
+// arrays of doubles).
 template <class T>
 void SpringMultigrid<T>::residual(const Level& level, std::vector<Vec3>& out) const {
+  static_assert(sizeof(Sym3) == 6 * sizeof(double) && sizeof(Vec3) == 3 * sizeof(double));
   const kernels::CoarseResidualJob job{level.group_row.data(),
                                        level.row_column.data(),
                                        {level.row_edge[0].data(), level.row_edge[1].data(), level.row_edge[2].data(),
@@ -471,13 +477,14 @@ void SpringMultigrid<T>::set_operator(const Workers& workers, const FineSystem<T
   }
   fine_galerkin(fine);
   finish_level(levels_[0]);
-  fill_rows(levels_[0]);
   for (std::size_t l = 1; l < levels_.size(); ++l) {
     coarse_galerkin(l);
     finish_level(levels_[l]);
-    fill_rows(levels_[l]);
   }
   factor_coarsest();
+  // The residual's rows, where a residual is taken: not at a coarsest level solved exactly.
+  const std::size_t with_residual = cholesky_.empty() ? levels_.size() : levels_.size() - 1;
+  for (std::size_t l = 0; l < with_residual; ++l) fill_rows(levels_[l]);
 }
 
 // Coarse level l's V-cycle on its b, into its x.
