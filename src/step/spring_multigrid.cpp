@@ -413,6 +413,7 @@ void SpringMultigrid<T>::fill_rows(Level& level) const {
 template <class T>
 void SpringMultigrid<T>::residual(const Level& level, std::vector<Vec3>& out) const {
   static_assert(sizeof(Sym3) == 6 * sizeof(double) && sizeof(Vec3) == 3 * sizeof(double));
+  if (level.size == 0) return;  // (the views below name a first element)
   const kernels::CoarseResidualJob job{level.group_row.data(),
                                        level.row_column.data(),
                                        {level.row_edge[0].data(), level.row_edge[1].data(), level.row_edge[2].data(),
