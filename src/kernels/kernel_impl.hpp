@@ -289,20 +289,19 @@ struct StateSource {
   const T* v[3];
   T* const* before = nullptr;  // FusedJob::before
   EventProbe<T>* probe = nullptr;  // FusedJob::probe
-  // A probe of one plane along an axis (a floor, a wall): the value a x[axis] - b, read from
-  // the state arrays before the batch's store (axis_in) and picked from the registers after
-  // it, without a branch on the axis in the loop.
+  // A probe of one plane along an axis (a floor, a wall, EventScanJob::band): the coordinate
+  // along it, read before the batch's store (axis_in) and after it (axis_out).
   const T* axis_in = nullptr;
-  int axis = 0;
-  T axis_a = 0, axis_b = 0;
+  const T* axis_out = nullptr;
+  T band_low = 0, band_high = 0;
 };
 template <class T>
 StateSource<T> with_probe(StateSource<T> in, const FusedJob<T>& job) {
   in.before = job.before, in.probe = job.probe;
-  if (in.probe == nullptr || in.probe->count != 1 || in.probe->tests[0].value != EventValue::axis_plane) return in;
+  if (in.probe == nullptr || in.probe->count != 1 || !in.probe->tests[0].banded) return in;
   const EventScanJob<T>& plane = in.probe->tests[0];
-  in.axis_in = in.x[plane.axis], in.axis = plane.axis;
-  in.axis_a = plane.a[plane.axis], in.axis_b = plane.b;
+  in.axis_in = in.x[plane.axis], in.axis_out = job.bodies.x[plane.axis];
+  in.band_low = plane.band[0], in.band_high = plane.band[1];
   return in;
 }
 template <class T>
@@ -315,24 +314,32 @@ StateSource<T> source_of(const FusedJob<T>& job) {
   return with_probe<T>({{s[0], s[1], s[2]}, {s[3], s[4], s[5]}}, job);
 }
 
-// The one-plane probe's value (EventTest's axis_plane value) of positions x: the axis picked
-// by selects (loop-invariant masks), not by an index, which would send the registers to memory.
+// Before a batch's store: its coordinate along a one-plane probe's axis, where there is one.
 template <class V>
-KINEMA_INLINE V axis_value(const StateSource<value_t<V>>& in, const Vec<V>& x) {
-  using T = value_t<V>;
-  const auto first = V(T(in.axis == 0)) != V(0), second = V(T(in.axis == 1)) != V(0);
-  return V(in.axis_a) * pick(first, x.c[0], pick(second, x.c[1], x.c[2])) - V(in.axis_b);
+KINEMA_INLINE V along_before(const StateSource<value_t<V>>& in, std::size_t i) {
+  return in.axis_in != nullptr ? load<V>(in.axis_in + i) : V(0);
+}
+
+// Whether a body of the batch may have crossed the one-plane probe's plane, from its
+// coordinate along the axis before and after the step: both ends on one side of the band
+// rule a crossing out (EventScanJob::band), anything else lets event_scan decide. One compare
+// into a mask, the rest in vector registers: the compares that make masks cost these kernels
+// the most.
+template <class V>
+KINEMA_INLINE bool near_plane(const StateSource<value_t<V>>& in, const V& along0, const V& along1) {
+  const V above = V(in.band_high) - lane_min(along0, along1), below = lane_max(along0, along1) - V(in.band_low);
+  return any_lane(lane_min(above, below) >= V(0));
 }
 
 // After a batch's store: the state it started from (x0, v0), where the job asks for it (a
 // branch the batches all take the same way); with a probe, only where a body may have crossed
-// an event on its way to (x1, v1).
+// an event on its way to (x1, v1). along0: along_before's value.
 template <class V>
 KINEMA_INLINE void keep_before(const StateSource<value_t<V>>& in, std::size_t i, const Vec<V>& x0, const Vec<V>& v0,
-                               const Vec<V>& x1, const Vec<V>& v1) {
+                               const Vec<V>& x1, const Vec<V>& v1, const V& along0) {
   if (in.before == nullptr) return;
   if (in.axis_in != nullptr) {
-    if (!any_lane(axis_value<V>(in, x0) * axis_value<V>(in, x1) <= V(0))) return;  // probe_crossed's test
+    if (!near_plane<V>(in, along0, load<V>(in.axis_out + i))) return;  // a superset of probe_crossed's test
     in.probe->batches[in.probe->found++] = std::uint32_t(i);
   } else if (in.probe != nullptr) {
     if (!probe_crossed(*in.probe, x0.c, v0.c, x1.c, v1.c)) return;
@@ -381,9 +388,10 @@ KINEMA_INLINE void runge_kutta_batch(const BodyArrays<value_t<V>>& b, const Stat
     kv[s] = accel<Quadratic, Central>(f, body, ps, xs, vs);
   });
   const Vec<V> x1 = advanced<tab.b>(h, kx, x), v1 = advanced<tab.b, sigma>(h, kv, v);
+  const V along0 = along_before<V>(in, i);
   store3(b.x, i, x1);
   store3(b.v, i, v1);
-  keep_before<V>(in, i, x, v, x1, v1);
+  keep_before<V>(in, i, x, v, x1, v1, along0);
 }
 
 // In place (rigid bodies' centres).
@@ -433,9 +441,10 @@ KINEMA_INLINE void kick_drift_loop(const BodyArrays<value_t<V>>& b, const StateS
         x = step_by(wh[k], v, x);
       }
     });
+    const V along0 = along_before<V>(in, i);
     store3(b.x, i, x);
     store3(b.v, i, v);
-    keep_before<V>(in, i, x0, v0, x, v);
+    keep_before<V>(in, i, x0, v0, x, v, along0);
   }
 }
 

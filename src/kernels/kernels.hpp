@@ -394,6 +394,11 @@ struct EventScanJob {
   T b;
   int axis = 0;
   bool down, up;  // the sign changes that count: > 0 to <= 0, < 0 to >= 0
+  // axis_plane: every x[axis] whose value rounds to 0 or to either sign lies in [band[0],
+  // band[1]] (banded; not where the band overflows T): the fused kernels' probe compares
+  // both ends of a body's step with it, with no products.
+  bool banded = false;
+  T band[2] = {0, 0};
 };
 // The sign tests a fused kernel runs as it steps (FusedJob::probe): at most kProbeTests
 // built-in events. Each batch with a body that crossed any of them is listed by its first

@@ -211,4 +211,25 @@ KINEMA_INLINE xsimd::batch<T, A> pick(const xsimd::batch_bool<T, A>& mask, const
   return xsimd::select(mask, a, b);
 }
 
+// The smaller and the larger of two values, lane by lane (which one a NaN gives is left open:
+// for bounds only).
+template <class T>
+  requires std::is_floating_point_v<T>
+KINEMA_INLINE T lane_min(T a, T b) {
+  return a < b ? a : b;
+}
+template <class T>
+  requires std::is_floating_point_v<T>
+KINEMA_INLINE T lane_max(T a, T b) {
+  return a > b ? a : b;
+}
+template <class T, class A>
+KINEMA_INLINE xsimd::batch<T, A> lane_min(const xsimd::batch<T, A>& a, const xsimd::batch<T, A>& b) {
+  return xsimd::min(a, b);
+}
+template <class T, class A>
+KINEMA_INLINE xsimd::batch<T, A> lane_max(const xsimd::batch<T, A>& a, const xsimd::batch<T, A>& b) {
+  return xsimd::max(a, b);
+}
+
 }  // namespace kinema::kernels::KINEMA_ISA_NS

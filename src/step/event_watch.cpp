@@ -93,6 +93,26 @@ struct Curve {
 
 }  // namespace
 
+namespace {
+
+// The coordinates x whose plane value a x - b, rounded as the kernels form it (the product,
+// then the difference), may be 0 or take either sign: b / a widened by far more than the
+// product's rounding (relative) and underflow (absolute), then rounded outward to T. False
+// where the band does not fit in T.
+template <class T>
+bool axis_plane_band(T a, T b, T (&band)[2]) {
+  const double centre = double(b) / double(a);
+  const double width = std::abs(centre) * 32.0 * double(std::numeric_limits<T>::epsilon()) +
+                       4.0 * double(std::numeric_limits<T>::denorm_min()) / std::abs(double(a));
+  const double low = centre - width, high = centre + width, range = double(std::numeric_limits<T>::max());
+  if (!(std::abs(low) < range && std::abs(high) < range)) return false;
+  band[0] = std::nextafter(T(low), -std::numeric_limits<T>::infinity());
+  band[1] = std::nextafter(T(high), std::numeric_limits<T>::infinity());
+  return std::isfinite(band[0]) && std::isfinite(band[1]);
+}
+
+}  // namespace
+
 template <class T>
 void EventWatch<T>::set(EventOptions<T> options) {
   if (!(std::isfinite(options.time_tolerance) && options.time_tolerance >= 0)) {
@@ -115,6 +135,7 @@ void EventWatch<T>::set(EventOptions<T> options) {
       if (zeros == 2) {  // along an axis: one array read instead of three, the same values
         job.value = kernels::EventValue::axis_plane;
         job.axis = job.a[0] != 0 ? 0 : job.a[1] != 0 ? 1 : 2;
+        job.banded = axis_plane_band(job.a[job.axis], job.b, job.band);
       }
       if (zeros == 3) refuse(e, "plane normal is zero in this precision");
     } else if (const auto* distance = std::get_if<DistanceEvent>(&event.kind)) {

@@ -3,7 +3,9 @@
 // everywhere, and the events refused.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "support.hpp"
@@ -337,6 +339,59 @@ TEST_CASE("the fused kernels' own sign test finds exactly the crossings a full s
       CHECK(std::equal(probed.begin(), probed.end(), staged.begin(), same_hit));
     }
   }
+}
+
+namespace {
+
+// Bodies that start a few ulps to either side of a plane along y (normal (0, a, 0), offset b)
+// and move by a few ulps in a step: where the rounded value a y - b is 0 or turns sign. The
+// hits of the fused kernels' own test against those of a full scan, on every ISA.
+template <class T>
+void check_plane_edges(T a, T b, std::size_t expected_at_least) {
+  INFO("a " << a << ", b " << b << (sizeof(T) == 4 ? " float" : " double"));
+  const T centre = T(double(b) / double(a));
+  ParticleSet<T> start;
+  T y = centre;
+  for (int k = 0; k < 40; ++k) y = std::nextafter(y, -std::numeric_limits<T>::infinity());
+  for (int k = 0; k < 80; ++k, y = std::nextafter(y, std::numeric_limits<T>::infinity())) {
+    for (const T ulps : {T(-3), T(-1), T(1), T(3)}) {
+      const T speed = ulps * (std::nextafter(std::abs(y), std::numeric_limits<T>::infinity()) - std::abs(y));
+      start.add({T(k % 7), y, T(0)}, {T(0), speed, T(0)}, T(1));
+    }
+  }
+  const Event<T> plane{PlaneEvent{{0, double(a), 0}, double(b)}, Crossing::either};
+  const Event<T> never{EventFunction<T>([](const EventBlock<T>& v, T* value) { std::fill(value, value + v.count, T(1)); }),
+                       Crossing::either};
+  auto hits = [&](Isa isa, bool scanned) {
+    ParticleSet<T> bodies = start;
+    Stepper<T> s(ForceModel<T>{}, rk4, test::serial_options(isa));
+    s.set_events({scanned ? std::vector<Event<T>>{plane, never} : std::vector<Event<T>>{plane}});
+    s.advance(bodies, T(1), 2);
+    return s.event_hits();
+  };
+  const auto scanned = hits(Isa::scalar, true);
+  REQUIRE(scanned.size() >= expected_at_least);
+  for (Isa isa : {Isa::scalar, Isa::sse2, Isa::avx2, Isa::avx512}) {
+    if (!isa_available(isa)) continue;
+    INFO("isa " << isa_name(isa));
+    const auto probed = hits(isa, false);
+    REQUIRE(probed.size() == scanned.size());
+    for (std::size_t i = 0; i < probed.size(); ++i) {
+      CHECK(probed[i].body == scanned[i].body);
+      CHECK(probed[i].time == scanned[i].time);
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("the fused kernels' test of a plane along an axis misses no crossing a rounding away from it", "[events]") {
+  check_plane_edges<float>(1, 0, 12);
+  check_plane_edges<float>(-3, 0.7f, 12);
+  check_plane_edges<float>(2.5f, -1e-20f, 12);
+  check_plane_edges<float>(1, 1e-41f, 12);  // b subnormal
+  check_plane_edges<double>(-3, 0.7, 12);
+  check_plane_edges<double>(7, 1e300, 12);
 }
 
 namespace {
