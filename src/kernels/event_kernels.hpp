@@ -2,7 +2,9 @@
 // The events' sign test: each body's event value at both ends of a step, compared lane by
 // lane; only the lanes of a batch that crossed are looked at one by one. The values use
 // mul_add as written, so every instruction set finds the same bodies. The fused kernels run
-// the same test on the values they hold (probe_crossed); event_scan runs it on arrays.
+// a superset of it on the values they hold (probe_crossed, or a band about a plane along an
+// axis: EventScanJob::band), so they list every batch where a body may have crossed;
+// event_scan runs the exact test on arrays.
 
 #include <cstddef>
 #include <cstdint>

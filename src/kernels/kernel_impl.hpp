@@ -339,7 +339,7 @@ KINEMA_INLINE void keep_before(const StateSource<value_t<V>>& in, std::size_t i,
                                const Vec<V>& x1, const Vec<V>& v1, const V& along0) {
   if (in.before == nullptr) return;
   if (in.axis_in != nullptr) {
-    if (!near_plane<V>(in, along0, load<V>(in.axis_out + i))) return;  // a superset of probe_crossed's test
+    if (!near_plane<V>(in, along0, load<V>(in.axis_out + i))) return;  // a superset of event_scan's exact test
     in.probe->batches[in.probe->found++] = std::uint32_t(i);
   } else if (in.probe != nullptr) {
     if (!probe_crossed(*in.probe, x0.c, v0.c, x1.c, v1.c)) return;

@@ -171,7 +171,8 @@ struct FusedJob {
   // events' test reads both ends of the step from there and the set). Null: nowhere.
   T* const* before = nullptr;
   // With `before`: the events' sign test, run on both ends of each batch's step in registers;
-  // only the batches where a body crossed store their start state. Null: every batch stores it.
+  // only the batches where a body may have crossed store their start state. Null: every
+  // batch stores it.
   EventProbe<T>* probe = nullptr;
 };
 template <class T>
@@ -394,15 +395,15 @@ struct EventScanJob {
   T b;
   int axis = 0;
   bool down, up;  // the sign changes that count: > 0 to <= 0, < 0 to >= 0
-  // axis_plane: every x[axis] whose value rounds to 0 or to either sign lies in [band[0],
-  // band[1]] (banded; not where the band overflows T): the fused kernels' probe compares
-  // both ends of a body's step with it, with no products.
+  // axis_plane: outside [band[0], band[1]] the value of x[axis], rounded, has a strict sign
+  // (sign(a[axis]) above the band, the other below; banded, not where the band overflows T):
+  // the fused kernels' probe compares both ends of a body's step with it, with no products.
   bool banded = false;
   T band[2] = {0, 0};
 };
 // The sign tests a fused kernel runs as it steps (FusedJob::probe): at most kProbeTests
-// built-in events. Each batch with a body that crossed any of them is listed by its first
-// body's index, in order; the caller then tests that batch's bodies one by one.
+// built-in events. Each batch with a body that may have crossed any of them is listed by its
+// first body's index, in order; the caller then tests that batch's bodies one by one.
 inline constexpr int kProbeTests = 4;
 template <class T>
 struct EventProbe {

@@ -91,19 +91,17 @@ struct Curve {
 };
 
 
-}  // namespace
-
-namespace {
-
-// The coordinates x whose plane value a x - b, rounded as the kernels form it (the product,
-// then the difference), may be 0 or take either sign: b / a widened by far more than the
-// product's rounding (relative) and underflow (absolute), then rounded outward to T. False
-// where the band does not fit in T.
+// The band of coordinates x outside which the plane value a x - b, rounded as the kernels
+// form it (the product, then the difference), has a strict sign (sign(a) above, -sign(a)
+// below): b / a widened by far more than the product's rounding (relative) and its underflow,
+// gradual or flushed to zero where the host sets FTZ / DAZ (absolute: the smallest normal
+// number, over a and as a coordinate), then rounded outward to T. False where the band does
+// not fit in T.
 template <class T>
 bool axis_plane_band(T a, T b, T (&band)[2]) {
   const double centre = double(b) / double(a);
   const double width = std::abs(centre) * 32.0 * double(std::numeric_limits<T>::epsilon()) +
-                       4.0 * double(std::numeric_limits<T>::denorm_min()) / std::abs(double(a));
+                       4.0 * double(std::numeric_limits<T>::min()) * (1.0 / std::abs(double(a)) + 1.0);
   const double low = centre - width, high = centre + width, range = double(std::numeric_limits<T>::max());
   if (!(std::abs(low) < range && std::abs(high) < range)) return false;
   band[0] = std::nextafter(T(low), -std::numeric_limits<T>::infinity());

@@ -8,6 +8,8 @@
 #include <limits>
 #include <numbers>
 
+#include <xmmintrin.h>
+
 #include "support.hpp"
 
 using namespace kinema;
@@ -343,22 +345,11 @@ TEST_CASE("the fused kernels' own sign test finds exactly the crossings a full s
 
 namespace {
 
-// Bodies that start a few ulps to either side of a plane along y (normal (0, a, 0), offset b)
-// and move by a few ulps in a step: where the rounded value a y - b is 0 or turns sign. The
-// hits of the fused kernels' own test against those of a full scan, on every ISA.
+// The hits of the fused kernels' own test of a plane along y (normal (0, a, 0), offset b)
+// against those of a full scan, on every ISA, for bodies `start` over two steps of 1.
 template <class T>
-void check_plane_edges(T a, T b, std::size_t expected_at_least) {
+void check_plane_hits(T a, T b, const ParticleSet<T>& start, std::size_t expected_at_least) {
   INFO("a " << a << ", b " << b << (sizeof(T) == 4 ? " float" : " double"));
-  const T centre = T(double(b) / double(a));
-  ParticleSet<T> start;
-  T y = centre;
-  for (int k = 0; k < 40; ++k) y = std::nextafter(y, -std::numeric_limits<T>::infinity());
-  for (int k = 0; k < 80; ++k, y = std::nextafter(y, std::numeric_limits<T>::infinity())) {
-    for (const T ulps : {T(-3), T(-1), T(1), T(3)}) {
-      const T speed = ulps * (std::nextafter(std::abs(y), std::numeric_limits<T>::infinity()) - std::abs(y));
-      start.add({T(k % 7), y, T(0)}, {T(0), speed, T(0)}, T(1));
-    }
-  }
   const Event<T> plane{PlaneEvent{{0, double(a), 0}, double(b)}, Crossing::either};
   const Event<T> never{EventFunction<T>([](const EventBlock<T>& v, T* value) { std::fill(value, value + v.count, T(1)); }),
                        Crossing::either};
@@ -383,6 +374,29 @@ void check_plane_edges(T a, T b, std::size_t expected_at_least) {
   }
 }
 
+// Bodies that start a few steps to either side of b / a and move by a few steps a step: where
+// the rounded value a y - b is 0 or turns sign. A step is an ulp of y, or where a is so short
+// that the product's own underflow is coarser, the y that moves the product by a subnormal.
+template <class T>
+void check_plane_edges(T a, T b, std::size_t expected_at_least) {
+  const T coarse = T(2 * double(std::numeric_limits<T>::denorm_min()) / std::abs(double(a)));
+  const auto step = [&](T y) { return std::max(std::nextafter(std::abs(y), std::numeric_limits<T>::infinity()) - std::abs(y), coarse); };
+  ParticleSet<T> start;
+  T y = T(double(b) / double(a));
+  for (int k = 0; k < 40; ++k) y -= step(y);
+  for (int k = 0; k < 80; ++k, y += step(y)) {
+    for (const T steps : {T(-3), T(-1), T(1), T(3)}) start.add({T(k % 7), y, T(0)}, {T(0), steps * step(y), T(0)}, T(1));
+  }
+  check_plane_hits(a, b, start, expected_at_least);
+}
+
+// The host's flush to zero of results and inputs (FTZ, DAZ) on this thread, until the scope ends.
+struct FlushToZero {
+  unsigned saved = _mm_getcsr();
+  FlushToZero() { _mm_setcsr(saved | 0x8040u); }
+  ~FlushToZero() { _mm_setcsr(saved); }
+};
+
 }  // namespace
 
 TEST_CASE("the fused kernels' test of a plane along an axis misses no crossing a rounding away from it", "[events]") {
@@ -390,8 +404,23 @@ TEST_CASE("the fused kernels' test of a plane along an axis misses no crossing a
   check_plane_edges<float>(-3, 0.7f, 12);
   check_plane_edges<float>(2.5f, -1e-20f, 12);
   check_plane_edges<float>(1, 1e-41f, 12);  // b subnormal
+  check_plane_edges<float>(0x1.31f49cp-57f, -0x1.ecp-142f, 12);  // products that underflow
   check_plane_edges<double>(-3, 0.7, 12);
   check_plane_edges<double>(7, 1e300, 12);
+}
+
+TEST_CASE("the fused kernels' test of a plane along an axis misses none where the host flushes to zero", "[events]") {
+  const FlushToZero flush;
+  // Bodies from a few smallest normals above and below a plane through 0 whose normal is
+  // shorter than 1: a product under the smallest normal is 0, a crossing where it lands.
+  ParticleSet<float> start;
+  const float least = std::numeric_limits<float>::min();
+  for (int k = -6; k <= 6; ++k) {
+    for (int j = -8; j <= 8; ++j) start.add({float(k), float(k) * least, 0}, {0, float(j) * least / 4, 0}, 1);
+  }
+  check_plane_hits(0.891f, 0.0f, start, 12);
+  check_plane_hits(0.25f, 0.0f, start, 12);
+  check_plane_hits(-0.5f, 0.0f, start, 12);
 }
 
 namespace {

@@ -5,9 +5,9 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
-#include <string>
 #include <numbers>
 #include <stdexcept>
+#include <string>
 
 #include "support.hpp"
 
@@ -144,6 +144,8 @@ TEST_CASE("the rigid block path keeps its recorded bits", "[rigid][callbacks][de
       {"bs3", 0x29671312295fc7a5ull},
       {"rk6", 0x8246ad13869cbdf7ull},
       {"dopri5", 0x314c78f70695a399ull},
+      {"symplectic_euler", 0xb3c6b859aff986f7ull},
+      {"velocity_verlet", 0xab3d7f00c1dcd56aull},
       {"advance_to", 0x0e472f2fd5fbab05ull},
       {"double rk4", 0x23820755d493b365ull}};
   const auto check = [&](const std::string& name, std::uint64_t hash) {
@@ -151,7 +153,7 @@ TEST_CASE("the rigid block path keeps its recorded bits", "[rigid][callbacks][de
     if (recorded.at(name) != hash) std::printf("      {\"%s\", 0x%016" PRIx64 "ull},\n", name.c_str(), hash);
     CHECK(recorded.at(name) == hash);
   };
-  for (const Method* m : {&euler, &midpoint, &heun, &rk4, &bs3, &rk6, &dopri5}) {
+  for (const Method* m : {&euler, &midpoint, &heun, &rk4, &bs3, &rk6, &dopri5, &symplectic_euler, &velocity_verlet}) {
     RigidBodySet<float> b = tumbling<float>(700);
     Stepper<float> s(callback_model<float>(), *m, test::serial_options());
     s.advance(b, 0.01f, 6);
