@@ -106,8 +106,10 @@ void check_each_enqueue(const char* path, const Set& initial, const ForceModel<d
 // Three blocks (two under the sanitizers, which run every enqueue's case some ten times slower).
 #ifdef KINEMA_SANITIZED
 constexpr std::size_t kBodies = 1500;
+constexpr bool kSanitized = true;
 #else
 constexpr std::size_t kBodies = 2500;
+constexpr bool kSanitized = false;
 #endif
 
 TEST_CASE("a throwing enqueue leaves particles as before the step, on every path", "[job_system][throws]") {
@@ -128,7 +130,9 @@ TEST_CASE("a throwing enqueue leaves particles as before the step, on every path
     check_each_enqueue("block path", cloud, with_callback(local), *m);
     check_each_enqueue("staged, springs", cloud, springs, *m);
     check_each_enqueue("staged, springs and a callback", cloud, with_callback(springs), *m);
-    check_each_enqueue("staged, N-body", cloud, gravity, *m);
+    // Under the sanitizers N-body's pairs took most of the test (80 s of rk4's enqueues, 32 s
+    // of velocity Verlet's): one method there.
+    if (!kSanitized || m == &velocity_verlet) check_each_enqueue("staged, N-body", cloud, gravity, *m);
     check_each_enqueue("staged, springs", cloud, springs, *m, FiniteGuard::check);
     check_each_enqueue("fused", cloud, local, *m, FiniteGuard::check);
     check_each_enqueue("staged, springs", cloud, springs, *m, FiniteGuard::clamp);
