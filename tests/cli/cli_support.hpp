@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdint>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -54,6 +55,22 @@ struct Result {
   std::string out, err;
   long peak_kib = 0;     // the child's peak resident memory
 };
+
+// Waits (a minute at most) until process `pid` catches `signal`: its handler is installed, so
+// the signal tests what the program does with it, not how long the program took to start (an
+// unoptimized, sanitized build on a busy machine can take longer than a test's delay).
+inline void wait_until_catching(pid_t pid, int signal) {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::minutes(1);
+  const std::uint64_t bit = std::uint64_t(1) << (signal - 1);
+  while (std::chrono::steady_clock::now() < give_up) {
+    std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+    std::string line;
+    while (std::getline(status, line)) {
+      if (line.rfind("SigCgt:", 0) == 0 && (std::stoull(line.substr(7), nullptr, 16) & bit) != 0) return;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+}
 
 // Runs `kinema args...`. `while_running`, when given, is called with the child's pid right
 // after it starts (to signal it, for example).

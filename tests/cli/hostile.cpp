@@ -403,6 +403,7 @@ TEST_CASE("a signal with no output asked for: the message claims none", "[cli][h
   const fs::path scene = write("long_quiet.json", R"({"dt": 0.001, "steps": 100000000,
       "generate": {"count": 1000, "position_min": [0,0,0], "position_max": [1,1,1]}})");
   const Result r = run_kinema({"run", scene.string(), "-q"}, {}, [](pid_t pid) {
+    wait_until_catching(pid, SIGINT);
     std::this_thread::sleep_for(std::chrono::milliseconds(1000));
     ::kill(pid, SIGINT);
   });
@@ -437,6 +438,7 @@ TEST_CASE("the long analyses answer a signal: chart and stability runs, auto's p
   for (const auto& args : commands) {
     INFO(args[0] << " " << args[1]);
     const Result r = run_kinema(args, {}, [](pid_t pid) {
+      wait_until_catching(pid, SIGINT);
       std::this_thread::sleep_for(std::chrono::milliseconds(700));
       ::kill(pid, SIGINT);
       // A minute to answer, then it is killed (and the test fails: it did not exit by itself).
