@@ -1,14 +1,18 @@
 // A program's first calls, as an engine meets them: a fresh process, default options or one
 // thread, one rk4 step after another over the benchmark scene's bodies. Prints the mean step
 // over the calls after the warm-up and the first call after which the stepper favours
-// workers (-1: never, or one thread). tools/bench --first-calls runs it in fresh processes, the two kinds in turn.
-//   kinema_first_calls [--threads N] [--workers measured|all] [--jobs pair] [--bodies N]
-//                      [--calls N] [--warmup N] [--trace]
+// workers (-1: never, or one thread). tools/bench --first-calls runs it in fresh processes, its
+// four kinds in turn:
+//   kinema_first_calls [--threads N] [--workers measured|all] [--bodies N] [--calls N]
+//                      [--warmup N] [--trace]
+//   kinema_first_calls --jobs pair [--bodies N] [--calls N] [--warmup N] [--trace]
 // --threads 0 (the default) is the default job system, 1 the calling thread alone;
-// --workers all hands every call to all of the job system's workers; --jobs pair to
-// SpinningPair (below), every call.
+// --workers all hands every call to all of the job system's workers; --jobs pair every call
+// to SpinningPair (below). Exit code 2 for bad options, 1 for an error while stepping.
 #include <atomic>
 #include <chrono>
+#include <cerrno>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -16,13 +20,17 @@
 #include <string>
 #include <thread>
 
+#include <immintrin.h>
+
 #include "bench_scene.hpp"
 
 namespace {
 
 // The least a second core can cost a call: one helper thread that spins for the next job,
 // each call cut into two fixed halves, the caller running the first. No stealing, no
-// sleeping, two cache lines shared per call (the job, the helper's done count).
+// sleeping, three cache lines shared per call (the job, its ticket, the helper's done count).
+// For one host thread that never calls it from inside a task, and for calls that want every
+// worker (WorkerChoice::all: min_range 1, so any split is allowed).
 class SpinningPair final : public kinema::JobSystem {
  public:
   SpinningPair() : helper_([this] { serve(); }) {}
@@ -37,8 +45,7 @@ class SpinningPair final : public kinema::JobSystem {
     const std::uint64_t ticket = posted_.load(std::memory_order_relaxed) + 1;
     posted_.store(ticket, std::memory_order_release);
     if (half > 0) task(0, half, 0, context);
-    while (done_.load(std::memory_order_acquire) != ticket) {
-    }
+    while (done_.load(std::memory_order_acquire) != ticket) _mm_pause();
     return nullptr;
   }
   void wait(kinema::JobHandle) override {}
@@ -53,7 +60,10 @@ class SpinningPair final : public kinema::JobSystem {
     std::uint64_t seen = 0;
     while (!quit_.load(std::memory_order_acquire)) {
       const std::uint64_t ticket = posted_.load(std::memory_order_acquire);
-      if (ticket == seen) continue;
+      if (ticket == seen) {
+        _mm_pause();
+        continue;
+      }
       seen = ticket;
       if (job_.begin < job_.end) job_.task(job_.begin, job_.end, 1, job_.context);
       done_.store(ticket, std::memory_order_release);
@@ -76,55 +86,67 @@ struct Options {
   int warmup = 20;
 };
 
-long parse_count(const char* flag, const char* text, long low) {
+[[noreturn]] void refuse(const std::string& why) {
+  std::fprintf(stderr, "kinema_first_calls: %s (see the head of bench/first_calls.cpp)\n", why.c_str());
+  std::exit(2);
+}
+
+// A whole number in [low, high], all of `text`.
+long long parse_count(const char* flag, const char* text, long long low, long long high) {
   char* end = nullptr;
-  const long value = std::strtol(text, &end, 10);
-  if (end == text || *end != '\0' || value < low) {
-    std::fprintf(stderr, "kinema_first_calls: %s needs a whole number >= %ld, not '%s'\n", flag, low, text);
-    std::exit(2);
+  errno = 0;
+  const long long value = std::strtoll(text, &end, 10);
+  if (end == text || *end != '\0' || errno == ERANGE || value < low || value > high) {
+    refuse(std::string(flag) + " needs a whole number in [" + std::to_string(low) + ", " + std::to_string(high) +
+           "], not '" + text + "'");
   }
   return value;
 }
 
+bool one_of(const char* value, const char* a, const char* b) {
+  return std::strcmp(value, a) == 0 || (b != nullptr && std::strcmp(value, b) == 0);
+}
+
 Options parse(int argc, char** argv) {
   Options o;
+  bool threads_given = false;
   for (int a = 1; a < argc; ++a) {
     const std::string flag = argv[a];
     if (flag == "--trace") {
       o.trace = true;
       continue;
     }
-    if (a + 1 == argc) {
-      std::fprintf(stderr, "kinema_first_calls: '%s' needs a value (see the head of bench/first_calls.cpp)\n", argv[a]);
-      std::exit(2);
-    }
+    if (a + 1 == argc) refuse("'" + flag + "' needs a value");
     const char* value = argv[++a];
-    if (flag == "--threads") o.threads = unsigned(parse_count("--threads", value, 0));
-    else if (flag == "--workers" && (std::strcmp(value, "all") == 0 || std::strcmp(value, "measured") == 0))
-      o.all_workers = std::strcmp(value, "all") == 0;
-    else if (flag == "--jobs" && std::strcmp(value, "pair") == 0)
+    constexpr long long kMaxCount = 1 << 30;
+    if (flag == "--threads") {
+      o.threads = unsigned(parse_count("--threads", value, 0, 1024));
+      threads_given = true;
+    } else if (flag == "--workers") {
+      if (!one_of(value, "all", "measured")) refuse("--workers takes all or measured, not '" + std::string(value) + "'");
+      o.all_workers = one_of(value, "all", nullptr);
+    } else if (flag == "--jobs") {
+      if (!one_of(value, "pair", nullptr)) refuse("--jobs takes pair, not '" + std::string(value) + "'");
       o.spinning_pair = true;
-    else if (flag == "--bodies") o.bodies = std::size_t(parse_count("--bodies", value, 1));
-    else if (flag == "--calls") o.calls = int(parse_count("--calls", value, 2));
-    else if (flag == "--warmup") o.warmup = int(parse_count("--warmup", value, 0));
-    else {
-      std::fprintf(stderr, "kinema_first_calls: unknown option '%s'\n", flag.c_str());
-      std::exit(2);
+    } else if (flag == "--bodies") {
+      o.bodies = std::size_t(parse_count("--bodies", value, 1, kMaxCount));
+    } else if (flag == "--calls") {
+      o.calls = int(parse_count("--calls", value, 2, kMaxCount));
+    } else if (flag == "--warmup") {
+      o.warmup = int(parse_count("--warmup", value, 0, kMaxCount));
+    } else {
+      refuse("unknown option '" + flag + "'");
     }
   }
-  if (o.warmup >= o.calls) {
-    std::fprintf(stderr, "kinema_first_calls: --warmup must be below --calls\n");
-    std::exit(2);
-  }
+  if (o.warmup >= o.calls) refuse("--warmup must be below --calls");
+  if (o.spinning_pair && (threads_given || o.all_workers)) refuse("--jobs pair takes neither --threads nor --workers");
   return o;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// Steps as the options say and prints the one line tools/bench reads.
+void step_calls(const Options& o) {
   using namespace kinema;
   using Clock = std::chrono::steady_clock;
-  const Options o = parse(argc, argv);
   const Scene scene = bench::bench_scene(o.bodies);
   ParticleSet<float> bodies = make_particles<float>(scene);
   StepperOptions options = o.threads == 1 ? on_calling_thread() : StepperOptions{};
@@ -147,7 +169,20 @@ int main(int argc, char** argv) {
     if (o.trace) std::fprintf(stderr, "call %d us %.3f favoured %u\n", call, 1e6 * seconds, stepper.chosen_workers());
     if (o.threads != 1 && first_with_workers < 0 && stepper.chosen_workers() > 0) first_with_workers = call;
   }
-  std::printf("threads %u bodies %zu calls %d mean_us %.3f first_call_favouring_workers %d\n", o.threads,
-              o.bodies, o.calls, 1e6 * timed / (o.calls - o.warmup), first_with_workers);
+  std::printf("threads %u jobs %s bodies %zu calls %d mean_us %.3f first_call_favouring_workers %d\n", o.threads,
+              o.spinning_pair ? "pair" : "default", o.bodies, o.calls, 1e6 * timed / (o.calls - o.warmup),
+              first_with_workers);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Options o = parse(argc, argv);
+  try {
+    step_calls(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "kinema_first_calls: %s\n", e.what());
+    return 1;
+  }
   return 0;
 }
