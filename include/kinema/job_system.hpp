@@ -97,6 +97,10 @@ struct WorkerSpin {
 // most 20 ms): a first step does not pay for oneTBB's thread start. The arena is created
 // once, not per step. A host's own job system never spins for kinema. enqueue returns once
 // every worker that took its job is done with it, never waiting for another caller's job.
+// A worker that takes a job on the core of the thread that posted it (Linux may wake a
+// sleeping thread on its waker's core) moves to another of its allowed cores first, so that
+// its spin never holds its caller's core until the next scheduler tick (milliseconds); its
+// allowed cores stay as they were.
 class TbbJobSystem final : public JobSystem {
  public:
   explicit TbbJobSystem(unsigned threads = 0, WorkerSpin spin = {});

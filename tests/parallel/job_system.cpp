@@ -8,9 +8,12 @@
 #include <thread>
 #include <vector>
 
+#include <sched.h>
+
 #include "kinema/error.hpp"
 
 #include "kinema/job_system.hpp"
+#include "parallel/cores.hpp"
 #include "thread_pool.hpp"
 
 using namespace kinema;
@@ -157,4 +160,22 @@ TEST_CASE("KINEMA_WORKER_SPIN_US must be a whole number of microseconds", "[job_
   CHECK(default_job_system(7).worker_count() == 7);
   if (outer != nullptr) setenv("KINEMA_WORKER_SPIN_US", kept.c_str(), 1);
   else unsetenv("KINEMA_WORKER_SPIN_US");
+}
+
+TEST_CASE("a worker leaves the core it shares with its caller, and keeps every core it may use", "[job_system]") {
+  cpu_set_t allowed;
+  REQUIRE(sched_getaffinity(0, sizeof allowed, &allowed) == 0);
+  std::thread([&] {
+    const int here = kinema::detail::current_cpu();
+    REQUIRE(here >= 0);
+    kinema::detail::leave_core(here);
+    cpu_set_t after;
+    REQUIRE(sched_getaffinity(0, sizeof after, &after) == 0);
+    CHECK(CPU_EQUAL(&after, &allowed));  // the thread's allowed cores are as before
+    if (CPU_COUNT(&allowed) > 1) {
+      CHECK(kinema::detail::current_cpu() != here);
+    } else {
+      CHECK(kinema::detail::current_cpu() == here);  // nowhere else to go
+    }
+  }).join();
 }
