@@ -99,8 +99,9 @@ struct WorkerSpin {
 // every worker that took its job is done with it, never waiting for another caller's job.
 // A worker that takes a job on the core of the thread that posted it (Linux may wake a
 // sleeping thread on its waker's core) moves to another of its allowed cores first, so that
-// its spin never holds its caller's core until the next scheduler tick (milliseconds); its
-// allowed cores stay as they were.
+// its spin after the job does not hold its caller's core until the next scheduler tick
+// (milliseconds); it then gets back the affinity mask it had. A worker woken by wake() alone
+// is not checked until it takes a job.
 class TbbJobSystem final : public JobSystem {
  public:
   explicit TbbJobSystem(unsigned threads = 0, WorkerSpin spin = {});

@@ -4,6 +4,7 @@
 #include "parallel/cores.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <array>
 #include <atomic>
 #include <charconv>
@@ -21,9 +22,10 @@
 
 #if defined(__x86_64__)
 #include <immintrin.h>
+#endif
 #if defined(__linux__)
 #include <sched.h>
-#endif
+#include <unistd.h>
 #endif
 
 #include <tbb/global_control.h>
@@ -234,7 +236,6 @@ struct Workforce {
   std::atomic<bool> closing{false};
   std::atomic<unsigned> started{0};  // tasks that have begun, ever
   std::atomic<std::int64_t> spun_ns{0};
-
   void serve(unsigned worker, bool spin_first);
   std::uintptr_t spin_until(const Mailbox& m, std::int64_t until);
   std::uintptr_t sleep(Mailbox& m);
@@ -466,16 +467,56 @@ int current_cpu() {
 #endif
 }
 
-void leave_core(int cpu) {
+namespace {
+
 #if defined(__linux__)
-  cpu_set_t allowed;
-  if (cpu < 0 || cpu >= CPU_SETSIZE || sched_getaffinity(0, sizeof allowed, &allowed) != 0) return;
-  cpu_set_t elsewhere = allowed;
-  CPU_CLR(cpu, &elsewhere);
-  if (CPU_COUNT(&elsewhere) == 0 || sched_setaffinity(0, sizeof elsewhere, &elsewhere) != 0) return;
-  sched_setaffinity(0, sizeof allowed, &allowed);
+// The calling thread's allowed cores, in a set sized for the machine (CPU_ALLOC: more than
+// 1024 cores too); nullptr where the system refuses.
+struct CoreSet {
+  cpu_set_t* set = nullptr;
+  std::size_t bytes = 0;
+  int cores = 0;
+  CoreSet() {
+    const long configured = sysconf(_SC_NPROCESSORS_CONF);
+    for (int n = int(std::max(configured, 1024L)); n <= (1 << 20); n *= 2) {
+      set = CPU_ALLOC(n);
+      bytes = CPU_ALLOC_SIZE(n);
+      cores = n;
+      if (set == nullptr) return;
+      if (sched_getaffinity(0, bytes, set) == 0) return;
+      CPU_FREE(set);
+      set = nullptr;
+      if (errno != EINVAL) return;
+    }
+  }
+  ~CoreSet() {
+    if (set != nullptr) CPU_FREE(set);
+  }
+  CoreSet(const CoreSet&) = delete;
+  CoreSet& operator=(const CoreSet&) = delete;
+};
+#endif
+
+}  // namespace
+
+bool leave_core(int cpu) {
+#if defined(__linux__)
+  CoreSet allowed;
+  if (allowed.set == nullptr || cpu < 0 || cpu >= allowed.cores || !CPU_ISSET_S(cpu, allowed.bytes, allowed.set)) {
+    return false;
+  }
+  CoreSet elsewhere;
+  if (elsewhere.set == nullptr || elsewhere.bytes != allowed.bytes) return false;
+  CPU_CLR_S(cpu, elsewhere.bytes, elsewhere.set);
+  if (CPU_COUNT_S(elsewhere.bytes, elsewhere.set) == 0) return false;
+  if (sched_setaffinity(0, elsewhere.bytes, elsewhere.set) != 0) return false;
+  const bool moved = current_cpu() != cpu;  // the kernel moves the thread before it returns
+  // The allowed cores back, twice if need be: a thread left narrowed would never use `cpu`.
+  if (sched_setaffinity(0, allowed.bytes, allowed.set) != 0) sched_setaffinity(0, allowed.bytes, allowed.set);
+  return moved;
 #else
   (void)cpu;
+  return false;
 #endif
 }
 
