@@ -4,9 +4,9 @@
 #include "parallel/cores.hpp"
 
 #include <algorithm>
-#include <cerrno>
 #include <array>
 #include <atomic>
+#include <cerrno>
 #include <charconv>
 #include <condition_variable>
 #include <cstdint>
@@ -139,7 +139,6 @@ struct alignas(64) Slice {
 
 constexpr unsigned kMaxSlices = 64;
 
-
 // One call's items, cut into one contiguous slice per worker. A worker runs its own slice
 // front to back, so across steps it meets the same bodies, in its own cache. Then it takes
 // chunks from the backs of the other slices, so a worker that joins late or is slowed down
@@ -236,6 +235,7 @@ struct Workforce {
   std::atomic<bool> closing{false};
   std::atomic<unsigned> started{0};  // tasks that have begun, ever
   std::atomic<std::int64_t> spun_ns{0};
+
   void serve(unsigned worker, bool spin_first);
   std::uintptr_t spin_until(const Mailbox& m, std::int64_t until);
   std::uintptr_t sleep(Mailbox& m);
