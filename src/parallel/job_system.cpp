@@ -505,11 +505,13 @@ bool leave_core(int cpu) {
   if (allowed.set == nullptr || cpu < 0 || cpu >= allowed.cores || !CPU_ISSET_S(cpu, allowed.bytes, allowed.set)) {
     return false;
   }
-  CoreSet elsewhere;
-  if (elsewhere.set == nullptr || elsewhere.bytes != allowed.bytes) return false;
-  CPU_CLR_S(cpu, elsewhere.bytes, elsewhere.set);
-  if (CPU_COUNT_S(elsewhere.bytes, elsewhere.set) == 0) return false;
-  if (sched_setaffinity(0, elsewhere.bytes, elsewhere.set) != 0) return false;
+  cpu_set_t* elsewhere = CPU_ALLOC(allowed.cores);
+  if (elsewhere == nullptr) return false;
+  std::memcpy(elsewhere, allowed.set, allowed.bytes);
+  CPU_CLR_S(cpu, allowed.bytes, elsewhere);
+  const bool narrowed = CPU_COUNT_S(allowed.bytes, elsewhere) > 0 && sched_setaffinity(0, allowed.bytes, elsewhere) == 0;
+  CPU_FREE(elsewhere);
+  if (!narrowed) return false;
   const bool moved = current_cpu() != cpu;  // the kernel moves the thread before it returns
   // The allowed cores back, twice if need be: a thread left narrowed would never use `cpu`.
   if (sched_setaffinity(0, allowed.bytes, allowed.set) != 0) sched_setaffinity(0, allowed.bytes, allowed.set);
