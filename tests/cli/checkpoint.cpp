@@ -34,7 +34,7 @@ std::string scene(const std::string& name) { return std::string(KINEMA_SCENES) +
 // fewer times (it looks for memory errors; the release run counts the kills).
 #ifdef KINEMA_SANITIZED
 constexpr long kSlower = 80;
-constexpr int kKills = 4;
+constexpr int kKills = 2;
 constexpr int kKillAfterMs[2] = {1500, 3000};  // its start (the stiffness estimate) takes a second
 const char* const kStressBodies = "4000";       // N-body among N/16 of them
 #else
