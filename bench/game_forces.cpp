@@ -1,7 +1,8 @@
 // Forces from the game, beside the fused rows of the same run: the bench scene (gravity,
 // linear drag, a spring) as built-in terms; the same with a force applied to every body; with
 // a gravity factor and damping rate per body (and angular damping for rigid bodies); with
-// gravity moved into a one-line callback (the block path); with a coupled term that adds
+// gravity moved into a one-line callback (the block path), as g times the view's mass and as
+// g over its inverse mass (a division per body and stage); with a coupled term that adds
 // nothing (the staged path); and rigid bodies plain, with applied forces and torques, and
 // with their angular drag in a one-line callback (the rigid block path), and both in chains
 // of 64 joined by springs (spring pairs between particles, body springs between points of
@@ -19,7 +20,7 @@ namespace {
 
 constexpr std::uint64_t kSteps = 20;
 
-enum class Variant { fused, applied, parameters, callback, staged, springs };
+enum class Variant { fused, applied, parameters, callback, callback_divide, staged, springs };
 
 // Chains of 64: body i joined to i + 1 within its chain.
 constexpr std::size_t kChain = 64;
@@ -31,6 +32,7 @@ const char* variant_name(Variant v) {
     case Variant::applied: return "applied";
     case Variant::parameters: return "parameters";
     case Variant::callback: return "callback";
+    case Variant::callback_divide: return "callback-divide";
     case Variant::staged: return "staged";
     case Variant::springs: return "springs";
   }
@@ -60,10 +62,16 @@ void set_parameters(Set& bodies) {
 template <class T>
 ForceModel<T> variant_forces(Variant v, std::size_t n) {
   Scene scene = bench_scene(n);
-  if (v == Variant::callback) scene.forces.erase(scene.forces.begin());  // gravity
+  const bool by_callback = v == Variant::callback || v == Variant::callback_divide;
+  if (by_callback) scene.forces.erase(scene.forces.begin());  // gravity
   ForceModel<T> f = make_forces<T>(scene);
   if (v == Variant::callback) {
     f.add([](ParticleBlock<T> b) {  // by value: the compiler knows its arrays apart
+      for (std::size_t i = 0; i < b.count; ++i) b.fy[i] += T(kGravity) * b.mass[i];
+    });
+  }
+  if (v == Variant::callback_divide) {
+    f.add([](ParticleBlock<T> b) {
       for (std::size_t i = 0; i < b.count; ++i) b.fy[i] += T(kGravity) / b.inv_mass[i];
     });
   }
@@ -155,7 +163,8 @@ void rigid_forces(benchmark::State& state, Variant v) {
 
 void register_all() {
   const std::string isa(isa_name(best_isa()));
-  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback, Variant::staged, Variant::springs}) {
+  for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback, Variant::callback_divide,
+                    Variant::staged, Variant::springs}) {
     const std::string name = std::string("game/") + variant_name(v) + "/rk4/float/" + isa;
     benchmark::RegisterBenchmark(name.c_str(), particle_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);

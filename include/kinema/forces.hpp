@@ -159,7 +159,8 @@ inline constexpr int kMaxPointForces = 4;
 // block (at most kBlockBodies) at one stage, as SoA pointers already offset to `begin`. It adds forces into fx, fy, fz
 // (zeroed before the call); they are divided by mass afterwards. Counts include the inert
 // padding bodies at the end of the set (at the origin, inv_mass 0); forces on them are
-// ignored.
+// ignored. `mass` is 1 / inv_mass, and 0 where inv_mass is 0 (kinematic and padding bodies):
+// a force that grows with mass (gravity, fy[i] += g * mass[i]) needs no division per body.
 //
 // Every array of a view is its own (none overlaps another), and its pointers say so
 // (__restrict): a callback that takes the view by value, [](kinema::ParticleBlock<float> b),
@@ -171,7 +172,7 @@ struct ParticleBlock {
   std::size_t count = 0;
   double t = 0;
   const T *__restrict px, *__restrict py, *__restrict pz, *__restrict vx, *__restrict vy, *__restrict vz,
-      *__restrict inv_mass;
+      *__restrict inv_mass, *__restrict mass;
   T *__restrict fx, *__restrict fy, *__restrict fz;
 };
 
@@ -192,7 +193,8 @@ using ForceCallback = std::function<void(const ParticleBlock<T>&)>;
 // rotates as q / |q|), world angular velocity and world angular momentum, inverse mass and
 // inverse principal moments. It adds a world force (at the centre of mass) into fx, fy, fz
 // and a world torque into tx, ty, tz, zeroed before the call. Padding bodies (inv_mass 0)
-// ignore both, as kinematic bodies do.
+// ignore both, as kinematic bodies do. `mass` is a ParticleBlock's: 1 / inv_mass, 0 where
+// inv_mass is 0.
 // Its arrays are its own, as a ParticleBlock's: take it by value to vectorize.
 template <class T>
 struct RigidBlock {
@@ -203,7 +205,7 @@ struct RigidBlock {
   const T *__restrict qw, *__restrict qx, *__restrict qy, *__restrict qz;
   const T *__restrict wx, *__restrict wy, *__restrict wz;
   const T *__restrict lx, *__restrict ly, *__restrict lz;
-  const T *__restrict inv_mass, *__restrict inv_ix, *__restrict inv_iy, *__restrict inv_iz;
+  const T *__restrict inv_mass, *__restrict mass, *__restrict inv_ix, *__restrict inv_iy, *__restrict inv_iz;
   T *__restrict fx, *__restrict fy, *__restrict fz;
   T *__restrict tx, *__restrict ty, *__restrict tz;
 };

@@ -19,7 +19,7 @@ kernels::SliceLayout BlockPath<T>::layout() const {
 template <class T>
 void BlockPath<T>::reserve(std::size_t padded) {
   if (padded <= capacity_) return;
-  region_ = layout().arrays() * kernels::kSliceBodies<T>;
+  region_ = (layout().arrays() + 1) * kernels::kSliceBodies<T>;
   scratch_.resize(block_count(padded) * region_);
   if (may_throw()) {
     for (auto& a : saved_) a.resize(padded);
@@ -45,6 +45,16 @@ void BlockPath<T>::prepare(const StepContext<T>& c) {
   if (method_.kind == MethodKind::kick_drift) {
     for (int k = 0; k < method_.scheme.count; ++k) op_steps_[k] = T(method_.scheme.ops[k].weight) * c.h;
   }
+}
+
+template <class T>
+T* BlockPath<T>::masses(Block slice) {
+  return at(scratch_.data() + slice.begin / kBlockBodies * region_, layout().arrays());
+}
+
+template <class T>
+void BlockPath<T>::begin_slice(Block slice) {
+  fill_masses(job_.bodies.inv_mass + slice.begin, masses(slice), slice.end - slice.begin);
 }
 
 template <class T>
@@ -74,6 +84,7 @@ void BlockPath<T>::call_back(int s, Block slice, T* scratch, double t) const {
     v.vx = at(scratch, l.vs(s, 0)), v.vy = at(scratch, l.vs(s, 1)), v.vz = at(scratch, l.vs(s, 2));
   }
   v.inv_mass = job_.bodies.inv_mass + i;
+  v.mass = at(scratch, l.arrays());
   v.fx = at(scratch, l.force(0)), v.fy = at(scratch, l.force(1)), v.fz = at(scratch, l.force(2));
   for (const auto& callback : forces_.callbacks()) callback(v);
 }

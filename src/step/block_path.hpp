@@ -31,6 +31,8 @@ class BlockPath {
   bool may_throw() const { return !forces_.callbacks().empty(); }
   // Builds the call's job (step size, where the arrays are): before any step_block.
   void prepare(const StepContext<T>& c);
+  // Before a slice's steps of a call: its bodies' masses, as the callbacks' view gives them.
+  void begin_slice(Block slice);
   // One step of one slice of a block (at most kernels::kSliceBodies<T> bodies) from time t0.
   void step_block(Block slice, double t0);
   void keep_block(Block b);     // saves the bodies' positions and velocities
@@ -42,6 +44,7 @@ class BlockPath {
   void call_back(int s, Block slice, T* scratch, double t) const;
   kernels::SliceLayout layout() const;
   static T* at(T* scratch, std::size_t array);  // one array of a slice's scratch
+  T* masses(Block slice);                        // after the layout's arrays
 
   const ForceModel<T>& forces_;
   const Method& method_;
@@ -52,8 +55,8 @@ class BlockPath {
   kernels::BlockJob<T> job_{};
   std::array<T, kMaxStages> op_steps_{};  // kick-drift: w h per operation
   std::size_t capacity_ = 0;
-  // Per block, one slice's stage state: the slices of a block take their steps one after
-  // another in it, so it stays in the L1 cache. The callbacks' forces are zero between
+  // Per block, one slice's stage state and masses: the slices of a block take their steps
+  // one after another in it, so it stays in the L1 cache. The callbacks' forces are zero between
   // phases: each kernel that reads them leaves zeros.
   AlignedArray<T> scratch_;
   std::size_t region_ = 0;  // elements of scratch_ per block

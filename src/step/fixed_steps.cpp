@@ -493,6 +493,7 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
         if (guard) guard->checkpoint.save(guard->state, block);
         for (std::size_t s = block.begin; s < block.end; s += kSliceBodies) {
           const Block slice{s, std::min(s + kSliceBodies, block.end)};
+          path.begin(slice);
           for (std::uint64_t k = 0; k < steps; ++k) {
             Clock<T> now = start;
             now.steps += k;

@@ -101,7 +101,8 @@ class FixedSteps {
   template <class Set, class Path>
   void run_blocks(const Workers& w, Set& set, Path& path, std::uint64_t steps, Guard* guard);
 
-  // The block paths as run_blocks takes them: may_throw(), keep, restore and step a block.
+  // The block paths as run_blocks takes them: may_throw(), keep and restore a block, begin a
+  // slice's steps of a call and step a slice.
   // A slice of a block takes every step of a call, every phase over the slice, whose stage
   // state stays in the L1 cache meanwhile (see kernels::kSliceBodies).
   static constexpr std::size_t kSliceBodies = kernels::kSliceBodies<T>;
@@ -111,6 +112,7 @@ class FixedSteps {
     bool may_throw() const { return staged.may_throw(); }
     void keep(Block b) { staged.keep_block(c, b); }
     void restore(Block b) { staged.restore_block(c, b); }
+    void begin(Block) {}
     void step(Block b, double t0) {
       StepContext<T> at = c;
       at.t0 = t0;
@@ -122,6 +124,7 @@ class FixedSteps {
     bool may_throw() const { return path.may_throw(); }
     void keep(Block b) { path.keep_block(b); }
     void restore(Block b) { path.restore_block(b); }
+    void begin(Block b) { path.begin_slice(b); }
     void step(Block b, double t0) { path.step_block(b, t0); }
   };
   struct RigidBlocks {
@@ -130,6 +133,7 @@ class FixedSteps {
     bool may_throw() const { return path.may_throw(); }
     void keep(Block b) { path.keep_block(call, b); }
     void restore(Block b) { path.restore_block(call, b); }
+    void begin(Block) {}
     void step(Block b, double t0) { path.step_block(call, b, t0); }
   };
   void clamp(ParticleSet<T>& b, Block block) const;

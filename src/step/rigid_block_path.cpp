@@ -24,6 +24,7 @@ void RigidBlockPath<T>::reserve(std::size_t padded) {
   for (int s = 0; s < stages; ++s) grow(vs_[s]), grow(kv_[s]), grow(kl_[s]), grow(kq_[s]);
   // step_all may keep the state with coupled terms, and an attempt always does.
   if (may_throw() || coupled() || method_.embedded_order > 0) grow(saved_);
+  if (may_throw()) mass_.resize(padded);  // user code reads masses: callbacks, coupled terms
   if (method_.embedded_order > 0) block_error_.resize(block_count(padded));
   capacity_ = padded;
 }
@@ -35,6 +36,7 @@ std::size_t RigidBlockPath<T>::bytes() const {
     for (const AlignedArray<T>& a : arrays) n += a.size() * sizeof(T);
   };
   add(xs_), add(ls_), add(omega_), add(force_), add(torque_), add(qs_), add(saved_);
+  n += mass_.size() * sizeof(T);
   for (int s = 0; s < kMaxStages; ++s) add(vs_[s]), add(kv_[s]), add(kl_[s]), add(kq_[s]);
   return n;
 }
@@ -113,6 +115,7 @@ template <class T>
 void RigidBlockPath<T>::prepare(const Call& call) {
   coupling_.check_reach(call.bodies.size());
   const kernels::RigidBlockJob<T> base = job(call);
+  if (may_throw()) fill_masses(base.inv_mass, mass_.data(), call.bodies.padded_size());
   if (method_.kind == MethodKind::runge_kutta) {
     const ButcherTableau& tab = method_.tableau;
     for (int s = 0; s < tab.stages; ++s) stage_jobs_[s] = with_terms(base, tab.a[s], s, call.h, s);
@@ -149,6 +152,7 @@ RigidBlock<T> RigidBlockPath<T>::view(const kernels::RigidBlockJob<T>& j, Block 
   v.wx = j.omega[0] + i, v.wy = j.omega[1] + i, v.wz = j.omega[2] + i;
   v.lx = j.ls[0] + i, v.ly = j.ls[1] + i, v.lz = j.ls[2] + i;
   v.inv_mass = j.inv_mass + i;
+  v.mass = mass_.data() + i;
   v.inv_ix = j.inv_inertia[0] + i, v.inv_iy = j.inv_inertia[1] + i, v.inv_iz = j.inv_inertia[2] + i;
   v.fx = j.force[0] + i, v.fy = j.force[1] + i, v.fz = j.force[2] + i;
   v.tx = j.torque[0] + i, v.ty = j.torque[1] + i, v.tz = j.torque[2] + i;
@@ -206,6 +210,7 @@ void RigidBlockPath<T>::add_coupled(const kernels::RigidBlockJob<T>& j, Block b,
   view.px = j.xs[0] + b.begin, view.py = j.xs[1] + b.begin, view.pz = j.xs[2] + b.begin;
   view.vx = j.vs[0] + b.begin, view.vy = j.vs[1] + b.begin, view.vz = j.vs[2] + b.begin;
   view.inv_mass = j.inv_mass + b.begin;
+  view.mass = mass_.data() + b.begin;
   view.fx = j.force[0] + b.begin, view.fy = j.force[1] + b.begin, view.fz = j.force[2] + b.begin;
   for (const auto& term : forces_.coupled_terms()) term->accumulate(all, view);
 }

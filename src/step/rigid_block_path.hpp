@@ -110,6 +110,7 @@ class RigidBlockPath {
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> vs_, kv_, kl_;
   std::array<std::array<AlignedArray<T>, 4>, kMaxStages> kq_;
   std::array<AlignedArray<T>, 13> saved_;
+  AlignedArray<T> mass_;  // with callbacks or coupled terms: their views' masses (prepare)
   std::vector<double> block_error_;  // an attempt's sum of squared weighted errors per block
   // The call's jobs (prepare): per stage, the finish; per kick-drift operation, its step
   // (w h) and its turn.

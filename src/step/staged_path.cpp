@@ -49,6 +49,7 @@ std::size_t StagedPath<T>::bytes() const {
   };
   for (int s = 0; s < kMaxStages; ++s) add(stage_x_[s]), add(stage_v_[s]), add(stage_a_[s]);
   add(force_);
+  n += mass_.size() * sizeof(T);
   for (const auto& kept : saved_) add(kept);
   return n;
 }
@@ -65,6 +66,7 @@ void StagedPath<T>::reserve(std::size_t padded) {
   }
   if (needs_force_scratch()) {
     for (auto& f : force_) f.resize(padded);
+    mass_.resize(padded);
   }
   if (keeps_state()) {
     for (auto& kept : saved_) {
@@ -269,6 +271,9 @@ void StagedPath<T>::prepare(const StepContext<T>& c) {
 template <class T>
 void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) {
   const int s = accel_slot(p);
+  if (s == 0 && needs_force_scratch()) {  // the views' masses, once a step
+    fill_masses(c.bodies.inv_mass() + b.begin, mass_.data() + b.begin, b.end - b.begin);
+  }
   if (s == 0 && attempt_ != nullptr && attempt_->reuse_scale > 0) return scale_first_stage(b);
   table_.stage[local_.has_quadratic()][local_.has_central()](stage_jobs_[s], b.begin, b.end);
   if (!needs_force_scratch()) return;
@@ -318,6 +323,7 @@ ParticleBlock<T> StagedPath<T>::block_view(const StepContext<T>& c, int s, Block
   v.px = state_x(c, s, 0) + b.begin, v.py = state_x(c, s, 1) + b.begin, v.pz = state_x(c, s, 2) + b.begin;
   v.vx = state_v(c, s, 0) + b.begin, v.vy = state_v(c, s, 1) + b.begin, v.vz = state_v(c, s, 2) + b.begin;
   v.inv_mass = c.bodies.inv_mass() + b.begin;
+  v.mass = mass_.data() + b.begin;
   v.fx = force_[0].data() + b.begin, v.fy = force_[1].data() + b.begin, v.fz = force_[2].data() + b.begin;
   return v;
 }

@@ -147,6 +147,7 @@ class StagedPath {
   // and the force accumulator of callback and coupled terms. Blocks write disjoint ranges.
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> stage_x_, stage_v_, stage_a_;
   std::array<AlignedArray<T>, 3> force_;
+  AlignedArray<T> mass_;  // with force_: the views' masses (fill_masses)
   std::array<std::array<AlignedArray<T>, 3>, 2> saved_;  // x and v before a step that may throw
   // The call's jobs (prepare): per stage slot, the finish (x, v), per kick-drift operation.
   std::array<kernels::StageJob<T>, kMaxStages> stage_jobs_{};

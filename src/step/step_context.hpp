@@ -27,6 +27,12 @@ bool reads_per_body(const ParticleSet<T>& b) {
   return per_body(b).any();
 }
 
+// Each body's mass as a callback's view gives it: 1 / inv_mass, 0 where inv_mass is 0.
+template <class T>
+void fill_masses(const T* inv_mass, T* mass, std::size_t count) {
+  for (std::size_t i = 0; i < count; ++i) mass[i] = inv_mass[i] == T(0) ? T(0) : T(1) / inv_mass[i];
+}
+
 // A set's arrays as the kernels take them.
 template <class T>
 kernels::BodyArrays<T> arrays(ParticleSet<T>& b) {

@@ -1,7 +1,9 @@
 // Forces from the game: forces, torques and impulses applied to single bodies.
 #include <catch2/catch.hpp>
 
+#include <atomic>
 #include <cmath>
+#include <memory>
 
 #include "support.hpp"
 
@@ -302,12 +304,37 @@ ForceModel<T> callback_model(bool with_callback) {
   if (!with_callback) return f.add(Gravity{{0.5, -9.81, 0}}).add(Spring{{0, 0, 0}, 2, 0});
   return f.add([](const ParticleBlock<T>& b) {
     for (std::size_t i = 0; i < b.count; ++i) {
-      if (b.inv_mass[i] == 0) continue;
-      const T m = T(1) / b.inv_mass[i];
+      const T m = b.mass[i];
       b.fx[i] += T(0.5) * m - 2 * b.px[i], b.fy[i] += T(-9.81) * m - 2 * b.py[i], b.fz[i] -= 2 * b.pz[i];
     }
   });
 }
+
+// Counts the views it is given and the bodies whose mass is not 1 / inv_mass (0 where
+// inv_mass is 0), for callbacks and coupled terms alike; views come concurrently.
+struct MassCheck {
+  std::shared_ptr<std::atomic<long>> views = std::make_shared<std::atomic<long>>(0);
+  std::shared_ptr<std::atomic<long>> wrong = std::make_shared<std::atomic<long>>(0);
+  std::shared_ptr<std::atomic<long>> inert = std::make_shared<std::atomic<long>>(0);
+  template <class View>
+  void operator()(const View& b) const {
+    ++*views;
+    for (std::size_t i = 0; i < b.count; ++i) {
+      *inert += b.inv_mass[i] == 0;
+      *wrong += b.mass[i] != (b.inv_mass[i] == 0 ? 0 : 1 / b.inv_mass[i]);
+    }
+  }
+};
+
+class MassCheckTerm final : public CoupledTerm<double> {
+ public:
+  explicit MassCheckTerm(MassCheck check) : check_(std::move(check)) {}
+  void accumulate(const ParticleState<double>&, const ParticleBlock<double>& b) const override { check_(b); }
+  double potential_energy(const ParticleState<double>&) const override { return 0; }
+
+ private:
+  MassCheck check_;
+};
 
 }  // namespace
 
@@ -325,6 +352,40 @@ TEST_CASE("the block path: a callback moves bodies as the equivalent built-in te
       worst = std::max(worst, test::distance(a.position(i), b.position(i)) + test::distance(a.velocity(i), b.velocity(i)));
     }
     CHECK(worst < 1e-11);
+  }
+}
+
+TEST_CASE("a view's mass is 1 / inv_mass, 0 for kinematic and padding bodies, on every path", "[forces][callbacks]") {
+  // The block path, the staged path's callbacks and coupled terms, rigid centres' coupled
+  // terms, rigid callbacks; a mass changed between two calls is seen by the second.
+  for (const Method* m : {&rk4, &velocity_verlet}) {
+    for (const int kind : {0, 1, 2, 3, 4}) {
+      INFO(m->name << ", kind " << kind);
+      const MassCheck check;
+      ForceModel<double> f;
+      if (kind < 2) f.add(ForceCallback<double>(check));
+      if (kind == 2 || kind == 3) f.add(std::make_shared<const MassCheckTerm>(check));
+      if (kind == 4) f.add(RigidCallback<double>(check));
+      StepperOptions o = test::serial_options();
+      o.force_staged = kind == 1;
+      Stepper<double> s(f, *m, o);
+      if (kind >= 3) {
+        RigidBodySet<double> r = test::tumbling_cloud<double>(300);
+        r.set_kinematic(7);
+        s.advance(r, 0.01, 3);
+        r.set_mass(9, 5.0);
+        s.advance(r, 0.01, 3);
+      } else {
+        ParticleSet<double> b = test::cloud<double>(300);
+        b.set_kinematic(7);
+        s.advance(b, 0.01, 3);
+        b.set_mass(9, 5.0);
+        s.advance(b, 0.01, 3);
+      }
+      CHECK(*check.views > 0);
+      CHECK(*check.inert > 0);  // the kinematic body and the padding were seen
+      CHECK(*check.wrong == 0);
+    }
   }
 }
 
