@@ -184,8 +184,10 @@ template <class T>
 void RigidBlockPath<T>::rates(const kernels::RigidBlockJob<T>& j, Block b, double t) {
   if (!coupling_.empty()) coupling_.add(stage_of(j), b.begin, b.end);
   if (forces_.coupled()) add_coupled(j, b, t);
-  const RigidBlock<T> v = view(j, b, t);
-  for (const auto& callback : forces_.rigid_callbacks()) callback(v);
+  if (!forces_.rigid_callbacks().empty()) {  // their masses exist (reserve) only then
+    const RigidBlock<T> v = view(j, b, t);
+    for (const auto& callback : forces_.rigid_callbacks()) callback(v);
+  }
   table_.rigid_block_rates[lowered_.rigid.has_quadratic()][lowered_.rigid.has_central()](j, b.begin, b.end);
   if (const auto& nbody = lowered_.coupled.nbody) {
     kernels::NBodyJob<T> g{};

@@ -66,8 +66,8 @@ void StagedPath<T>::reserve(std::size_t padded) {
   }
   if (needs_force_scratch()) {
     for (auto& f : force_) f.resize(padded);
-    mass_.resize(padded);
   }
+  if (user_views()) mass_.resize(padded);
   if (keeps_state()) {
     for (auto& kept : saved_) {
       for (auto& a : kept) a.resize(padded);
@@ -271,7 +271,7 @@ void StagedPath<T>::prepare(const StepContext<T>& c) {
 template <class T>
 void StagedPath<T>::run_stage(const StepContext<T>& c, const Phase& p, Block b) {
   const int s = accel_slot(p);
-  if (s == 0 && needs_force_scratch()) {  // the views' masses, once a step
+  if (s == 0 && user_views()) {  // the views' masses, at a step's first stage (or each kick)
     fill_masses(c.bodies.inv_mass() + b.begin, mass_.data() + b.begin, b.end - b.begin);
   }
   if (s == 0 && attempt_ != nullptr && attempt_->reuse_scale > 0) return scale_first_stage(b);

@@ -104,6 +104,8 @@ class StagedPath {
   void copy_state(const StepContext<T>& c, Block b, bool save);
   bool coupled() const { return forces_.coupled(); }
   bool needs_force_scratch() const { return coupled() || !forces_.callbacks().empty(); }
+  // Whether user code sees views (callbacks, coupled terms): only then are masses formed.
+  bool user_views() const { return !forces_.callbacks().empty() || !forces_.coupled_terms().empty(); }
 
   bool own_state(int s) const;
   const T* state_x(const StepContext<T>& c, int s, int d) const;
@@ -147,7 +149,7 @@ class StagedPath {
   // and the force accumulator of callback and coupled terms. Blocks write disjoint ranges.
   std::array<std::array<AlignedArray<T>, 3>, kMaxStages> stage_x_, stage_v_, stage_a_;
   std::array<AlignedArray<T>, 3> force_;
-  AlignedArray<T> mass_;  // with force_: the views' masses (fill_masses)
+  AlignedArray<T> mass_;  // where user code sees views: their masses (fill_masses)
   std::array<std::array<AlignedArray<T>, 3>, 2> saved_;  // x and v before a step that may throw
   // The call's jobs (prepare): per stage slot, the finish (x, v), per kick-drift operation.
   std::array<kernels::StageJob<T>, kMaxStages> stage_jobs_{};

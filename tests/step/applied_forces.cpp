@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cmath>
 #include <memory>
+#include <vector>
 
 #include "support.hpp"
 
@@ -313,14 +314,17 @@ ForceModel<T> callback_model(bool with_callback) {
 // Counts the views it is given and the bodies whose mass is not 1 / inv_mass (0 where
 // inv_mass is 0), for callbacks and coupled terms alike; views come concurrently.
 struct MassCheck {
+  std::size_t bodies = 0;  // the set's: views past it are padding
   std::shared_ptr<std::atomic<long>> views = std::make_shared<std::atomic<long>>(0);
   std::shared_ptr<std::atomic<long>> wrong = std::make_shared<std::atomic<long>>(0);
-  std::shared_ptr<std::atomic<long>> inert = std::make_shared<std::atomic<long>>(0);
+  std::shared_ptr<std::atomic<long>> padding = std::make_shared<std::atomic<long>>(0);
+  std::shared_ptr<std::atomic<long>> later_blocks = std::make_shared<std::atomic<long>>(0);
   template <class View>
   void operator()(const View& b) const {
     ++*views;
+    *later_blocks += b.begin >= kBlockBodies;
     for (std::size_t i = 0; i < b.count; ++i) {
-      *inert += b.inv_mass[i] == 0;
+      *padding += b.begin + i >= bodies;
       *wrong += b.mass[i] != (b.inv_mass[i] == 0 ? 0 : 1 / b.inv_mass[i]);
     }
   }
@@ -357,36 +361,57 @@ TEST_CASE("the block path: a callback moves bodies as the equivalent built-in te
 
 TEST_CASE("a view's mass is 1 / inv_mass, 0 for kinematic and padding bodies, on every path", "[forces][callbacks]") {
   // The block path, the staged path's callbacks and coupled terms, rigid centres' coupled
-  // terms, rigid callbacks; a mass changed between two calls is seen by the second.
+  // terms, rigid callbacks, on three blocks and two threads; a kinematic body (index 7) and
+  // one made kinematic between the two calls (index 1500), whose mass the second call sees.
+  constexpr std::size_t kBodies = 2500;  // and padding
   for (const Method* m : {&rk4, &velocity_verlet}) {
     for (const int kind : {0, 1, 2, 3, 4}) {
       INFO(m->name << ", kind " << kind);
-      const MassCheck check;
+      MassCheck check;
+      check.bodies = kBodies;
       ForceModel<double> f;
       if (kind < 2) f.add(ForceCallback<double>(check));
       if (kind == 2 || kind == 3) f.add(std::make_shared<const MassCheckTerm>(check));
       if (kind == 4) f.add(RigidCallback<double>(check));
-      StepperOptions o = test::serial_options();
+      StepperOptions o;
+      o.threads = 2;
       o.force_staged = kind == 1;
       Stepper<double> s(f, *m, o);
-      if (kind >= 3) {
-        RigidBodySet<double> r = test::tumbling_cloud<double>(300);
-        r.set_kinematic(7);
-        s.advance(r, 0.01, 3);
-        r.set_mass(9, 5.0);
-        s.advance(r, 0.01, 3);
-      } else {
-        ParticleSet<double> b = test::cloud<double>(300);
+      auto run = [&](auto& b) {
         b.set_kinematic(7);
         s.advance(b, 0.01, 3);
-        b.set_mass(9, 5.0);
+        b.set_kinematic(1500);
         s.advance(b, 0.01, 3);
+      };
+      if (kind >= 3) {
+        RigidBodySet<double> r = test::tumbling_cloud<double>(kBodies);
+        run(r);
+      } else {
+        ParticleSet<double> b = test::cloud<double>(kBodies);
+        run(b);
       }
       CHECK(*check.views > 0);
-      CHECK(*check.inert > 0);  // the kinematic body and the padding were seen
+      CHECK(*check.later_blocks > 0);
+      CHECK(*check.padding > 0);
       CHECK(*check.wrong == 0);
     }
   }
+  // Error control (its first stage reused from the step before) and the acceleration probe.
+  MassCheck check;
+  check.bodies = kBodies;
+  ForceModel<double> f;
+  f.add(ForceCallback<double>(check));
+  Stepper<double> s(f, dopri5, test::serial_options());
+  ParticleSet<double> b = test::cloud<double>(kBodies);
+  s.advance_to(b, 0.05, Tolerances{1e-6, 1e-6});
+  b.set_kinematic(1500);
+  s.advance_to(b, 0.1, Tolerances{1e-6, 1e-6});
+  const long before_probe = *check.views;
+  std::vector<double> ax(b.padded_size()), ay(ax), az(ax);
+  double* const out[3] = {ax.data(), ay.data(), az.data()};
+  s.accelerations(b, 0.1, out);
+  CHECK(*check.views > before_probe);
+  CHECK(*check.wrong == 0);
 }
 
 TEST_CASE("the block paths read applied forces and torques", "[forces][callbacks]") {
