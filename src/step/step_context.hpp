@@ -27,10 +27,15 @@ bool reads_per_body(const ParticleSet<T>& b) {
   return per_body(b).any();
 }
 
-// Each body's mass as a callback's view gives it: 1 / inv_mass, 0 where inv_mass is 0.
+// Each body's mass as a callback's view gives it: 1 / inv_mass, 0 where inv_mass is 0, as
+// dynamic / (inv_mass + 1 - dynamic), dynamic 1 or 0: no division by zero (a host may trap
+// it) and no branch, so the loop vectorizes.
 template <class T>
 void fill_masses(const T* inv_mass, T* mass, std::size_t count) {
-  for (std::size_t i = 0; i < count; ++i) mass[i] = inv_mass[i] == T(0) ? T(0) : T(1) / inv_mass[i];
+  for (std::size_t i = 0; i < count; ++i) {
+    const T dynamic = T(inv_mass[i] != T(0));
+    mass[i] = dynamic / (inv_mass[i] + (T(1) - dynamic));
+  }
 }
 
 // A set's arrays as the kernels take them.
