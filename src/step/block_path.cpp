@@ -48,18 +48,18 @@ void BlockPath<T>::prepare(const StepContext<T>& c) {
 }
 
 template <class T>
-T* BlockPath<T>::masses(Block slice) {
-  return at(scratch_.data() + slice.begin / kBlockBodies * region_, layout().arrays());
+T* BlockPath<T>::region(Block b) {
+  return scratch_.data() + b.begin / kBlockBodies * region_;
 }
 
 template <class T>
 void BlockPath<T>::begin_slice(Block slice) {
-  fill_masses(job_.bodies.inv_mass + slice.begin, masses(slice), slice.end - slice.begin);
+  fill_masses(job_.bodies.inv_mass + slice.begin, at(region(slice), layout().arrays()), slice.end - slice.begin);
 }
 
 template <class T>
 void BlockPath<T>::step_block(Block slice, double t0) {
-  T* scratch = scratch_.data() + slice.begin / kBlockBodies * region_;
+  T* scratch = region(slice);
   if (method_.kind == MethodKind::runge_kutta) return runge_kutta_step(slice, scratch, t0);
   kick_drift_step(slice, scratch, t0);
 }
@@ -123,7 +123,7 @@ void BlockPath<T>::keep_block(Block b) {
 // leave zeros for the next callbacks.
 template <class T>
 void BlockPath<T>::restore_block(Block b) {
-  std::fill_n(scratch_.data() + b.begin / kBlockBodies * region_, region_, T(0));
+  std::fill_n(region(b), region_, T(0));
   for (int d = 0; d < 3; ++d) {
     std::copy(saved_[d].data() + b.begin, saved_[d].data() + b.end, job_.bodies.x[d] + b.begin);
     std::copy(saved_[3 + d].data() + b.begin, saved_[3 + d].data() + b.end, job_.bodies.v[d] + b.begin);

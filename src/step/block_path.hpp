@@ -44,7 +44,7 @@ class BlockPath {
   void call_back(int s, Block slice, T* scratch, double t) const;
   kernels::SliceLayout layout() const;
   static T* at(T* scratch, std::size_t array);  // one array of a slice's scratch
-  T* masses(Block slice);                        // after the layout's arrays
+  T* region(Block b);                            // its block's scratch: stage state, then masses
 
   const ForceModel<T>& forces_;
   const Method& method_;
