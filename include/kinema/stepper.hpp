@@ -93,7 +93,8 @@ struct StepperOptions {
   bool force_staged = false;
   // Scalar and SSE2 paths only (CPUs without FMA, or a forced isa): multiply then add
   // instead of an exact fused multiply-add. Faster there, but results then differ in the
-  // last bits from the AVX2 and AVX-512 paths. Those always use their FMA units.
+  // last bits from the AVX2 and AVX-512 paths. Those always use their FMA units. (A build
+  // configured with KINEMA_RELAXED_KERNELS=OFF has only the exact kernels: this selects them.)
   bool relaxed_fma = false;
   // Rigid bodies: renormalize orientation quaternions after each step. Off only to test
   // how a method lets |q| drift.

@@ -14,9 +14,17 @@ const KernelTable<T>& kernel_table(Isa isa, bool relaxed) {
     case Isa::avx2: return avx2_table<T>();
 #endif
 #ifdef KINEMA_KERNELS_SSE2
-    case Isa::sse2: return relaxed ? sse2_relaxed_table<T>() : sse2_table<T>();
+    case Isa::sse2:
+#ifdef KINEMA_KERNELS_RELAXED
+      if (relaxed) return sse2_relaxed_table<T>();
 #endif
-    default: return relaxed ? scalar_relaxed_table<T>() : scalar_table<T>();
+      return sse2_table<T>();
+#endif
+    default:
+#ifdef KINEMA_KERNELS_RELAXED
+      if (relaxed) return scalar_relaxed_table<T>();
+#endif
+      return scalar_table<T>();
   }
 }
 
