@@ -1,0 +1,36 @@
+# The TSan build compiles only KINEMA_THREAD_TEST_FILES (tests/CMakeLists.txt): a test the
+# tsan preset selects by name, put in any other file, would silently not run there. Fails
+# naming each such test and its file.
+#   cmake -DSOURCE_DIR=<repo> "-DOTHER_FILES=<file>,<file>,..." -P check_tsan_files.cmake
+cmake_minimum_required(VERSION 3.25)
+file(READ "${SOURCE_DIR}/CMakePresets.json" presets)
+string(JSON count LENGTH "${presets}" testPresets)
+math(EXPR last "${count} - 1")
+set(selects "")
+foreach(k RANGE ${last})
+  string(JSON name GET "${presets}" testPresets ${k} name)
+  if(name STREQUAL "tsan")
+    string(JSON selects GET "${presets}" testPresets ${k} filter include name)
+  endif()
+endforeach()
+if(selects STREQUAL "")
+  message(FATAL_ERROR "CMakePresets.json has no tsan test preset with a name filter")
+endif()
+
+string(REPLACE "," ";" files "${OTHER_FILES}")
+set(misplaced "")
+foreach(file IN LISTS files)
+  file(READ "${SOURCE_DIR}/tests/${file}" text)
+  string(REGEX MATCHALL "TEST_CASE\\([ \t\r\n]*\"[^\"]*\"" cases "${text}")
+  foreach(c IN LISTS cases)
+    string(REGEX REPLACE "^TEST_CASE\\([ \t\r\n]*\"(.*)\"$" "\\1" test "${c}")
+    if("kinema.${test}" MATCHES "${selects}")
+      string(APPEND misplaced "\n  ${file}: ${test}")
+    endif()
+  endforeach()
+endforeach()
+if(NOT misplaced STREQUAL "")
+  message(FATAL_ERROR "tests the TSan run selects (${selects}) in files it does not compile; "
+                      "move them or list their file in KINEMA_THREAD_TEST_FILES:${misplaced}")
+endif()
+message(STATUS "every test the TSan run selects is in a file it compiles")
