@@ -5,7 +5,7 @@ namespace kinema {
 namespace kernels {
 
 template <class T>
-const KernelTable<T>& kernel_table(Isa isa, bool relaxed) {
+const KernelTable<T>& kernel_table(Isa isa, [[maybe_unused]] bool relaxed) {
   switch (resolve_isa(isa)) {  // only the sets this build has get past it
 #ifdef KINEMA_KERNELS_AVX512
     case Isa::avx512: return avx512_table<T>();
