@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cmath>
 #include <limits>
+#include <iterator>
 #include <map>
 
 #include "forces/force_terms.hpp"
@@ -325,7 +326,22 @@ class Pilot {
     if (!std::isfinite(d1) || !std::isfinite(d2)) return std::numeric_limits<double>::infinity();
     const double nominal = method_.order;
     const double p = d1 > 0 && d2 > 0 ? std::clamp(std::log2(d1 / d2), 0.5, nominal) : nominal;
-    return d1 * std::pow(2.0, p) / (std::pow(2.0, p) - 1);
+    return estimates_[n] = d1 * std::pow(2.0, p) / (std::pow(2.0, p) - 1);
+  }
+
+  // Whether the estimates of the two finest runs so far did not fall as the steps doubled:
+  // the finer run's steps, the coarser estimate and the finer one. A method of order p >= 1
+  // divides its error by 2^p a doubling once its steps resolve the motion; where more steps
+  // do not shrink it, the run's end hangs on round-off or on each step's error.
+  struct Stall {
+    std::uint64_t steps;
+    double coarser, finer;
+  };
+  std::optional<Stall> stall() const {
+    if (estimates_.size() < 2) return std::nullopt;
+    const auto finer = std::prev(estimates_.end()), coarser = std::prev(finer);
+    if (!std::isfinite(coarser->second) || finer->second < coarser->second) return std::nullopt;
+    return Stall{finer->first, coarser->second, finer->second};
   }
 
   // The n-step run's cost in force evaluations, an implicit solve's iteration counted as
@@ -358,6 +374,7 @@ class Pilot {
   double iterations_per_step_ = 0;
   double bodies_;
   std::map<std::uint64_t, CountedRun> runs_;
+  std::map<std::uint64_t, double> estimates_;  // by step count
 };
 
 // The fewest steps (to within a factor 4/3) whose estimated error stays under the
@@ -581,6 +598,7 @@ class MethodSearch {
         note(std::string(m.name) + " not settled within its share of the search budget");
         return true;
       }
+      if (note_stall(pilot, m, " and spent the search budget")) return false;
       // The best so far meets the tolerance; it may not be the cheapest.
       note(std::string(m.name) + " not tried (search budget spent)");
       return false;
@@ -589,7 +607,7 @@ class MethodSearch {
       return true;
     }
     if (!steps) {
-      note(std::string(m.name) + (std::isfinite(best_cost_) ? " costlier" : " cannot"));
+      if (!note_stall(pilot, m, "")) note(std::string(m.name) + (std::isfinite(best_cost_) ? " costlier" : " cannot"));
       return true;
     }
     const double cost = pilot.cost(*steps);
@@ -603,6 +621,18 @@ class MethodSearch {
       choice_.steps = *steps;
       choice_.estimated_error = estimated;
     }
+    return true;
+  }
+
+  // While nothing meets the tolerance: notes that m's estimates did not settle, if so.
+  bool note_stall(const Pilot& pilot, const Method& m, const char* then) {
+    const auto stall = pilot.stall();
+    if (!stall || std::isfinite(best_cost_)) return false;
+    char text[160];
+    std::snprintf(text, sizeof text, " did not settle (its error estimate %.2g at %llu steps, %.2g at half as many)%s",
+                  stall->finer, static_cast<unsigned long long>(stall->steps), stall->coarser, then);
+    note(std::string(m.name) + text);
+    unsettled_ = true;
     return true;
   }
 
@@ -662,7 +692,13 @@ class MethodSearch {
                   "auto: no method reaches tolerance %g within 2^22 steps or 2^28 body-steps of "
                   "pilot runs (give --method and --dt, or a larger tolerance%s)", tolerance_,
                   choice_.precision == Precision::single ? "; in float, try double" : "");
-    throw Error(text);
+    std::string message = text;
+    if (!reason_.empty()) message += "; " + reason_;
+    if (unsettled_) {
+      message += ". Where more steps do not shrink the error, the end of the run likely hangs on round-off or on "
+                 "every step's error (a buckling, tumbling or chaotic scene): a shorter run may have an answer";
+    }
+    throw Error(message);
   }
 
   double duration_, tolerance_;
@@ -680,6 +716,7 @@ class MethodSearch {
   MethodChoice choice_;
   double best_cost_ = std::numeric_limits<double>::infinity(), spent_ = 0;
   std::string reason_;
+  bool unsettled_ = false;  // the search ended on a method whose estimates did not settle (Pilot::stall)
 };
 
 }  // namespace

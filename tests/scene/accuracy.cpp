@@ -146,6 +146,25 @@ TEST_CASE("auto checks an implicit method's pilots against an explicit run", "[a
   const Reference ref = reference_states(scene, duration, std::uint64_t(1) << 18);
   CHECK(state_error(simulate(scene, *choice.method, choice.steps, duration), ref.states) <= tolerance);
 }
+
+TEST_CASE("auto says when a method's error estimate stops falling as its steps double", "[accuracy][auto]") {
+  // The drag oscillator over 10 s in float: past a hundred thousand steps rk6's round-off
+  // outgrows its truncation error, so its estimates rise as its steps double and it spends the
+  // search. The refusal names that and what it means; in double the same tolerance is met.
+  Scene scene = load_scene(scene_path("drag_oscillator"));
+  scene.precision = Precision::single;
+  try {
+    choose_method(scene, 1e-6);
+    FAIL("float met 1e-6");
+  } catch (const Error& e) {
+    CHECK_THAT(e.what(), Catch::Contains("rk6 did not settle (its error estimate") &&
+                             Catch::Contains("and spent the search budget") && Catch::Contains("round-off"));
+  }
+  scene.precision = Precision::dual;
+  const MethodChoice choice = choose_method(scene, 1e-6);
+  REQUIRE(choice.method != nullptr);
+  CHECK_THAT(choice.reason, !Catch::Contains("did not settle"));
+}
 #endif
 
 TEST_CASE("auto passes over a candidate whose pilot fails and says so", "[accuracy][auto]") {

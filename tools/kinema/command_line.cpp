@@ -83,8 +83,8 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_option("--method", o.method,
                   "Override the scene's method: euler, midpoint, heun, rk4, symplectic_euler, "
                   "velocity_verlet, bs3, dopri5, rk6, implicit_euler, ros2 (implicit: particles with "
-                  "springs, fixed steps), or auto (the cheapest explicit method and step for "
-                  "--tolerance)");
+                  "springs, fixed steps), or auto (the cheapest method and step for --tolerance: "
+                  "explicit, or implicit where stiff springs set every explicit step)");
   run->add_option("--tolerance", o.tolerance,
                   "With auto: the largest error allowed at the end (length units; radians for "
                   "rigid orientations)")
