@@ -555,6 +555,19 @@ TEST_CASE("stability: a table of predicted and measured steps, and where an orbi
   }
   CHECK(spring.out.find(" *\n") == std::string::npos);
   CHECK(spring.out.find("breaks the linear bound") == std::string::npos);
+
+  // A spring network with every method by default: the table says how to draw the implicit
+  // ones, which the default leaves out; named methods get no such line.
+  const std::string pair = "stability " + scene("stiff_pair.json") + " --duration 0.02 --out " + out.string();
+  const Result all = kinema_cli(pair);
+  REQUIRE(all.code == 0);
+  CHECK(all.out.find("implicit_euler and ros2 (springs implicit, unbounded predicted step) are drawn when named in "
+                     "--methods") != std::string::npos);
+  CHECK(csv_rows(out / "step_limits.csv").size() == 9);
+  const Result named = kinema_cli(pair + " --methods rk4,implicit_euler");
+  REQUIRE(named.code == 0);
+  CHECK(named.out.find("are drawn when named") == std::string::npos);
+  CHECK(named.out.find("  implicit_euler ") != std::string::npos);
 }
 
 // The charts' files and styles, as the chart and stability commands write them.
