@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 #include <cmath>
-#include <limits>
 #include <iterator>
+#include <limits>
 #include <map>
 
 #include "forces/force_terms.hpp"
@@ -716,7 +716,7 @@ class MethodSearch {
   MethodChoice choice_;
   double best_cost_ = std::numeric_limits<double>::infinity(), spent_ = 0;
   std::string reason_;
-  bool unsettled_ = false;  // the search ended on a method whose estimates did not settle (Pilot::stall)
+  bool unsettled_ = false;  // a method's estimates did not settle while none met the tolerance
 };
 
 }  // namespace
