@@ -482,7 +482,12 @@ void consider_float(const Scene& pilot_scene, double duration, double tolerance,
     return choice.step_tolerance ? simulate_adaptive(s, *choice.method, *choice.step_tolerance, duration, max_step).states
                                  : simulate(s, *choice.method, choice.steps, duration);
   };
-  const double roundoff = state_error(states(single), states(pilot_scene));
+  double roundoff = 0;
+  try {
+    roundoff = state_error(states(single), states(pilot_scene));
+  } catch (const Error&) {
+    return;  // float cannot take the run (error control asked for less than its round-off)
+  }
   if (roundoff <= tolerance / 10 && choice.estimated_error + roundoff <= tolerance) {
     choice.precision = Precision::single;
     char text[160];

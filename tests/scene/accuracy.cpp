@@ -176,6 +176,18 @@ TEST_CASE("auto passes over a candidate whose pilot fails and says so", "[accura
   CHECK_FALSE(choice.step_tolerance);
 }
 
+TEST_CASE("auto keeps double where float cannot take the chosen error control", "[accuracy][auto]") {
+  // At 1e-8 on the eccentric orbit dopri5 wins at rtol = atol = 1e-10, below float's round-off
+  // on these bodies: the float check's own run is refused, and the choice stays in double.
+  const Scene scene = load_scene(scene_path("kepler_eccentric"));
+  REQUIRE(scene.precision == Precision::dual);
+  const MethodChoice choice = choose_method(scene, 1e-8);
+  REQUIRE(choice.method == &dopri5);
+  REQUIRE(choice.step_tolerance);
+  CHECK(*choice.step_tolerance == Approx(1e-10));
+  CHECK(choice.precision == Precision::dual);
+}
+
 TEST_CASE("tighter tolerances take more steps", "[accuracy][auto]") {
   const Scene scene = load_scene(scene_path("damped_spring"));
   const MethodChoice loose = choose_method(scene, 1e-2), tight = choose_method(scene, 1e-9);
