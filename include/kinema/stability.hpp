@@ -62,7 +62,8 @@ StiffnessEstimate estimate_stiffness(const RigidBodySet<T>& bodies,
 double largest_stable_step(const Method& method, const StiffnessEstimate& estimate);
 
 // How much the estimate's mode grows (or shrinks) per step of size h under the method: the
-// spectral radius of the step's 2 x 2 matrix (see above).
+// spectral radius of the step's 2 x 2 matrix (see above); infinity where the step's entries
+// overflow double (h far past the stable step).
 double growth_per_step(const Method& method, const StiffnessEstimate& estimate, double h);
 
 // h |lambda| at the edge of the stability region on the negative real axis (damping at the

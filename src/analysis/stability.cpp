@@ -68,10 +68,23 @@ std::array<double, 2> one_step(const Method& m, double h, double a, double b, st
   return y;
 }
 
-double spectral_radius(const Matrix& m) {
+double spectral_radius(Matrix m) {
   // Triangular (the damping mode: v does not see x): the diagonal, without the cancellation
   // the discriminant would suffer next to an eigenvalue of exactly 1.
-  if (m[1][0] == 0 || m[0][1] == 0) return std::max(std::abs(m[0][0]), std::abs(m[1][1]));
+  if (m[1][0] == 0 || m[0][1] == 0) {
+    const double d0 = std::abs(m[0][0]), d1 = std::abs(m[1][1]);
+    return std::isnan(d0) || std::isnan(d1) ? std::numeric_limits<double>::quiet_NaN() : std::max(d0, d1);
+  }
+  // Entries past 1e150 (a step far past the stable one) would overflow the determinant:
+  // the radius of the matrix scaled by a power of two, scaled back.
+  const double largest = std::max({std::abs(m[0][0]), std::abs(m[0][1]), std::abs(m[1][0]), std::abs(m[1][1])});
+  if (largest > 1e150 && std::isfinite(largest)) {
+    const int shift = std::ilogb(largest);
+    for (auto& row : m) {
+      for (double& x : row) x = std::scalbn(x, -shift);
+    }
+    return std::scalbn(spectral_radius(m), shift);
+  }
   const double trace = m[0][0] + m[1][1], det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
   const double disc = trace * trace - 4 * det;
   if (disc < 0) return std::sqrt(std::abs(det));
@@ -402,7 +415,8 @@ double largest_stable_step(const Method& method, const StiffnessEstimate& e) {
 double growth_per_step(const Method& method, const StiffnessEstimate& e, double h) {
   if (!(e.magnitude > 0)) return 1;
   const auto [a, b] = mode_of(e);
-  return radius(method, h, a, b);
+  const double growth = radius(method, h, a, b);
+  return std::isnan(growth) ? std::numeric_limits<double>::infinity() : growth;  // the step's entries overflowed
 }
 
 StabilityLimits stability_limits(const Method& method) {

@@ -503,6 +503,47 @@ TEST_CASE("run -q: the stable-step warning still prints", "[cli]") {
   CHECK(stable.err.empty());
 }
 
+TEST_CASE("run --strict: steps far past the stable one, and an estimate that overflows", "[cli]") {
+  // One body under an attractor of mu = 1e100 at r = 1: |lambda| = 1e50 /s, dt 0.01. The step's
+  // 2 x 2 matrix has entries past 1e150, whose determinant overflowed (no warning before).
+  const auto attractor = [](const char* mu) {
+    return write(std::string("attractor") + mu + ".json",
+                 std::string(R"({"precision": "double", "method": "rk4", "dt": 0.01, "steps": 100,
+      "particles": [{"position": [1, 0, 0], "velocity": [0, 1, 0]}],
+      "forces": [{"type": "central", "center": [0, 0, 0], "mu": )") + mu + "}]}");
+  };
+  const fs::path summary = work_dir() / "strict.json";
+  const Result far = kinema_cli("run " + attractor("1e100").string() + " -q --strict --summary " + summary.string());
+  CHECK(far.code == 1);
+  CHECK(far.err.find("past the largest stable step of rk4 on this scene, 2.83e-50") != std::string::npos);
+  CHECK(far.err.find("grows more than 1e300-fold over the run (--strict)") != std::string::npos);
+  const auto j = nlohmann::json::parse(read(summary));  // the refusal's summary has the estimate
+  CHECK(j["stiffness"].get<double>() == Approx(1e50).epsilon(1e-3));
+  CHECK(j["largest_stable_step"].get<double>() == Approx(2.828e-50).epsilon(1e-3));
+  // Two bodies at one point under unsoftened N-body gravity: a damping mode of 6e164 /s,
+  // whose step's diagonal overflows to NaN (it read as a growth of 1 before).
+  const fs::path twins = write("twins.json", R"({"precision": "double", "method": "rk4", "dt": 0.01, "steps": 100,
+      "particles": [{"position": [0, 0, 0]}, {"position": [0, 0, 0]}, {"position": [1, 0, 0]}],
+      "forces": [{"type": "nbody", "G": 1}]})");
+  CHECK(kinema_cli("run " + twins.string() + " -q --strict").err.find("(damping at |lambda| = 5.766e+164 /s) grows more than") !=
+        std::string::npos);
+  // At mu = 1e150 the estimate itself overflows: a warning, and --strict refuses.
+  const fs::path huge = attractor("1e150");
+  const Result warned = kinema_cli("run " + huge.string() + " -q");
+  CHECK(warned.code == 0);
+  CHECK(warned.err.find("kinema: warning: the stiffness estimate overflows double on this scene") != std::string::npos);
+  const Result refused = kinema_cli("run " + huge.string() + " -q --strict");
+  CHECK(refused.code == 1);
+  CHECK(refused.err.find("dt is not checked against the largest stable step (--strict)") != std::string::npos);
+}
+
+TEST_CASE("run: a state that blew up gets its error, not an energy warning", "[cli]") {
+  const Result r = kinema_cli("run " + scene("stiff_pair.json") + " -q --steps 20 --method rk6");
+  CHECK(r.code == 3);
+  CHECK(r.err.find("no longer finite") != std::string::npos);
+  CHECK(r.err.find("energy") == std::string::npos);
+}
+
 TEST_CASE("run --method auto: one readable line for its choice, costs in force evaluations", "[cli][auto]") {
   const fs::path summary = work_dir() / "auto_line.json";
   const Result r = kinema_cli("run " + scene("kepler_eccentric.json") + " --method auto --tolerance 1e-6 --summary " +

@@ -203,12 +203,17 @@ void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessE
   const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
   const bool springs = !scene.springs.empty() && !rigid && scene.events.empty() &&
                        method_by_name(scene.method).kind != MethodKind::linearly_implicit;
+  char growth[48];
+  if (log_growth < 690) {
+    std::snprintf(growth, sizeof growth, "%.3g-fold", std::exp(log_growth));
+  } else {
+    std::snprintf(growth, sizeof growth, "more than 1e300-fold");  // past what double holds
+  }
   char text[500];
   std::snprintf(text, sizeof text,
                 "dt %g is past the largest stable step of %s on this scene, %.3g: its fastest mode (%s at "
-                "|lambda| = %.4g /s) grows %.3g-fold over the run%s",
-                scene.dt, scene.method.c_str(), stable, mode_name(e).c_str(), e.magnitude,
-                std::exp(std::min(log_growth, 700.0)),
+                "|lambda| = %.4g /s) grows %s over the run%s",
+                scene.dt, scene.method.c_str(), stable, mode_name(e).c_str(), e.magnitude, growth,
                 springs ? " (an implicit method holds at this step where the springs are the stiff part: "
                           "--method implicit_euler or ros2)"
                         : "");
@@ -283,10 +288,23 @@ StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOption
   plan.stable_step = plan.estimated ? largest_stable_step(explicit_part(method_by_name(scene.method)), plan.stiffness)
                                     : std::numeric_limits<double>::infinity();
   plan.tolerances = tolerances_of(scene);
-  // Error control never goes past the stable step; fixed steps are checked against it.
+  // Error control never goes past the stable step; fixed steps are checked against it
+  // (check_plan, once the plan is kept: a refusal's summary reports the estimate).
   if (plan.tolerances && plan.stable_step > 0) plan.tolerances->max_step = plan.stable_step;
-  if (!plan.tolerances) check_stable_step(scene, o, plan.stiffness, plan.stable_step);
   return plan;
+}
+
+// Warns (or with --strict refuses) when dt is past the stable step, or when the stiffness
+// estimate itself overflowed double (forces too large near the start): then nothing checks dt.
+void check_plan(const Scene& scene, const RunOptions& o, const StepPlan& plan) {
+  if (plan.estimated && !std::isfinite(plan.stiffness.magnitude)) {
+    const std::string text = "the stiffness estimate overflows double on this scene (forces too large near its "
+                             "start): dt is not checked against the largest stable step";
+    if (o.strict) throw Error(o.scene_path + ": " + text + " (--strict)");
+    std::fprintf(stderr, "kinema: warning: %s\n", text.c_str());
+    return;
+  }
+  if (!plan.tolerances) check_stable_step(scene, o, plan.stiffness, plan.stable_step);
 }
 
 // Steps per advance call: for the progress bar, the trajectory and signals (the same bits as
@@ -756,12 +774,15 @@ int finish(const nlohmann::ordered_json& summary, const Scene& scene, const RunO
 }
 
 // The state can be finite while its energy is not (N-body with G = 1e308: the potential
-// overflows); the summary's energies are then null, and this says why. Not silenced by -q.
-void warn_if_energy_overflows(double initial, double final) {
-  if (std::isfinite(initial) && std::isfinite(final)) return;
+// overflows); the summary's energy there is then null, and this says why. A state that is not
+// finite has its own error. Not silenced by -q.
+void warn_if_energy_overflows(double initial, double final, bool state_finite) {
+  if (!state_finite || (std::isfinite(initial) && std::isfinite(final))) return;
+  const bool start = !std::isfinite(initial), end = !std::isfinite(final);
   std::fprintf(stderr, "kinema: warning: the total energy %s overflows double (a force parameter or a mass too "
-               "large, or bodies too close without softening): energy_initial and energy_final are null in the "
-               "summary\n", std::isfinite(initial) ? "at the end" : "at the start");
+               "large, or bodies too close without softening): %s null in the summary\n",
+               start && end ? "at the start and the end" : start ? "at the start" : "at the end",
+               start && end ? "energy_initial and energy_final are" : start ? "energy_initial is" : "energy_final is");
 }
 
 // What a summary says of a run that could not start (the world or auto's choice failed).
@@ -794,6 +815,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
     }
     stepped.fingerprint = fingerprint;
     plan = plan_steps(scene, o, options, double(body_count(world)));
+    check_plan(scene, o, plan);
     std::optional<TrajectoryWriter> trajectory;
     if (!o.trajectory_path.empty() && stepped.resumed_at) {
       if (!trajectory_bytes) throw Error(printable(o.checkpoint.resume_path) + ": the checkpoint was taken without --out");
@@ -815,7 +837,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
   const nlohmann::ordered_json summary = summarize(world, scene, o, plan, stepped, initial_energy, context);
   summary_file.write(summary);
   if (!o.quiet) print_summary(summary);
-  if (stepped.final_energy) warn_if_energy_overflows(initial_energy, *stepped.final_energy);
+  if (stepped.final_energy) warn_if_energy_overflows(initial_energy, *stepped.final_energy, world.finite());
   return finish(summary, scene, o, stepped);
 }
 
