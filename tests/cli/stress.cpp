@@ -174,6 +174,8 @@ TEST_CASE("stress: bad options are refused before any work", "[cli][stress][erro
       {{"--guard", "sometimes"}, 2},
       {{"--bodies", "0"}, 2},
       {{"--max-speed", "inf"}, 2},
+      {{"--max-speed", "10"}, 2},  // without --guard clamp it would hold nothing
+      {{"--max-angular-speed", "10", "--guard", "check"}, 2},
       {{"--method", "auto"}, 1},
       {{"--method", "rk5"}, 1},
       {{"--bodies", "1000000000"}, 1},  // more memory than the machine has

@@ -99,11 +99,12 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_option("--steps", o.steps, "Override the number of steps")->transform(decimal(0, kMaxCount));
   run->add_option("--precision", precision, "Override the scene's precision: float or double")
       ->check(CLI::IsMember({"float", "double"}));
-  run->add_option("--out", o.trajectory_path,
-                  "Write the trajectory as CSV (step,t,body,px,py,pz,vx,vy,vz)")
-      ->check(not_empty);
+  auto* out = run->add_option("--out", o.trajectory_path,
+                               "Write the trajectory as CSV (step,t,body,px,py,pz,vx,vy,vz)")
+                   ->check(not_empty);
   run->add_option("--every", o.every, "With --out: write every K steps (plus step 0 and the last)")
-      ->transform(decimal(1, kMaxCount));
+      ->transform(decimal(1, kMaxCount))
+      ->needs(out);
   run->add_option("--summary", o.summary_path, "Write the run's summary as JSON")->check(not_empty);
   run->add_option("--isa", isa, "Instruction set: auto, scalar, sse2, avx2, avx512")
       ->check(CLI::IsMember({"auto", "scalar", "sse2", "avx2", "avx512"}));
@@ -241,6 +242,12 @@ void parse_command_line(CLI::App& app, CommandLine& out, int argc, const char* c
     out.run.precision = out.stress.precision = out.precision == "float" ? Precision::single : Precision::dual;
   }
   out.stress.guard = guard_by_name(out.guard);
+  if (app.got_subcommand("stress") && out.stress.guard != FiniteGuard::clamp) {
+    const CLI::App& stress = *app.get_subcommand("stress");
+    for (const char* limit : {"--max-speed", "--max-angular-speed"}) {
+      if (stress.count(limit) > 0) throw CLI::ValidationError(limit, "holds speeds under --guard clamp only");
+    }
+  }
 }
 
 }  // namespace kinema::cli

@@ -35,6 +35,17 @@ constexpr double kBodyStepsPerChunk = double(1 << 26);
 
 }  // namespace
 
+// Options that would do nothing with the run's method are refused, not ignored.
+void check_method_options(const RunOptions& o, const std::string& method) {
+  if (method == "auto") return;
+  if (o.tolerance) throw Error("--tolerance bounds the error of --method auto's choice; the method here is " + method);
+  const bool implicit = method_by_name(method).kind == MethodKind::linearly_implicit;
+  if (!implicit && (o.implicit_tolerance || o.implicit_iterations || o.implicit_preconditioner != "automatic")) {
+    throw Error("--implicit-tolerance, --implicit-iterations and --implicit-preconditioner set the linear solves of "
+                "implicit_euler and ros2; the method here is " + method);
+  }
+}
+
 Scene scene_with_overrides(const RunOptions& o) {
   Scene scene = load_scene(o.scene_path);
   if (o.method) scene.method = *o.method;
@@ -45,6 +56,7 @@ Scene scene_with_overrides(const RunOptions& o) {
   if (o.rtol) scene.rtol = *o.rtol;
   if (o.atol) scene.atol = *o.atol;
   if (scene.method != "auto") method_by_name(scene.method);
+  check_method_options(o, scene.method);
   try {
     if (scene.method == "auto" && !scene.tolerance) {
       throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
