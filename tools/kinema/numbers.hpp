@@ -8,8 +8,11 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include <optional>
+
 #include <nlohmann/json.hpp>
 
+#include "kinema/error.hpp"
 #include "kinema/scene.hpp"
 
 namespace kinema::cli {
@@ -27,6 +30,18 @@ inline double significant(double x, int digits) {
 }
 
 inline double measured(double x) { return significant(x, kMeasuredDigits); }
+
+// A --dt the run's precision cannot hold (0 or infinite once rounded to float) is the
+// option's fault, not the scene file's: said so before the scene's own checks.
+inline void check_dt_option(const std::optional<double>& dt, Precision p) {
+  if (!dt || p != Precision::single) return;
+  const float rounded = float(*dt);
+  if (rounded > 0 && std::isfinite(rounded)) return;
+  char text[120];
+  std::snprintf(text, sizeof text, "--dt %g %s in float (give a step float holds, or --precision double)", *dt,
+                rounded == 0 ? "rounds to 0" : "overflows");
+  throw Error(text);
+}
 
 // A value of the simulation (a step, a time, an energy) to the digits its precision holds:
 // a float exactly as short as it round-trips (0.016666668 for 1/60 in float), other values

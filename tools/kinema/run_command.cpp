@@ -57,6 +57,7 @@ Scene scene_with_overrides(const RunOptions& o) {
   if (o.atol) scene.atol = *o.atol;
   if (scene.method != "auto") method_by_name(scene.method);
   check_method_options(o, scene.method);
+  check_dt_option(o.dt, scene.precision);
   try {
     if (scene.method == "auto" && !scene.tolerance) {
       throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");

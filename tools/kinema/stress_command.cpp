@@ -7,6 +7,7 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <type_traits>
 #include <unistd.h>
 #include <vector>
 
@@ -169,6 +170,7 @@ StressSetup<T> set_up(const StressOptions& o, const Scene* scene) {
                    : random_stress_groups<T>(o.bodies, o.seed, method, options);
   if (s.groups.empty()) throw Error("the scene has no bodies");
   s.dt = o.dt ? *o.dt : scene ? scene->dt : kStressDt;
+  check_dt_option(o.dt, std::is_same_v<T, float> ? Precision::single : Precision::dual);
   for (const auto& g : s.groups) {
     g.stepper().check_step_size(T(s.dt));
     s.bodies += g.size();
@@ -587,6 +589,7 @@ std::optional<Scene> stress_scene(const StressOptions& o) {
   if (o.precision) scene.precision = *o.precision;
   if (o.dt) scene.dt = *o.dt;
   if (o.method) scene.method = *o.method;
+  check_dt_option(o.dt, scene.precision);
   try {
     if (scene.method == "auto") throw Error("stress runs a fixed method: give one with --method");
     method_by_name(scene.method);
