@@ -483,6 +483,9 @@ TEST_CASE("a usage error points to the help of the command it is in", "[cli]") {
   CHECK(kinema_cli("chart").err.find("(see kinema chart --help)") != std::string::npos);
   CHECK(kinema_cli("stability").err.find("(see kinema stability --help)") != std::string::npos);
   CHECK(kinema_cli("").err.find("(see kinema --help)") != std::string::npos);
+  const Result unknown = kinema_cli("bogus");
+  CHECK(unknown.code == 2);
+  CHECK(unknown.err.find("unknown command 'bogus': run, chart, stability or stress (see kinema --help)") != std::string::npos);
 }
 
 TEST_CASE("run -q: the stable-step warning still prints", "[cli]") {

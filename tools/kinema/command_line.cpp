@@ -1,10 +1,13 @@
 #include "command_line.hpp"
 
+#include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdint>
 #include <limits>
+#include <string_view>
 
 #include <CLI/CLI.hpp>
 
@@ -232,9 +235,15 @@ std::string help_command(const CLI::App& app) {
 }
 
 void parse_command_line(CLI::App& app, CommandLine& out, int argc, const char* const* argv) {
+  // A first word that is no command and no option: named, where CLI11 would only say that a
+  // command is required.
+  constexpr std::array<std::string_view, 4> commands{"run", "chart", "stability", "stress"};
+  if (argc > 1 && argv[1][0] != '-' && std::find(commands.begin(), commands.end(), argv[1]) == commands.end()) {
+    throw CLI::ValidationError("unknown command '" + printable(argv[1]) + "': run, chart, stability or stress");
+  }
   app.parse(argc, argv);
-  for (const char* name : {"run", "chart", "stability", "stress"}) {
-    if (app.got_subcommand(name)) out.command = name;
+  for (const std::string_view name : commands) {
+    if (app.got_subcommand(std::string(name))) out.command = name;
   }
   // Both were checked against their lists while parsing.
   out.run.isa = out.stress.isa = isa_by_name(out.isa);
