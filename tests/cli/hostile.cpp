@@ -267,7 +267,7 @@ std::vector<Case> option_cases() {
       {"", {"run", ""}, 2, "expected a path"},
       {"", {"run"}, 2, "scene is required"},
       {"", {}, 2, "A subcommand is required"},
-      {"", {"fly", scene}, 2, "subcommand"},
+      {"", {"fly", scene}, 2, "unknown command 'fly': run, chart, stability or stress"},
       {"", {"chart", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
       {"", {"chart", scene, "--repeat", "101"}, 2, "--repeat: expected 1 to 100"},
       {"", {"chart", scene, "--dts", "0.1,inf"}, 2, "--dts: expected a finite number > 0"},

@@ -58,9 +58,10 @@ inline double in_precision(double x, Precision p) {
   return significant(x, p == Precision::single ? 9 : 15);
 }
 
-// A JSON number: a whole value as an integer (10, not 10.0), any other as it is.
+// A JSON number: a whole value as an integer (10, not 10.0), any other finite one as it is.
 inline nlohmann::ordered_json number(double x) {
-  if (std::isfinite(x) && x == std::trunc(x) && std::abs(x) < 0x1p53) return std::int64_t(x);
+  if (!std::isfinite(x)) return nullptr;  // JSON has no NaN or infinity; null, not a number that prints as one
+  if (x == std::trunc(x) && std::abs(x) < 0x1p53) return std::int64_t(x);
   return x;
 }
 
