@@ -253,6 +253,16 @@ TEST_CASE("rigid-body terms in a scene without rigid bodies are refused, not lef
                         "forces": [{"type": "angular_drag", "c": 1}]})").forces.size() == 1);
 }
 
+TEST_CASE("a dynamic body at an attractor's centre is refused where it is listed", "[scene][errors]") {
+  const std::string central = R"("forces": [{"type": "central", "center": [0, 1, 0], "mu": 2}]})";
+  CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [1,0,0]}, {"position": [0,1,0]}], )" + central),
+                    "scene: particles[1]: sits at the centre of a central term (mu / r^2 is infinite there)");
+  CHECK_THROWS_WITH(parse_scene(R"({"rigid_bodies": [{"position": [0,1,0]}], )" + central),
+                    Catch::StartsWith("scene: rigid_bodies[0]: sits at the centre"));
+  // A kinematic body there (a sun the attractor stands for) is moved by no force.
+  CHECK(parse_scene(R"({"particles": [{"position": [0,1,0], "kinematic": true}], )" + central).particles.size() == 1);
+}
+
 TEST_CASE("rigid bodies in scenes: body springs, point springs, kinematic anchors, coupled terms", "[scene][rigid][springs]") {
   const Scene s = parse_scene(R"({"rigid_bodies": [{"position": [0,0,0], "kinematic": true}, {"position": [0,-1,0]},
                                                    {"position": [0,-2,0]}],

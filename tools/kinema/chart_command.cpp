@@ -20,7 +20,11 @@ namespace fs = std::filesystem;
 
 std::vector<const Method*> pick_methods(const std::vector<std::string>& names, const Scene& scene) {
   std::vector<const Method*> out;
-  for (const std::string& n : names) out.push_back(&method_by_name(n));
+  for (const std::string& n : names) {
+    const Method* m = &method_by_name(n);
+    if (std::find(out.begin(), out.end(), m) != out.end()) throw Error("--methods names " + printable(n) + " twice");
+    out.push_back(m);
+  }
   if (out.empty()) {
     out.assign(builtin_methods.begin(), builtin_methods.end());
     // Rigid bodies take the fused kernels only: the built-in methods.
