@@ -540,6 +540,15 @@ TEST_CASE("run --strict: steps far past the stable one, and an estimate that ove
   CHECK(refused.err.find("dt is not checked against the largest stable step (--strict)") != std::string::npos);
 }
 
+TEST_CASE("run: an implicit method on a scene without springs says its steps are explicit", "[cli][implicit]") {
+  const Result orbit = kinema_cli("run " + scene("kepler_circular.json") + " --method ros2 --steps 3");
+  CHECK(orbit.code == 0);
+  CHECK(orbit.err.find("kinema: note: ros2 takes spring networks implicitly and this scene has none: every force is "
+                       "explicit, and each step is heun's") != std::string::npos);
+  CHECK(kinema_cli("run " + scene("kepler_circular.json") + " --method ros2 --steps 3 -q").err.empty());
+  CHECK(kinema_cli("run " + scene("cloth.json") + " --method implicit_euler --steps 2 -q").err.empty());
+}
+
 TEST_CASE("run: a state that blew up gets its error, not an energy warning", "[cli]") {
   const Result r = kinema_cli("run " + scene("stiff_pair.json") + " -q --steps 20 --method rk6");
   CHECK(r.code == 3);

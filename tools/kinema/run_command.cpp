@@ -798,6 +798,17 @@ void warn_if_energy_overflows(double initial, double final, bool state_finite) {
                start && end ? "energy_initial and energy_final are" : start ? "energy_initial is" : "energy_final is");
 }
 
+// An implicit method takes a scene's springs implicitly; on a scene without them every force
+// is explicit, and the step is its explicit part's. Said once (not with -q).
+void note_nothing_implicit(const Scene& scene, const RunOptions& o) {
+  const Method& method = method_by_name(scene.method);
+  if (o.quiet || method.kind != MethodKind::linearly_implicit || !scene.springs.empty()) return;
+  const int same = builtin_index(explicit_part(method));
+  const std::string step = same >= 0 ? std::string(builtin_methods[std::size_t(same)]->name) + "'s" : "its explicit part's";
+  std::fprintf(stderr, "kinema: note: %s takes spring networks implicitly and this scene has none: every force is "
+               "explicit, and each step is %s\n", scene.method.c_str(), step.c_str());
+}
+
 // What a summary says of a run that could not start (the world or auto's choice failed).
 nlohmann::ordered_json failed_summary(const Scene& scene, const std::string& error) {
   nlohmann::ordered_json summary;
@@ -866,6 +877,7 @@ int run_scene(const RunOptions& o) {
   try {
     RunContext context;
     if (scene.method == "auto") context.auto_choice = apply_auto_choice(scene, o.scene_path).record;
+    note_nothing_implicit(scene, o);
     return with_precision(scene.precision,
                           [&]<class T>() { return run_typed<T>(scene, o, context, summary_file); });
   } catch (const std::exception& e) {
