@@ -47,7 +47,10 @@ class DocumentBuilder : public nlohmann::json_sax<json> {
   }
 
   bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception& e) override {
-    throw Stop{std::string("invalid JSON: ") + e.what()};
+    // Without the library's "[json.exception.parse_error.101] " tag: where and what is the message.
+    std::string what = e.what();
+    if (what.rfind("[json.exception.", 0) == 0) what.erase(0, what.find("] ") == std::string::npos ? 0 : what.find("] ") + 2);
+    throw Stop{"invalid JSON: " + what};
   }
 
   // Where the parser is: "forces[2].k", or "" at the top level.

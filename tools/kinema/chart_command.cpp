@@ -18,6 +18,12 @@
 namespace kinema::cli {
 namespace fs = std::filesystem;
 
+void make_output_folder(const fs::path& dir) {
+  std::error_code error;
+  fs::create_directories(dir, error);
+  if (error) throw Error("--out " + printable(dir.string()) + ": cannot create the folder (" + error.message() + ")");
+}
+
 std::vector<const Method*> pick_methods(const std::vector<std::string>& names, const Scene& scene) {
   std::vector<const Method*> out;
   for (const std::string& n : names) {
@@ -414,7 +420,7 @@ int chart_scene(const ChartOptions& o) {
   check_work(o.scene_path, "the chart", planned_evaluations(sweep, methods), sweep.scene,
              "give fewer or longer --dts, a shorter --duration or fewer --methods");
   measure_against_reference(sweep);
-  fs::create_directories(o.out);
+  make_output_folder(o.out);
   Written written{o.out, {"work_precision.csv", "orders.csv"}, {}};
   OutputFile csv(written.dir / "work_precision.csv");
   csv << "method,order,dt,steps,error,seconds_per_simulated_second,force_evaluations,"

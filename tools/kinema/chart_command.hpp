@@ -2,6 +2,7 @@
 // `kinema chart` (work-precision diagrams) and `kinema stability` (where methods fail).
 
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
@@ -41,7 +42,10 @@ int stability_scene(const StabilityOptions& options);
 // The scene file in the precision asked for (default its own), with check_scene run in it
 // (before any body is built).
 Scene load_checked(const std::string& path, std::optional<Precision> precision = std::nullopt);
-// The methods named (when none is, every named method the scene's bodies can take).
+// Creates the output folder (and its parents); an Error naming it when that fails.
+void make_output_folder(const std::filesystem::path& dir);
+// The methods named (when none is, every named method the scene's bodies can take; a name
+// given twice is an Error).
 std::vector<const Method*> pick_methods(const std::vector<std::string>& names, const Scene& scene);
 // Steps of about dt over `duration`; kinema::Error past 2^32 steps or below one.
 std::uint64_t step_count(double duration, double dt);

@@ -313,7 +313,7 @@ int stability_scene(const StabilityOptions& o) {
   check_work(o.scene_path, "stability", planned_evaluations(methods, steps, bool(scene.nbody)), scene,
              "give a shorter --duration, a longer --dt or fewer --methods");
   const fs::path dir = o.out;
-  fs::create_directories(dir);
+  make_output_folder(dir);
   OutputFile energy_csv(dir / "energy.csv"), path_csv(dir / "trajectory.csv");
   energy_csv << "method,t,energy,relative_error\n";
   path_csv << "method,t,x,y,z\n";
