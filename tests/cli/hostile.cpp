@@ -63,7 +63,7 @@ std::vector<Case> scene_cases() {
   deep += ", " + P + "}";
   return {
       // JSON as text: syntax, numbers out of range, duplicate keys, bytes that end parsing.
-      {"{\"particles\": [", run_args(), 1, "invalid JSON"},
+      {"{\"particles\": [", run_args(), 1, "particles[0]: invalid JSON: parse error at line 1, column 16: syntax error while parsing value"},
       {"", {"run", (work_dir() / "missing.json").string()}, 1, "cannot open the file"},
       {"", {"run", write("empty.json", "").string()}, 1, "invalid JSON"},
       {" ", run_args(), 1, "invalid JSON"},
@@ -268,6 +268,9 @@ std::vector<Case> option_cases() {
       {"", {"run"}, 2, "scene is required"},
       {"", {}, 2, "A subcommand is required"},
       {"", {"fly", scene}, 2, "unknown command 'fly': run, chart, stability or stress"},
+      {"", {"chart", scene, "--out", "/etc/passwd", "--methods", "rk4", "--dts", "0.1", "--duration", "1"}, 1,
+       "--out /etc/passwd: cannot create the folder (Not a directory)"},
+      {"", {"stability", scene, "--out", "/etc/passwd", "--methods", "rk4"}, 1, "--out /etc/passwd: cannot create the folder"},
       {"", {"chart", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
       {"", {"chart", scene, "--repeat", "101"}, 2, "--repeat: expected 1 to 100"},
       {"", {"chart", scene, "--dts", "0.1,inf"}, 2, "--dts: expected a finite number > 0"},
