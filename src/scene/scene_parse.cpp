@@ -260,15 +260,6 @@ void parse_bodies(const Node& root, Scene& s) {
   if (root.has("generate")) s.generate = parse_generate(root.child("generate"));
 }
 
-// The local terms the particle kernels leave out: torques, angular drag, point forces and
-// point springs act on rigid bodies alone.
-bool turns_rigid_bodies_only(const LocalTerm& t) {
-  return std::holds_alternative<Torque>(t) || std::holds_alternative<AngularDrag>(t) ||
-         std::holds_alternative<PointForce>(t) || std::holds_alternative<PointSpring>(t);
-}
-
-bool has_rigid_bodies(const Scene& s) { return !s.rigid_bodies.empty() || (s.generate && s.generate->rigid); }
-
 // Local terms, then the coupled ones (N-body, spring networks), checked together at the end.
 void parse_forces(const Node& root, Scene& s) {
   std::vector<Node> spring_terms, body_spring_terms;
@@ -280,9 +271,6 @@ void parse_forces(const Node& root, Scene& s) {
       const std::string type = term.value.is_object() && term.has("type") ? term.child("type").string() : "";
       if (!is_coupled_force(type)) {
         s.forces.push_back(parse_force(term));
-        if (turns_rigid_bodies_only(s.forces.back()) && !has_rigid_bodies(s)) {
-          term.fail(type + " acts on rigid bodies only, and the scene has none");
-        }
         continue;
       }
       if (type == "nbody" && mixed_bodies(s)) {

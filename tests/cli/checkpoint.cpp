@@ -301,8 +301,10 @@ TEST_CASE("an energy that overflows is said, not left as a silent null", "[cli][
   const fs::path summary = work_dir() / "overflow_summary.json";
   const Result r = run_kinema({"run", scene_file.string(), "-q", "--summary", summary.string()});
   CHECK(r.code == 0);
-  CHECK_THAT(r.err, Catch::Contains("warning: the total energy at the start overflows double"));
+  CHECK_THAT(r.err, Catch::Contains("warning: the total energy at the start and the end overflows double"));
+  CHECK_THAT(r.err, Catch::Contains("energy_initial and energy_final are null in the summary"));
   CHECK(summary_of(summary)["energy_initial"].is_null());
+  CHECK(summary_of(summary)["energy_final"].is_null());
 }
 
 TEST_CASE("a full device for the summary or report is refused before any step", "[cli][hostile]") {

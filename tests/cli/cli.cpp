@@ -176,7 +176,8 @@ TEST_CASE("run --rtol: dopri5 chooses its steps over the scene's duration and re
 }
 
 TEST_CASE("a state that blows up is reported, not hidden", "[cli]") {
-  const fs::path p = write("blowup.json", R"({"particles": [{"position": [0,0,0]}],
+  // 1e-150 from an attractor: a pull of 1e300 that overflows within the first step.
+  const fs::path p = write("blowup.json", R"({"particles": [{"position": [1e-150,0,0]}],
       "forces": [{"type": "central", "mu": 1}], "steps": 3})");
   const Result r = kinema_cli("run " + p.string());
   CHECK(r.code == 3);
@@ -547,6 +548,17 @@ TEST_CASE("run: an implicit method on a scene without springs says its steps are
                        "explicit, and each step is heun's") != std::string::npos);
   CHECK(kinema_cli("run " + scene("kepler_circular.json") + " --method ros2 --steps 3 -q").err.empty());
   CHECK(kinema_cli("run " + scene("cloth.json") + " --method implicit_euler --steps 2 -q").err.empty());
+}
+
+TEST_CASE("run: a rigid-body term in a scene without rigid bodies is noted as doing nothing", "[cli]") {
+  const fs::path p = write("idle_torque.json", R"({"particles": [{"position": [1,0,0]}], "steps": 3,
+      "forces": [{"type": "gravity", "g": [0,-1,0]}, {"type": "torque", "torque": [1,0,0]}]})");
+  const Result r = kinema_cli("run " + p.string());
+  CHECK(r.code == 0);
+  CHECK(r.err.find("kinema: note: torque acts on rigid bodies only, and this scene has none: it does nothing") !=
+        std::string::npos);
+  CHECK(r.err.find("gravity") == std::string::npos);
+  CHECK(kinema_cli("run " + p.string() + " -q").err.empty());
 }
 
 TEST_CASE("run: a state that blew up gets its error, not an energy warning", "[cli]") {

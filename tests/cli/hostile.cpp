@@ -189,8 +189,6 @@ std::vector<Case> scene_cases() {
       {force(R"({"type": "point_force", "point": [0,0,0]})"), run_args(), 1, "forces[0]: missing key 'force'"},
       {R"({"rigid_bodies": [{"position": [1,0,0]}], "forces": [{"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]},{"type":"point_force","point":[0,0,0],"force":[1,0,0]}]})",
        run_args(), 1, "forces[4]: point_force: at most 4"},
-      {force(R"({"type": "torque", "torque": [1,0,0]})"), run_args(), 1,
-       "forces[0]: torque acts on rigid bodies only, and the scene has none"},
       {with_body(R"("forces": {"type": "gravity"})"), run_args(), 1, "forces: expected an array"},
       // Rigid bodies.
       {R"({"rigid_bodies": [{"position": [0,0,0], "inertia": [[5e307,5e307,0],[5e307,5e307,0],[0,0,1e308]]}]})", run_args(), 1, "rigid_bodies[0].inertia: the tensor is singular"},

@@ -234,25 +234,6 @@ TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") 
   }
 }
 
-TEST_CASE("rigid-body terms in a scene without rigid bodies are refused, not left to act on nothing", "[scene][errors]") {
-  const std::string particles = R"({"particles": [{"position": [0,0,0]}], "forces": [{"type": "gravity", "g": [0,-1,0]}, )";
-  const std::pair<std::string, const char*> cases[] = {
-      {R"({"type": "torque", "torque": [1,0,0]}]})", "scene: forces[1]: torque acts on rigid bodies only"},
-      {R"({"type": "angular_drag", "c": 1}]})", "scene: forces[1]: angular_drag acts on rigid bodies only"},
-      {R"({"type": "point_force", "point": [1,0,0], "force": [0,1,0]}]})", "scene: forces[1]: point_force acts on rigid"},
-      {R"({"type": "point_spring", "point": [0,0,0], "k": 1}]})", "scene: forces[1]: point_spring acts on rigid"},
-  };
-  for (const auto& [term, message] : cases) {
-    INFO(term);
-    CHECK_THROWS_WITH(parse_scene(particles + term), Catch::StartsWith(message));
-  }
-  // Beside rigid bodies, listed or generated, they act on those.
-  CHECK(parse_scene(R"({"particles": [{"position": [0,0,0]}], "rigid_bodies": [{"position": [1,0,0]}],
-                        "forces": [{"type": "torque", "torque": [1,0,0]}]})").forces.size() == 1);
-  CHECK(parse_scene(R"({"generate": {"count": 2, "kind": "rigid", "position_min": [0,0,0], "position_max": [1,1,1]},
-                        "forces": [{"type": "angular_drag", "c": 1}]})").forces.size() == 1);
-}
-
 TEST_CASE("a dynamic body at an attractor's centre is refused where it is listed", "[scene][errors]") {
   const std::string central = R"("forces": [{"type": "central", "center": [0, 1, 0], "mu": 2}]})";
   CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [1,0,0]}, {"position": [0,1,0]}], )" + central),

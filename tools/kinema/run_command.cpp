@@ -809,6 +809,19 @@ void note_nothing_implicit(const Scene& scene, const RunOptions& o) {
                "explicit, and each step is %s\n", scene.method.c_str(), step.c_str());
 }
 
+// Torques, angular drag, point forces and point springs act on rigid bodies alone: in a scene
+// without any they do nothing, which is said (not with -q) rather than left unnoticed.
+void note_idle_rotational_terms(const Scene& scene, const RunOptions& o) {
+  if (o.quiet || !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid)) return;
+  for (const LocalTerm& term : scene.forces) {
+    if (std::holds_alternative<Torque>(term) || std::holds_alternative<AngularDrag>(term) ||
+        std::holds_alternative<PointForce>(term) || std::holds_alternative<PointSpring>(term)) {
+      std::fprintf(stderr, "kinema: note: %s acts on rigid bodies only, and this scene has none: it does nothing\n",
+                   term_name(term).c_str());
+    }
+  }
+}
+
 // What a summary says of a run that could not start (the world or auto's choice failed).
 nlohmann::ordered_json failed_summary(const Scene& scene, const std::string& error) {
   nlohmann::ordered_json summary;
@@ -878,6 +891,7 @@ int run_scene(const RunOptions& o) {
     RunContext context;
     if (scene.method == "auto") context.auto_choice = apply_auto_choice(scene, o.scene_path).record;
     note_nothing_implicit(scene, o);
+    note_idle_rotational_terms(scene, o);
     return with_precision(scene.precision,
                           [&]<class T>() { return run_typed<T>(scene, o, context, summary_file); });
   } catch (const std::exception& e) {
