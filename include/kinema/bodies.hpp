@@ -237,7 +237,11 @@ class ParticleSet {
   void keep_forces(bool keep) { keep_forces_ = keep; }
   bool keeps_forces() const { return keep_forces_; }
   bool has_applied_forces() const { return applied_.active(); }
-  Vec3<T> applied_force(std::size_t i) const { return applied_.at(i); }
+  // Body i's applied force (zero when none); kinema::Error for a bad index.
+  Vec3<T> applied_force(std::size_t i) const {
+    check_index(i);
+    return applied_.at(i);
+  }
   // Component d (0..2: x, y, z) of the applied forces, padded_size() long; nullptr when none.
   const T* applied_force_data(int d) const { return applied_.data(d); }
 
@@ -349,7 +353,10 @@ class RigidBodySet {
   bool keeps_forces() const { return centers_.keeps_forces(); }
   bool has_applied_forces() const { return centers_.has_applied_forces() || torques_.active(); }
   Vec3<T> applied_force(std::size_t i) const { return centers_.applied_force(i); }
-  Vec3<T> applied_torque(std::size_t i) const { return torques_.at(i); }
+  Vec3<T> applied_torque(std::size_t i) const {
+    centers_.check_index(i);
+    return torques_.at(i);
+  }
   const T* applied_torque_data(int d) const { return torques_.data(d); }  // nullptr when none
   // Per-body parameters, as ParticleSet's, plus angular damping (the torque -c L).
   void set_gravity_factor(std::size_t i, T factor) { centers_.set_gravity_factor(i, factor); }

@@ -40,7 +40,9 @@ struct Spring {
   double k = 0;
   double damping = 0;
 };
-// a = -mu r / |r|^3 with r = x - center (mu: gravitational parameter G M).
+// a = -mu r / |r|^3 with r = x - center (mu: gravitational parameter G M). A dynamic body
+// exactly at the centre has no defined pull: its step is NaN (FiniteGuard::check names it;
+// scenes refuse such a body).
 struct Central {
   Vec3<double> center{};
   double mu = 0;

@@ -263,8 +263,8 @@ class Stepper {
   double time() const;
   void set_time(double t);
   StepperClock clock() const;
-  // kinema::Error (nothing changed) for a value that is not finite or negative, or an h that
-  // T cannot hold exactly.
+  // kinema::Error (nothing changed) for a value that is not finite, an h or proposed step
+  // that is negative, or an h that T cannot hold exactly (the origin may be any finite time).
   void set_clock(const StepperClock& clock);
 
   const Method& method() const;

@@ -5,6 +5,7 @@
 #include "kinema/dense_output.hpp"
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <type_traits>
 
@@ -20,6 +21,7 @@ std::size_t FixedSteps<T>::checkpoint_bytes() const {
 template <class T>
 template <class Set>
 void FixedSteps<T>::advance(const Workers& w, Set& b, T h, std::uint64_t steps, const StopRequest* stop) {
+  check_step_count(h, steps);
   struct CallStop {  // the call's own: no later call sees it
     const StopRequest*& slot;
     CallStop(const StopRequest*& s, const StopRequest* stop) : slot(s) { slot = stop; }
@@ -72,6 +74,16 @@ void FixedSteps<T>::check_events(const Set& b) const {
     throw Error("events are watched with built-in local terms only (any method): this model takes the " +
                 std::string(core_.paths.block ? "block" : "staged") + " path for its callbacks or coupled terms");
   }
+}
+
+// The clock counts the steps of one size since its origin: a call that would take it past
+// 2^64 is refused before anything moves (it would wrap, and time() jump back).
+template <class T>
+void FixedSteps<T>::check_step_count(T h, std::uint64_t steps) const {
+  const std::uint64_t counted = h == core_.clock.h ? core_.clock.steps : 0;  // a new size starts a new count
+  if (steps <= std::numeric_limits<std::uint64_t>::max() - counted) return;
+  throw Error("advance: " + std::to_string(steps) + " steps after the clock's " + std::to_string(counted) +
+              " of this size pass 2^64 (set_time or set_clock moves its origin)");
 }
 
 template <class T>

@@ -87,6 +87,7 @@ class FixedSteps {
   // The fused particle path under a guard: steps into buffer_, which the set takes when
   // every value is finite (finite_guard.hpp): no copy to save, none to put back.
   bool buffers(const ParticleSet<T>& b) const;
+  void check_step_count(T h, std::uint64_t steps) const;
   void advance_buffered(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
   std::optional<NonFinite> buffered_run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
   template <class Set, class Step>

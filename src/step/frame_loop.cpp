@@ -28,7 +28,7 @@ unsigned FixedTimestep::steps_for(double frame_seconds) {
     // Saturated, the frame's and the total: 2^64 steps is forever anyway, and must not wrap.
     constexpr std::uint64_t most = std::numeric_limits<std::uint64_t>::max();
     const double dropped = due - double(cap_);
-    const std::uint64_t now = dropped < 0x1p63 ? std::uint64_t(dropped) : std::uint64_t(1) << 63;
+    const std::uint64_t now = dropped < 0x1p64 ? std::uint64_t(dropped) : most;
     dropped_ = dropped_ > most - now ? most : dropped_ + now;
     accumulated_ = std::isfinite(accumulated_) ? std::fmod(accumulated_, h_) : 0.0;  // keep the fraction
   } else {

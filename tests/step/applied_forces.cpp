@@ -107,6 +107,17 @@ TEST_CASE("a set that applies nothing carries no force arrays", "[bodies][applie
   b.apply_force(7, {0, 1, 0});  // a new frame starts from zero
   CHECK(b.applied_force(5) == Vec3<float>{0, 0, 0});
   CHECK(b.applied_force(7) == Vec3<float>{0, 1, 0});
+  // Reading past the set is an error, with the force arrays made or not (it read past them).
+  CHECK_THROWS_AS(b.applied_force(b.size()), Error);
+  CHECK_THROWS_AS(b.applied_force(1000000000), Error);
+  b.clear_forces();
+  CHECK_THROWS_AS(b.applied_force(b.size()), Error);
+  RigidBodySet<float> r;
+  r.add({});
+  r.apply_torque(0, {1, 0, 0});
+  CHECK(r.applied_torque(0) == Vec3<float>{1, 0, 0});
+  CHECK_THROWS_AS(r.applied_torque(1), Error);
+  CHECK_THROWS_AS(r.applied_force(1), Error);
 }
 
 TEST_CASE("applied forces move with their body on removal and copy with the set", "[bodies][applied]") {

@@ -436,6 +436,37 @@ TEST_CASE("a checkpoint made to pass its checksums with a state no set can hold 
   CHECK_THAT(refusal(negative), Catch::Contains("inverse mass"));
 }
 
+TEST_CASE("a rigid checkpoint whose orientation is no unit quaternion is refused", "[checkpoint][rigid]") {
+  // One body turned by the quaternion (0.6, 0.8, 0, 0): its two components found in the
+  // record's arrays and zeroed, the checksums made right.
+  RigidBodySet<float> b;
+  b.add({{0, 0, 0}, {0, 0, 0}, {0.6f, 0.8f, 0, 0}, {0, 0, 0}, 1, {1, 2, 3}});
+  Stepper<float> s(ForceModel<float>{}, rk4, test::serial_options());
+  CheckpointWriter out;
+  out.add(b, s);
+  std::vector<std::byte> bytes = out.bytes();
+  const auto find = [&](float value) {
+    for (std::size_t at = kCheckpointHeaderBytes + kCheckpointRecordBytes; at + 4 <= bytes.size(); at += 4) {
+      float x;
+      std::memcpy(&x, bytes.data() + at, 4);
+      if (std::abs(x - value) < 1e-6f) return at;
+    }
+    FAIL("value not found");
+    return std::size_t(0);
+  };
+  const std::vector<std::byte> good = bytes;
+  patch(bytes, find(0.6f), 0.0f);
+  patch(bytes, find(0.8f), 0.0f);
+  reseal(bytes);
+  RigidBodySet<float> restored;
+  Stepper<float> t(ForceModel<float>{}, rk4, test::serial_options());
+  CHECK_THROWS_WITH(CheckpointReader(bytes).restore(0, restored, t),
+                    Catch::Contains("body 0's orientation is not a unit quaternion"));
+  CHECK(restored.size() == 0);
+  CHECK_NOTHROW(CheckpointReader(good).restore(0, restored, t));
+  CHECK(restored.q(0)[0] == b.q(0)[0]);
+}
+
 TEST_CASE("checkpoint files: written whole, read only when regular", "[checkpoint][files]") {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("kinema-ckpt-" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);

@@ -346,6 +346,10 @@ TEST_CASE("a fixed timestep runs whole steps, caps a slow frame, and leaves the 
   CHECK(clock.steps_for(1e300) == 4);
   CHECK(clock.alpha() >= 0);
   CHECK(clock.alpha() < 1);
+  // One frame of 1e300 s drops more than 2^64 steps: the count saturates at once.
+  FixedTimestep once(1.0 / 60);
+  once.steps_for(1e300);
+  CHECK(once.dropped_steps() == std::numeric_limits<std::uint64_t>::max());
   // Frames of the largest double: the count saturates, it never wraps back to a small one.
   FixedTimestep hitched(0.01);
   for (int f = 0; f < 3; ++f) hitched.steps_for(std::numeric_limits<double>::max());
@@ -362,6 +366,31 @@ TEST_CASE("a fixed timestep runs whole steps, caps a slow frame, and leaves the 
   }
   CHECK(steady.dropped_steps() == 0);
   CHECK(double(steps) / 60 + steady.alpha() / 60 == Approx(wall).epsilon(1e-9));
+}
+
+TEST_CASE("the clock's step count never wraps: a call past 2^64 steps is refused before any move",
+          "[embedding]") {
+  ForceModel<double> gravity;
+  gravity.add(Gravity{{0, -1, 0}});
+  Stepper<double> stepper(gravity, rk4, on_calling_thread());
+  constexpr std::uint64_t most = std::numeric_limits<std::uint64_t>::max();
+  stepper.set_clock({0, most - 1, 1.0, 0});
+  ParticleSet<double> bodies;
+  bodies.add({0, 0, 0}, {1, 0, 0}, 1);
+  const ParticleSet<double> before = bodies;
+  CHECK_THROWS_WITH(stepper.advance(bodies, 1.0, 3), Catch::Contains("pass 2^64"));
+  CHECK(stepper.clock().steps == most - 1);
+  CHECK(bodies.px()[0] == before.px()[0]);
+  stepper.advance(bodies, 1.0, 1);  // up to the last count is fine
+  CHECK(stepper.clock().steps == most);
+  // Another step size starts a count of its own; an empty set is counted as well.
+  ParticleSet<double> none;
+  Stepper<double> empty(gravity, rk4, on_calling_thread());
+  empty.advance(none, 0.1, 5);
+  CHECK_THROWS_WITH(empty.advance(none, 0.1, most), Catch::Contains("pass 2^64"));
+  CHECK(empty.time() == Approx(0.5));
+  empty.advance(none, 0.2, most);
+  CHECK(empty.clock().steps == most);
 }
 
 TEST_CASE("interpolate: positions by lerp, orientations by the short-arc normalized lerp",
