@@ -149,7 +149,11 @@ void EventWatch<T>::set(EventOptions<T> options) {
     } else if (!std::get<EventFunction<T>>(event.kind)) {
       refuse(e, "the event function is empty");
     }
-    if (!std::isfinite(double(job.b))) refuse(e, "the radius or speed overflows the precision");
+    if (!std::isfinite(double(job.b))) {
+      refuse(e, std::holds_alternative<PlaneEvent>(event.kind)      ? "plane offset overflows the precision"
+                : std::holds_alternative<DistanceEvent>(event.kind) ? "distance radius squared overflows the precision"
+                                                                    : "speed squared overflows the precision");
+    }
     jobs.push_back(job);
   }
   events_ = std::move(options.events);

@@ -513,6 +513,11 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   CHECK_THROWS_WITH(s.set_events({{{SpeedEvent{-1}}}}), Catch::Contains("speed"));
   CHECK_THROWS_WITH(s.set_events({{{EventFunction<double>{}}}}), Catch::Contains("empty"));
   CHECK_THROWS_WITH(s.set_events({{floor_event()}, -1}), Catch::Contains("time_tolerance"));
+  // Values float cannot hold: each names its own field.
+  Stepper<float> single(ForceModel<float>{}, rk4, test::serial_options());
+  CHECK_THROWS_WITH(single.set_events({{{PlaneEvent{{0, 1, 0}, 1e300}}}}), Catch::Contains("plane offset overflows"));
+  CHECK_THROWS_WITH(single.set_events({{{DistanceEvent{{0, 0, 0}, 1e30}}}}), Catch::Contains("distance radius squared"));
+  CHECK_THROWS_WITH(single.set_events({{{SpeedEvent{1e30}}}}), Catch::Contains("speed squared overflows"));
   s.set_events({{floor_event()}});
   ParticleSet<double> b;
   b.add({0, 1, 0}, {0, 0, 0}, 1);
