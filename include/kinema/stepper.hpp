@@ -160,7 +160,8 @@ class Stepper {
   // fused path each block of bodies takes all its steps while in cache (same bits as
   // calling step() `steps` times, far less memory traffic), so nothing can look at the set
   // between those steps: call step() for that. What user code throws leaves the set as
-  // before the step that threw; time() counts the steps completed.
+  // before the step that threw; time() counts the steps completed. kinema::Error (nothing
+  // changed) when the clock's count of steps of this size would pass 2^64 (set_time moves it).
   void advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps);
   // The same, polling `stop` before each block of every pass of coupled terms (one N-body
   // step takes seconds at 32768 bodies): once it returns true, the step under way is

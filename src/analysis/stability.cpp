@@ -406,16 +406,40 @@ StiffnessEstimate estimate_stiffness(const RigidBodySet<T>& bodies,
   return dominant_mode(f, iterations);
 }
 
+namespace {
+
+// Where the mode's rate squared overflows double (|lambda| past 1e154): a step h on the mode
+// at rate r is similar, by a change of scale of v, to a step h r on the mode at rate 1, with
+// the same growth. Other rates keep the direct form (and its bits).
+bool rate_squared_overflows(const StiffnessEstimate& e) { return !std::isfinite(e.magnitude * e.magnitude); }
+
+std::pair<double, double> unit_mode_of(StiffnessEstimate e) {
+  e.magnitude = 1;
+  return mode_of(e);
+}
+
+}  // namespace
+
 double largest_stable_step(const Method& method, const StiffnessEstimate& e) {
   if (!(e.magnitude > 0)) return std::numeric_limits<double>::infinity();
+  if (rate_squared_overflows(e)) {
+    const auto [a, b] = unit_mode_of(e);
+    return stable_edge(method, 1, a, b) / e.magnitude;
+  }
   const auto [a, b] = mode_of(e);
   return stable_edge(method, e.magnitude, a, b);
 }
 
 double growth_per_step(const Method& method, const StiffnessEstimate& e, double h) {
   if (!(e.magnitude > 0)) return 1;
-  const auto [a, b] = mode_of(e);
-  const double growth = radius(method, h, a, b);
+  double growth = 0;
+  if (rate_squared_overflows(e)) {
+    const auto [a, b] = unit_mode_of(e);
+    growth = radius(method, h * e.magnitude, a, b);
+  } else {
+    const auto [a, b] = mode_of(e);
+    growth = radius(method, h, a, b);
+  }
   return std::isnan(growth) ? std::numeric_limits<double>::infinity() : growth;  // the step's entries overflowed
 }
 

@@ -340,7 +340,7 @@ class Pilot {
   std::optional<Stall> stall() const {
     if (estimates_.size() < 2) return std::nullopt;
     const auto finer = std::prev(estimates_.end()), coarser = std::prev(finer);
-    if (!std::isfinite(coarser->second) || finer->second < coarser->second) return std::nullopt;
+    if (finer->second < coarser->second) return std::nullopt;  // estimates are finite when kept
     return Stall{finer->first, coarser->second, finer->second};
   }
 
@@ -604,8 +604,9 @@ class MethodSearch {
         return true;
       }
       if (note_stall(pilot, m, " and spent the search budget")) return false;
-      // The best so far meets the tolerance; it may not be the cheapest.
-      note(std::string(m.name) + " not tried (search budget spent)");
+      // A best so far meets the tolerance and may not be the cheapest; or none does yet.
+      note(std::string(m.name) + (std::isfinite(best_cost_) ? " not tried (search budget spent)"
+                                                             : " ran out of the search budget before meeting it"));
       return false;
     } catch (const Error& e) {
       note(std::string(m.name) + " failed (" + first_clause(e.what()) + ")");

@@ -49,7 +49,9 @@ class DocumentBuilder : public nlohmann::json_sax<json> {
   bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception& e) override {
     // Without the library's "[json.exception.parse_error.101] " tag: where and what is the message.
     std::string what = e.what();
-    if (what.rfind("[json.exception.", 0) == 0) what.erase(0, what.find("] ") == std::string::npos ? 0 : what.find("] ") + 2);
+    if (const std::size_t tag_end = what.find("] "); what.starts_with("[json.exception.") && tag_end != std::string::npos) {
+      what.erase(0, tag_end + 2);
+    }
     throw Stop{"invalid JSON: " + what};
   }
 

@@ -8,6 +8,7 @@
 #include <initializer_list>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <unistd.h>
 #include <variant>
 #include <vector>
@@ -339,10 +340,9 @@ void check_events(const Node& events, const Scene& s) {
   }
 }
 
-}  // namespace
-
-// A dynamic body listed at an attractor's centre feels an infinite pull from the first step
-// (mu / r^2 at r = 0): refused where it is named, not reported later as a blow-up.
+// A dynamic body at an attractor's centre feels an infinite pull from the first step (mu /
+// r^2 at r = 0): refused where it is named (a listed body, or the network that made it), not
+// reported later as a blow-up.
 template <class Spec>
 void check_off_centres(const Node& root, const char* key, const std::vector<Spec>& bodies, const Scene& s) {
   for (const LocalTerm& term : s.forces) {
@@ -350,10 +350,19 @@ void check_off_centres(const Node& root, const char* key, const std::vector<Spec
     if (central == nullptr || central->mu == 0) continue;
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       if (bodies[i].kinematic || bodies[i].position != central->center) continue;  // no force moves a kinematic body
-      root.child(key).element(i).fail("sits at the centre of a central term (mu / r^2 is infinite there)");
+      const char* why = "sits at the centre of a central term (mu / r^2 is infinite there)";
+      for (const Scene::Generated& g : s.generated_particles) {
+        if (std::is_same_v<Spec, BodySpec> && i >= g.first && i - g.first < g.count) {
+          throw Error(printable(std::string(root.origin) + ": " + g.path + ": its body " + std::to_string(i - g.first) +
+                                " " + why));
+        }
+      }
+      root.child(key).element(i).fail(why);
     }
   }
 }
+
+}  // namespace
 
 Scene parse_scene(std::string_view text, std::string_view origin) {
   const json doc = scene_json::parse_json(text, origin);

@@ -519,16 +519,18 @@ void check_parameters(const BodyParameters<T>& p, std::size_t k, std::size_t n) 
   }
 }
 
-// Orientations of unit length, as the setters and every step leave them (to within their
-// round-off): a zero or overflowing quaternion would make the next step NaN.
+// Orientations a step can normalize: |q|^2 between the square root of T's smallest normal
+// number and of its largest (near 1 as the setters and steps leave it, or drifted under
+// renormalize_quaternions = false). A zero, vanishing or overflowing one makes the next step NaN.
 template <class T>
-void check_unit_quaternions(const RigidBodySet<T>& b, std::size_t k) {
+void check_quaternions(const RigidBodySet<T>& b, std::size_t k) {
+  const double least = std::sqrt(double(std::numeric_limits<T>::min())), most = std::sqrt(double(std::numeric_limits<T>::max()));
   for (std::size_t i = 0; i < b.size(); ++i) {
     double norm2 = 0;
     for (int c = 0; c < 4; ++c) norm2 += double(b.q(c)[i]) * double(b.q(c)[i]);
-    if (!(std::abs(norm2 - 1) <= 1e-3)) {
+    if (!(norm2 >= least && norm2 <= most)) {
       throw Error("checkpoint record " + std::to_string(k) + ": body " + std::to_string(i) +
-                  "'s orientation is not a unit quaternion");
+                  "'s orientation quaternion is zero or too small or large to normalize");
     }
   }
 }
@@ -543,7 +545,7 @@ void check_values(const Set& b, std::size_t k) {
   if constexpr (requires { b.centers(); }) {
     check_inverse("inverse mass", k, b.centers().inv_mass(), b.size());
     for (int d = 0; d < 3; ++d) check_inverse("inverse moment", k, b.inv_inertia(d), b.size());
-    check_unit_quaternions(b, k);
+    check_quaternions(b, k);
   } else {
     check_inverse("inverse mass", k, b.inv_mass(), b.size());
   }

@@ -149,6 +149,10 @@ void EventWatch<T>::set(EventOptions<T> options) {
     } else if (!std::get<EventFunction<T>>(event.kind)) {
       refuse(e, "the event function is empty");
     }
+    if (!std::isfinite(double(job.a[0])) || !std::isfinite(double(job.a[1])) || !std::isfinite(double(job.a[2]))) {
+      refuse(e, std::holds_alternative<PlaneEvent>(event.kind) ? "plane normal overflows the precision"
+                                                              : "distance point overflows the precision");
+    }
     if (!std::isfinite(double(job.b))) {
       refuse(e, std::holds_alternative<PlaneEvent>(event.kind)      ? "plane offset overflows the precision"
                 : std::holds_alternative<DistanceEvent>(event.kind) ? "distance radius squared overflows the precision"

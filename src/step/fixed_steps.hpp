@@ -32,6 +32,9 @@ class FixedSteps {
   template <class Set>
   void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps, const StopRequest* stop = nullptr);
 
+  // kinema::Error when `steps` of size h would take the clock's count of steps past 2^64.
+  void check_step_count(T h, std::uint64_t steps) const;
+
   std::size_t checkpoint_bytes() const;
   // The events watched by the steps (kinema/events.hpp), and the hits of the last call.
   EventWatch<T>& events() { return events_; }
@@ -87,7 +90,6 @@ class FixedSteps {
   // The fused particle path under a guard: steps into buffer_, which the set takes when
   // every value is finite (finite_guard.hpp): no copy to save, none to put back.
   bool buffers(const ParticleSet<T>& b) const;
-  void check_step_count(T h, std::uint64_t steps) const;
   void advance_buffered(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
   std::optional<NonFinite> buffered_run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t steps);
   template <class Set, class Step>

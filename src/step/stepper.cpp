@@ -37,6 +37,7 @@ struct Stepper<T>::Impl {
 
   template <class Set>
   void advance(Set& bodies, T h, std::uint64_t steps) {
+    fixed.check_step_count(h, steps);  // before anything changes, the continuation too
     continuation.active = false;
     workers.run(std::uint64_t(kind_of(bodies)), bodies.size(), steps, [&](const Workers& w) {
       fixed.advance(w, bodies, h, steps);
@@ -51,6 +52,7 @@ struct Stepper<T>::Impl {
       advance(bodies, h, steps);
       return fixed.events().stop_time() ? fixed.steps_to_stop() : steps;
     }
+    fixed.check_step_count(h, steps);
     continuation.active = false;
     const std::uint64_t start = core.clock.steps;
     try {

@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "kinema/stability.hpp"
@@ -158,6 +159,23 @@ TEST_CASE("stability limits on the real and imaginary axes, from each method's c
   CHECK(limits(velocity_verlet).imaginary_axis == Approx(2).epsilon(1e-6));
   // A kick at the half-step velocity: drag is damped twice per step, (1 - h k / 2)^2.
   CHECK(limits(velocity_verlet).real_axis == Approx(4).epsilon(1e-6));
+}
+
+TEST_CASE("stable steps and growth at rates whose square overflows double", "[stability]") {
+  // An undamped oscillation at 1e200 /s: rk4's edge is 2 sqrt(2) / 1e200 as at any rate, and a
+  // step far past it grows (it read as no stable step at all, and a growth of NaN).
+  const double pi = std::numbers::pi;
+  for (double rate : {1e3, 1e200}) {
+    INFO(rate);
+    const StiffnessEstimate oscillation{rate, pi / 2, 0};
+    CHECK(largest_stable_step(rk4, oscillation) * rate == Approx(2 * std::sqrt(2.0)).epsilon(1e-6));
+    CHECK(growth_per_step(rk4, oscillation, 1 / rate) == Approx(growth_per_step(rk4, {1, pi / 2, 0}, 1)).epsilon(1e-9));
+    CHECK(growth_per_step(rk4, oscillation, 1e-2 * 1e300 / rate) == std::numeric_limits<double>::infinity());
+  }
+  // Damping at 1e300 /s: euler's edge 2 / 1e300; a step of 0.01 grows past what double holds.
+  const StiffnessEstimate damping{1e300, 0, 0};
+  CHECK(largest_stable_step(euler, damping) * 1e300 == Approx(2).epsilon(1e-6));
+  CHECK(growth_per_step(rk4, damping, 0.01) == std::numeric_limits<double>::infinity());
 }
 
 TEST_CASE("the stiffness estimate of an undamped spring is its angular frequency, an oscillation", "[stability]") {

@@ -240,6 +240,10 @@ TEST_CASE("a dynamic body at an attractor's centre is refused where it is listed
                     "scene: particles[1]: sits at the centre of a central term (mu / r^2 is infinite there)");
   CHECK_THROWS_WITH(parse_scene(R"({"rigid_bodies": [{"position": [0,1,0]}], )" + central),
                     Catch::StartsWith("scene: rigid_bodies[0]: sits at the centre"));
+  // A body a spring network makes there is named by its network.
+  CHECK_THROWS_WITH(parse_scene(R"({"forces": [{"type": "central", "center": [0, 0, 0], "mu": 1},
+      {"type": "springs", "grid": {"rows": 2, "columns": 2, "spacing": 1, "k": 1}}]})"),
+                    "scene: forces[1].grid: its body 0 sits at the centre of a central term (mu / r^2 is infinite there)");
   // A kinematic body there (a sun the attractor stands for) is moved by no force.
   CHECK(parse_scene(R"({"particles": [{"position": [0,1,0], "kinematic": true}], )" + central).particles.size() == 1);
 }

@@ -436,35 +436,40 @@ TEST_CASE("a checkpoint made to pass its checksums with a state no set can hold 
   CHECK_THAT(refusal(negative), Catch::Contains("inverse mass"));
 }
 
-TEST_CASE("a rigid checkpoint whose orientation is no unit quaternion is refused", "[checkpoint][rigid]") {
-  // One body turned by the quaternion (0.6, 0.8, 0, 0): its two components found in the
-  // record's arrays and zeroed, the checksums made right.
+TEST_CASE("a rigid checkpoint whose orientation cannot be normalized is refused", "[checkpoint][rigid]") {
+  // One body turned by the quaternion (0.6, 0.8, 0, 0): its components found in the record's
+  // arrays and changed, the checksums made right.
   RigidBodySet<float> b;
   b.add({{0, 0, 0}, {0, 0, 0}, {0.6f, 0.8f, 0, 0}, {0, 0, 0}, 1, {1, 2, 3}});
   Stepper<float> s(ForceModel<float>{}, rk4, test::serial_options());
   CheckpointWriter out;
   out.add(b, s);
-  std::vector<std::byte> bytes = out.bytes();
-  const auto find = [&](float value) {
-    for (std::size_t at = kCheckpointHeaderBytes + kCheckpointRecordBytes; at + 4 <= bytes.size(); at += 4) {
-      float x;
-      std::memcpy(&x, bytes.data() + at, 4);
-      if (std::abs(x - value) < 1e-6f) return at;
+  const std::vector<std::byte> good = out.bytes();
+  const auto changed = [&](std::initializer_list<std::pair<float, float>> changes) {
+    std::vector<std::byte> bytes = good;
+    for (const auto& [from, to] : changes) {
+      std::size_t at = kCheckpointHeaderBytes + kCheckpointRecordBytes;
+      for (float x; at + 4 <= bytes.size(); at += 4) {
+        std::memcpy(&x, bytes.data() + at, 4);
+        if (std::abs(x - from) < 1e-6f) break;
+      }
+      REQUIRE(at + 4 <= bytes.size());
+      patch(bytes, at, to);
     }
-    FAIL("value not found");
-    return std::size_t(0);
+    reseal(bytes);
+    return bytes;
   };
-  const std::vector<std::byte> good = bytes;
-  patch(bytes, find(0.6f), 0.0f);
-  patch(bytes, find(0.8f), 0.0f);
-  reseal(bytes);
   RigidBodySet<float> restored;
   Stepper<float> t(ForceModel<float>{}, rk4, test::serial_options());
-  CHECK_THROWS_WITH(CheckpointReader(bytes).restore(0, restored, t),
-                    Catch::Contains("body 0's orientation is not a unit quaternion"));
+  CHECK_THROWS_WITH(CheckpointReader(changed({{0.6f, 0.0f}, {0.8f, 0.0f}})).restore(0, restored, t),
+                    Catch::Contains("body 0's orientation quaternion is zero or too small or large to normalize"));
+  CHECK_THROWS_AS(CheckpointReader(changed({{0.6f, 3e37f}, {0.8f, 3e37f}})).restore(0, restored, t), Error);
   CHECK(restored.size() == 0);
   CHECK_NOTHROW(CheckpointReader(good).restore(0, restored, t));
   CHECK(restored.q(0)[0] == b.q(0)[0]);
+  // Drifted from unit length (renormalize_quaternions = false lets it): kept as it is.
+  CHECK_NOTHROW(CheckpointReader(changed({{0.6f, 0.9f}})).restore(0, restored, t));
+  CHECK(restored.q(0)[0] == 0.9f);
 }
 
 TEST_CASE("checkpoint files: written whole, read only when regular", "[checkpoint][files]") {

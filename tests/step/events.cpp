@@ -518,6 +518,8 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   CHECK_THROWS_WITH(single.set_events({{{PlaneEvent{{0, 1, 0}, 1e300}}}}), Catch::Contains("plane offset overflows"));
   CHECK_THROWS_WITH(single.set_events({{{DistanceEvent{{0, 0, 0}, 1e30}}}}), Catch::Contains("distance radius squared"));
   CHECK_THROWS_WITH(single.set_events({{{SpeedEvent{1e30}}}}), Catch::Contains("speed squared overflows"));
+  CHECK_THROWS_WITH(single.set_events({{{PlaneEvent{{0, 1e39, 0}, 0}}}}), Catch::Contains("plane normal overflows"));
+  CHECK_THROWS_WITH(single.set_events({{{DistanceEvent{{1e39, 0, 0}, 1}}}}), Catch::Contains("distance point overflows"));
   s.set_events({{floor_event()}});
   ParticleSet<double> b;
   b.add({0, 1, 0}, {0, 0, 0}, 1);

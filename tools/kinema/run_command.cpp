@@ -33,8 +33,6 @@ using Clock = std::chrono::steady_clock;
 // a signal is answered at once.
 constexpr double kBodyStepsPerChunk = double(1 << 26);
 
-}  // namespace
-
 // Options that would do nothing with the run's method are refused, not ignored.
 void check_method_options(const RunOptions& o, const std::string& method) {
   if (method == "auto") return;
@@ -45,6 +43,8 @@ void check_method_options(const RunOptions& o, const std::string& method) {
                 "implicit_euler and ros2; the method here is " + method);
   }
 }
+
+}  // namespace
 
 Scene scene_with_overrides(const RunOptions& o) {
   Scene scene = load_scene(o.scene_path);
@@ -217,7 +217,7 @@ void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessE
   const bool springs = !scene.springs.empty() && !rigid && scene.events.empty() &&
                        method_by_name(scene.method).kind != MethodKind::linearly_implicit;
   char growth[48];
-  if (log_growth < 690) {
+  if (log_growth < std::log(1e300)) {
     std::snprintf(growth, sizeof growth, "%.3g-fold", std::exp(log_growth));
   } else {
     std::snprintf(growth, sizeof growth, "more than 1e300-fold");  // past what double holds
@@ -298,8 +298,10 @@ StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOption
                  static_cast<unsigned long long>(scene.steps));
   }
   if (pays) plan.stiffness = stiffness_at_start(scene, options), plan.estimated = true;
-  plan.stable_step = plan.estimated ? largest_stable_step(explicit_part(method_by_name(scene.method)), plan.stiffness)
-                                    : std::numeric_limits<double>::infinity();
+  // An estimate that overflowed bounds nothing (check_plan says so): no stable step, no cap.
+  const bool bounded = plan.estimated && std::isfinite(plan.stiffness.magnitude);
+  plan.stable_step = bounded ? largest_stable_step(explicit_part(method_by_name(scene.method)), plan.stiffness)
+                             : std::numeric_limits<double>::infinity();
   plan.tolerances = tolerances_of(scene);
   // Error control never goes past the stable step; fixed steps are checked against it
   // (check_plan, once the plan is kept: a refusal's summary reports the estimate).

@@ -7,7 +7,6 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
-#include <type_traits>
 #include <unistd.h>
 #include <vector>
 
@@ -170,7 +169,6 @@ StressSetup<T> set_up(const StressOptions& o, const Scene* scene) {
                    : random_stress_groups<T>(o.bodies, o.seed, method, options);
   if (s.groups.empty()) throw Error("the scene has no bodies");
   s.dt = o.dt ? *o.dt : scene ? scene->dt : kStressDt;
-  check_dt_option(o.dt, std::is_same_v<T, float> ? Precision::single : Precision::dual);
   for (const auto& g : s.groups) {
     g.stepper().check_step_size(T(s.dt));
     s.bodies += g.size();
@@ -589,7 +587,7 @@ std::optional<Scene> stress_scene(const StressOptions& o) {
   if (o.precision) scene.precision = *o.precision;
   if (o.dt) scene.dt = *o.dt;
   if (o.method) scene.method = *o.method;
-  check_dt_option(o.dt, scene.precision);
+  check_dt_option(o.dt, scene.precision);  // the option's fault, before the scene's checks blame its dt
   try {
     if (scene.method == "auto") throw Error("stress runs a fixed method: give one with --method");
     method_by_name(scene.method);
@@ -631,8 +629,10 @@ StressPlan plan_stress(const StressOptions& o) {
   check_distinct({{"--scene", o.scene_path}}, {{"--report", o.report_path}, {"--checkpoint", o.checkpoint.path}});
   if (o.method == "auto") throw Error("stress runs a fixed method; auto is for kinema run");
   if (o.method) method_by_name(*o.method);  // a bad name fails before any work
+  const Precision asked = o.precision.value_or(Precision::single);
+  if (o.scene_path.empty()) check_dt_option(o.dt, asked);  // a scene's own: in stress_scene
   StressPlan plan{stress_scene(o), Precision::single};
-  plan.precision = plan.scene ? plan.scene->precision : o.precision.value_or(Precision::single);
+  plan.precision = plan.scene ? plan.scene->precision : asked;
   if (!plan.scene) check_fits(o, plan.precision);
   return plan;
 }
