@@ -127,6 +127,10 @@ Scene load_scene(const std::filesystem::path& path);
 template <class T>
 void check_scene(const Scene& scene);
 
+// Whether the implicit methods (implicit_euler, ros2) can run the scene: spring networks for
+// them to take implicitly, no rigid bodies (listed or generated) and no events.
+bool takes_implicit_methods(const Scene& scene);
+
 // Memory this process may use: physical memory, or less under ulimit -v or a cgroup
 // (memory.max) limit.
 double usable_memory_bytes();

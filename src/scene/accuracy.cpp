@@ -437,12 +437,6 @@ StiffnessEstimate stiffness_of(const Scene& scene) {
   return estimate_stiffness(make_rigid_bodies<double>(scene), forces, 0, 120, on_calling_thread(), current_stop());
 }
 
-// Whether the implicit methods may run the scene: particles only, with springs for them to
-// take implicitly, and no events (the implicit path refuses rigid bodies and events).
-bool takes_implicit(const Scene& scene) {
-  return scene.rigid_bodies.empty() && !scene.particles.empty() && !scene.springs.empty() && scene.events.empty();
-}
-
 // Refuses at once a tolerance below the round-off of a single step: a few units in the
 // last place of the largest |x| + |v| among the bodies.
 void check_reachable(const Scene& sample, double tolerance) {
@@ -522,7 +516,7 @@ class MethodSearch {
     std::stable_sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->order > b->order; });
     // The implicit methods right after the first explicit one that meets the tolerance,
     // whose run they are checked against (checked_implicit), before the search budget goes.
-    bool implicit_left = takes_implicit(pilot_scene_);
+    bool implicit_left = takes_implicit_methods(pilot_scene_);
     for (const Method* m : order) {
       if (!fixed_steps_leave_budget(*m)) return false;
       if (implicit_left && reference_) {

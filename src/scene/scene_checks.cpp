@@ -258,4 +258,9 @@ template RunBytes run_bytes<float>(const Scene&);
 template RunBytes run_bytes<double>(const Scene&);
 template double state_bytes<double>(const Scene&);
 
+bool takes_implicit_methods(const Scene& scene) {
+  const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
+  return !scene.springs.empty() && !rigid && scene.events.empty();
+}
+
 }  // namespace kinema

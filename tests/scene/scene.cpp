@@ -234,6 +234,21 @@ TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") 
   }
 }
 
+TEST_CASE("the implicit methods take scenes of particles with springs, without rigid bodies or events", "[scene][implicit]") {
+  const Scene chain = parse_scene(R"({"forces": [{"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1}}]})");
+  CHECK(takes_implicit_methods(chain));
+  CHECK_FALSE(takes_implicit_methods(parse_scene(R"({"particles": [{"position": [0,0,0]}]})")));
+  // Scenes refuse these mixes; a Scene made in code may hold them.
+  Scene with_rigid = chain, generated_rigid = chain, watched = chain;
+  with_rigid.rigid_bodies.emplace_back();
+  generated_rigid.generate = GenerateSpec{};
+  generated_rigid.generate->rigid = true;
+  watched.events.emplace_back();
+  CHECK_FALSE(takes_implicit_methods(with_rigid));
+  CHECK_FALSE(takes_implicit_methods(generated_rigid));
+  CHECK_FALSE(takes_implicit_methods(watched));
+}
+
 TEST_CASE("a dynamic body at an attractor's centre is refused where it is listed", "[scene][errors]") {
   const std::string central = R"("forces": [{"type": "central", "center": [0, 1, 0], "mu": 2}]})";
   CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [1,0,0]}, {"position": [0,1,0]}], )" + central),

@@ -213,9 +213,7 @@ void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessE
   if (!(log_growth > std::log(2.0))) return;
   // Springs are what the implicit methods take implicitly: name them where they would hold
   // (and the scene would take them).
-  const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
-  const bool springs = !scene.springs.empty() && !rigid && scene.events.empty() &&
-                       method_by_name(scene.method).kind != MethodKind::linearly_implicit;
+  const bool springs = takes_implicit_methods(scene) && method_by_name(scene.method).kind != MethodKind::linearly_implicit;
   char growth[48];
   if (log_growth < std::log(1e300)) {
     std::snprintf(growth, sizeof growth, "%.3g-fold", std::exp(log_growth));

@@ -231,12 +231,6 @@ std::string table_row(const MethodLimit& l) {
   return row;
 }
 
-// Whether the implicit methods may run the scene: particles with springs, no events.
-bool takes_implicit(const Scene& scene) {
-  const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
-  return !scene.springs.empty() && !rigid && scene.events.empty();
-}
-
 bool is_orbit(const Scene& scene) {
   return scene.nbody || std::any_of(scene.forces.begin(), scene.forces.end(),
                                     [](const LocalTerm& t) { return std::holds_alternative<Central>(t); });
@@ -353,7 +347,7 @@ int stability_scene(const StabilityOptions& o) {
                 planar ? "" : " (no trajectory chart: the motion is not planar)");
     std::fputs(springs.c_str(), stdout);
     std::fputs(steps_line.c_str(), stdout);
-    if (o.methods.empty() && takes_implicit(full)) {
+    if (o.methods.empty() && takes_implicit_methods(full)) {
       std::puts("implicit_euler and ros2 (springs implicit, unbounded predicted step) are drawn when named in "
                 "--methods;\n  their measured limit bisects many solves, minutes on a large scene");
     }
