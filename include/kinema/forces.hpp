@@ -293,6 +293,9 @@ void check_nbody(const NBody& term, const std::string& what);
 
 // Name of a term as scenes spell it ("gravity", "linear_drag", ...).
 std::string term_name(const LocalTerm& term);
+// Whether the term acts on rigid bodies only (torques, angular drag, point forces, point
+// springs): particles have no orientation, and their kernels leave it out.
+bool acts_on_rigid_bodies_only(const LocalTerm& term);
 
 extern template class ForceModel<float>;
 extern template class ForceModel<double>;

@@ -17,6 +17,10 @@ std::string term_name(const LocalTerm& term) {
   return visit_term(term, [](const auto&, auto info) { return std::string(info.name); });
 }
 
+bool acts_on_rigid_bodies_only(const LocalTerm& term) {
+  return visit_term(term, [](const auto&, auto info) { return info.kind == TermKind::rotational; });
+}
+
 namespace {
 
 // Every parameter in its range: vectors finite, numbers finite and >= 0.

@@ -46,14 +46,6 @@ double largest(const Vec3<double>& v) {
   return std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])});
 }
 
-// The generator (a spring network's chain or grid) that added particle i, if one did.
-const Scene::Generated* generator_of(const Scene& scene, std::size_t i) {
-  for (const Scene::Generated& g : scene.generated_particles) {
-    if (i >= g.first && i - g.first < g.count) return &g;
-  }
-  return nullptr;
-}
-
 std::string shown(const Vec3<double>& v) {
   char text[96];
   std::snprintf(text, sizeof text, "(%g, %g, %g)", v[0], v[1], v[2]);
@@ -261,6 +253,13 @@ template double state_bytes<double>(const Scene&);
 bool takes_implicit_methods(const Scene& scene) {
   const bool rigid = !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
   return !scene.springs.empty() && !rigid && scene.events.empty();
+}
+
+const Scene::Generated* generator_of(const Scene& scene, std::size_t i) {
+  for (const Scene::Generated& g : scene.generated_particles) {
+    if (i >= g.first && i - g.first < g.count) return &g;
+  }
+  return nullptr;
 }
 
 }  // namespace kinema

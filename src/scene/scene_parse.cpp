@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "forces/force_terms.hpp"
+#include "scene/scene_checks.hpp"
 #include "kinema/error.hpp"
 #include "kinema/methods.hpp"
 #include "scene/angular_momentum.hpp"
@@ -351,11 +352,9 @@ void check_off_centres(const Node& root, const char* key, const std::vector<Spec
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       if (bodies[i].kinematic || bodies[i].position != central->center) continue;  // no force moves a kinematic body
       const char* why = "sits at the centre of a central term (mu / r^2 is infinite there)";
-      for (const Scene::Generated& g : s.generated_particles) {
-        if (std::is_same_v<Spec, BodySpec> && i >= g.first && i - g.first < g.count) {
-          throw Error(printable(std::string(root.origin) + ": " + g.path + ": its body " + std::to_string(i - g.first) +
-                                " " + why));
-        }
+      if (const Scene::Generated* g = std::is_same_v<Spec, BodySpec> ? generator_of(s, i) : nullptr) {
+        throw Error(printable(std::string(root.origin) + ": " + g->path + ": its body " + std::to_string(i - g->first) +
+                              " " + why));
       }
       root.child(key).element(i).fail(why);
     }

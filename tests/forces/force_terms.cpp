@@ -92,6 +92,7 @@ TEST_CASE("every force term has a name, fields, a potential or none, and a refer
     REQUIRE(scene.forces.size() == 1);
     REQUIRE(std::holds_alternative<Term>(scene.forces[0]));
     CHECK(term_name(scene.forces[0]) == Info::name);
+    CHECK(acts_on_rigid_bodies_only(scene.forces[0]) == (Info::kind == TermKind::rotational));
     const Term& parsed = std::get<Term>(scene.forces[0]);
     for_each_field(Info{}, [&](const auto& field) {
       INFO(field.key);

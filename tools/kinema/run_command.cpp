@@ -814,8 +814,7 @@ void note_nothing_implicit(const Scene& scene, const RunOptions& o) {
 void note_idle_rotational_terms(const Scene& scene, const RunOptions& o) {
   if (o.quiet || !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid)) return;
   for (const LocalTerm& term : scene.forces) {
-    if (std::holds_alternative<Torque>(term) || std::holds_alternative<AngularDrag>(term) ||
-        std::holds_alternative<PointForce>(term) || std::holds_alternative<PointSpring>(term)) {
+    if (acts_on_rigid_bodies_only(term)) {
       std::fprintf(stderr, "kinema: note: %s acts on rigid bodies only, and this scene has none: it does nothing\n",
                    term_name(term).c_str());
     }
