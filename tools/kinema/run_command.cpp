@@ -44,6 +44,22 @@ void check_method_options(const RunOptions& o, const std::string& method) {
   }
 }
 
+// --relaxed-fma changes the scalar and SSE2 kernels only: with an instruction set that has
+// FMA units it would do nothing. Named by --isa: refused; chosen on this CPU: a note.
+void check_relaxed_fma(const RunOptions& o) {
+  if (!o.relaxed_fma) return;
+  const Isa isa = o.isa == Isa::automatic ? best_isa() : o.isa;
+  if (isa != Isa::avx2 && isa != Isa::avx512) return;
+  const std::string name(isa_name(isa));
+  if (o.isa != Isa::automatic) {
+    throw Error("--relaxed-fma changes the scalar and SSE2 kernels; --isa " + name + " always uses its FMA units");
+  }
+  if (!o.quiet) {
+    std::fprintf(stderr, "kinema: note: --relaxed-fma changes the scalar and SSE2 kernels; this CPU runs %s, which "
+                 "always uses its FMA units (--isa sse2 to relax)\n", name.c_str());
+  }
+}
+
 }  // namespace
 
 Scene scene_with_overrides(const RunOptions& o) {
@@ -57,6 +73,7 @@ Scene scene_with_overrides(const RunOptions& o) {
   if (o.atol) scene.atol = *o.atol;
   if (scene.method != "auto") method_by_name(scene.method);
   check_method_options(o, scene.method);
+  check_relaxed_fma(o);
   check_dt_option(o.dt, scene.precision);
   try {
     if (scene.method == "auto" && !scene.tolerance) {
