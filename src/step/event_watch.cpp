@@ -120,6 +120,12 @@ void EventWatch<T>::set(EventOptions<T> options) {
   bool stops = false;
   for (std::size_t e = 0; e < options.events.size(); ++e) {
     const Event<T>& event = options.events[e];
+    if (static_cast<int>(event.direction) < 0 || static_cast<int>(event.direction) > static_cast<int>(Crossing::either)) {
+      refuse(e, "direction has no value " + std::to_string(static_cast<int>(event.direction)));
+    }
+    if (static_cast<int>(event.action) < 0 || static_cast<int>(event.action) > static_cast<int>(EventAction::stop)) {
+      refuse(e, "action has no value " + std::to_string(static_cast<int>(event.action)));
+    }
     kernels::EventScanJob<T> job{};
     job.down = event.direction != Crossing::up;
     job.up = event.direction != Crossing::down;

@@ -19,9 +19,10 @@ void check_step_positive(T h);
 template <class T>
 void check_reach(const CoupledForces<T>& coupled, const ParticleSet<T>& bodies);
 
-// The clamp's speed limits, and their squares, finite and > 0 in T.
+// The options' enumerations named values; the implicit solves' tolerance and iteration cap;
+// the clamp's speed limits, and their squares, finite and > 0 in T.
 template <class T>
-void check_clamp_limits(const StepperOptions& options);
+void check_stepper_options(const StepperOptions& options);
 
 // advance_to's request: a method with a pair, sane tolerances, t_end not before `now`.
 void check_adaptive(const Method& method, double t_end, const Tolerances& tolerances, double now);

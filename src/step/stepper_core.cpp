@@ -10,7 +10,7 @@ template <class T>
 StepperCore<T>::StepperCore(std::shared_ptr<const ForceModel<T>> f, const Method& m, const StepperOptions& o)
     : method(m), options(o) {
   validate(method);
-  check_clamp_limits<T>(options);
+  check_stepper_options<T>(options);
   table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
   use(std::move(f));
 }

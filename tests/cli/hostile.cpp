@@ -237,6 +237,7 @@ std::vector<Case> option_cases() {
       {"", run({"--tolerance", "1e-3"}), 1, "--tolerance bounds the error of --method auto's choice; the method here is rk4"},
       {"", run({"--implicit-iterations", "5"}), 1, "set the linear solves of implicit_euler and ros2; the method here is rk4"},
       {"", run({"--implicit-preconditioner", "jacobi", "--method", "dopri5"}), 1, "the method here is dopri5"},
+      {"", run({"--implicit-preconditioner", "automatic"}), 1, "the method here is rk4"},
       {"", run({"--isa", "avx2", "--relaxed-fma"}), 1, "--relaxed-fma changes the scalar and SSE2 kernels; --isa avx2 always uses its FMA units"},
       {"", run({"--isa", "sse2", "--relaxed-fma", "--steps", "3"}), 0, ""},
       {"", run({"--every", "0"}), 2, "--every: expected 1 to"},

@@ -513,6 +513,12 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   CHECK_THROWS_WITH(s.set_events({{{SpeedEvent{-1}}}}), Catch::Contains("speed"));
   CHECK_THROWS_WITH(s.set_events({{{EventFunction<double>{}}}}), Catch::Contains("empty"));
   CHECK_THROWS_WITH(s.set_events({{floor_event()}, -1}), Catch::Contains("time_tolerance"));
+  Event<double> unnamed = floor_event();
+  unnamed.direction = Crossing(3);
+  CHECK_THROWS_WITH(s.set_events({{floor_event(), unnamed}}), Catch::Contains("events[1]: direction has no value 3"));
+  unnamed = floor_event();
+  unnamed.action = EventAction(2);
+  CHECK_THROWS_WITH(s.set_events({{unnamed}}), Catch::Contains("events[0]: action has no value 2"));
   // Values float cannot hold: each names its own field.
   Stepper<float> single(ForceModel<float>{}, rk4, test::serial_options());
   CHECK_THROWS_WITH(single.set_events({{{PlaneEvent{{0, 1, 0}, 1e300}}}}), Catch::Contains("plane offset overflows"));

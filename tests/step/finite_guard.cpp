@@ -249,6 +249,23 @@ TEST_CASE("guard clamp refuses speed limits that are not positive and finite in 
   CHECK_NOTHROW(Stepper<double>(ForceModel<double>{}, euler, o));
 }
 
+TEST_CASE("stepper options whose enumerations hold no named value are refused by field", "[guard][errors]") {
+  const auto refused = [](auto set, const char* message) {
+    StepperOptions o = test::serial_options();
+    set(o);
+    CHECK_THROWS_WITH(Stepper<double>(ForceModel<double>{}, rk4, o), Catch::Contains(message));
+  };
+  refused([](StepperOptions& o) { o.guard = FiniteGuard(3); }, "stepper options: guard has no value 3");
+  refused([](StepperOptions& o) { o.isa = Isa(-1); }, "stepper options: isa has no value -1");
+  refused([](StepperOptions& o) { o.workers = WorkerChoice(2); }, "stepper options: workers has no value 2");
+  refused([](StepperOptions& o) { o.implicit_preconditioner = ImplicitPreconditioner(3); },
+          "stepper options: implicit_preconditioner has no value 3");
+  StepperOptions last = test::serial_options();  // each enumeration's last name is taken
+  last.guard = FiniteGuard::clamp, last.workers = WorkerChoice::all;
+  last.implicit_preconditioner = ImplicitPreconditioner::multigrid;
+  CHECK_NOTHROW(Stepper<double>(ForceModel<double>{}, rk4, last));
+}
+
 TEMPLATE_TEST_CASE("scratch_bytes counts the guard's copy and the staged path's stage state", "[guard]",
                    float, double) {
   using T = TestType;

@@ -38,7 +38,7 @@ void check_method_options(const RunOptions& o, const std::string& method) {
   if (method == "auto") return;
   if (o.tolerance) throw Error("--tolerance bounds the error of --method auto's choice; the method here is " + method);
   const bool implicit = method_by_name(method).kind == MethodKind::linearly_implicit;
-  if (!implicit && (o.implicit_tolerance || o.implicit_iterations || o.implicit_preconditioner != "automatic")) {
+  if (!implicit && (o.implicit_tolerance || o.implicit_iterations || o.implicit_preconditioner)) {
     throw Error("--implicit-tolerance, --implicit-iterations and --implicit-preconditioner set the linear solves of "
                 "implicit_euler and ros2; the method here is " + method);
   }
@@ -263,9 +263,10 @@ StepperOptions stepper_options(const RunOptions& o) {
   options.relaxed_fma = o.relaxed_fma;
   options.implicit_tolerance = o.implicit_tolerance.value_or(options.implicit_tolerance);
   options.implicit_max_iterations = o.implicit_iterations.value_or(options.implicit_max_iterations);
-  options.implicit_preconditioner = o.implicit_preconditioner == "jacobi"      ? ImplicitPreconditioner::jacobi
-                                    : o.implicit_preconditioner == "multigrid" ? ImplicitPreconditioner::multigrid
-                                                                               : ImplicitPreconditioner::automatic;
+  const std::string preconditioner = o.implicit_preconditioner.value_or("automatic");
+  options.implicit_preconditioner = preconditioner == "jacobi"      ? ImplicitPreconditioner::jacobi
+                                    : preconditioner == "multigrid" ? ImplicitPreconditioner::multigrid
+                                                                    : ImplicitPreconditioner::automatic;
   return options;
 }
 

@@ -27,7 +27,7 @@ struct RunOptions {
   bool relaxed_fma = false;     // scalar and SSE2 paths: multiply then add
   std::optional<double> implicit_tolerance;  // implicit methods' linear solves (StepperOptions)
   std::optional<int> implicit_iterations;
-  std::string implicit_preconditioner = "automatic";  // automatic, jacobi, multigrid
+  std::optional<std::string> implicit_preconditioner;  // automatic (unset), jacobi, multigrid
   bool quiet = false;
   bool strict = false;          // a dt past the largest stable step is an error, not a warning
   CheckpointOptions checkpoint;
