@@ -73,7 +73,7 @@ void StagedPath<T>::reserve(std::size_t padded) {
       for (auto& a : kept) a.resize(padded);
     }
   }
-  if (method_.embedded_order > 0) block_error_.resize(block_count(padded));
+  if (method_.embedded_order > 0) block_error_.resize(block_count(padded)), block_saved_.resize(block_count(padded));
   capacity_ = padded;
 }
 
@@ -99,9 +99,9 @@ template <class T>
 double StagedPath<T>::attempt(const StepContext<T>& c, const Attempt& a) {
   attempt_ = &a;
   std::fill(block_error_.begin(), block_error_.end(), 0.0);
+  std::fill(block_saved_.begin(), block_saved_.end(), std::uint8_t(0));
   if (!saves_in_block()) {
-    for_each_block(c.workers, c.bodies.padded_size(),
-                   [&](Block b) { copy_state(c, b, true); });
+    for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { save_for_attempt(c, b); });
   }
   try {
     run_phases(c);
@@ -118,8 +118,22 @@ double StagedPath<T>::attempt(const StepContext<T>& c, const Attempt& a) {
 
 template <class T>
 void StagedPath<T>::take_back(const StepContext<T>& c) {
-  for_each_block(c.workers, c.bodies.padded_size(),
-                 [&](Block b) { copy_state(c, b, false); });
+  const std::size_t n = c.bodies.padded_size();
+  const auto restore = [&](Block b) {
+    if (block_saved_[b.begin / kBlockBodies] != 0) copy_state(c, b, false);
+  };
+  try {
+    for_each_block(c.workers, n, restore);
+  } catch (...) {  // the host's enqueue threw, having run no block (kinema/job_system.hpp)
+    for (std::size_t i = 0; i < block_count(n); ++i) restore(block(i, n));
+    throw;
+  }
+}
+
+template <class T>
+void StagedPath<T>::save_for_attempt(const StepContext<T>& c, Block b) {
+  copy_state(c, b, true);
+  block_saved_[b.begin / kBlockBodies] = 1;
 }
 
 template <class T>
@@ -177,7 +191,7 @@ void StagedPath<T>::run_phases(const StepContext<T>& c) {
 // Every phase of one block while it is in cache (no coupled terms).
 template <class T>
 void StagedPath<T>::run_block(const StepContext<T>& c, Block b) {
-  if (attempt_ != nullptr && saves_in_block()) copy_state(c, b, true);
+  if (attempt_ != nullptr && saves_in_block()) save_for_attempt(c, b);
   for (int p = 0; p < phase_count_; ++p) {
     if (!skipped(phases_[p])) run(c, phases_[p], b);
   }

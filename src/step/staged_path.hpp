@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "forces/coupled_forces.hpp"
@@ -48,7 +49,9 @@ class StagedPath {
   // components of (e / (atol + rtol max(|y0|, |y1|)))^2), e the difference of the two
   // solutions. Blocks' sums are added in block order, so the norm does not depend on threads.
   double attempt(const StepContext<T>& context, const Attempt& a);
-  // Puts back the state the last attempt started from.
+  // Puts back the state the last attempt started from, in the blocks it reached (an attempt
+  // that threw may have reached none). Where the host's enqueue throws, on the calling thread,
+  // and the exception goes on.
   void take_back(const StepContext<T>& context);
   // After a rejected attempt of size context.h (taken back): the body and component (0..5:
   // x, y, z, vx, vy, vz) whose weighted error was largest, weights from the state kept.
@@ -102,6 +105,8 @@ class StagedPath {
   void run_phases(const StepContext<T>& c);
   // Saves the block's positions and velocities to saved_, or puts them back.
   void copy_state(const StepContext<T>& c, Block b, bool save);
+  // An attempt's save of a block, marked for take_back.
+  void save_for_attempt(const StepContext<T>& c, Block b);
   bool coupled() const { return forces_.coupled(); }
   bool needs_force_scratch() const { return coupled() || !forces_.callbacks().empty(); }
   // Whether user code sees views (callbacks, coupled terms): only then are masses formed.
@@ -159,6 +164,7 @@ class StagedPath {
   const Attempt* attempt_ = nullptr;
   bool first_stage_only_ = false;
   std::vector<double> block_error_;
+  std::vector<std::uint8_t> block_saved_;  // whether the attempt saved the block (bytes: blocks write their own)
   bool keeps_state() const { return may_throw() || method_.embedded_order > 0 || phases_change_bodies(); }
   // More than one pass of a step changes the bodies (kick-drift methods with coupled terms:
   // each kick and drift is a pass of its own); else only the last pass does.
