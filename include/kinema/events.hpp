@@ -24,7 +24,10 @@
 //   count and job system.
 // - Action `stop`: the call ends at the first such hit. The set is then at that time (every
 //   body on the dense output there) and so is the stepper's clock; hits later than it are
-//   dropped. Steps with a stop event run one pass per step over the whole set.
+//   dropped. Steps with a stop event run one pass per step over the whole set. The next call
+//   goes on from there: a crossing reported at the stop's time (the stop's own, another
+//   body's or another event's) is not reported again where a body's state, rounded to T, lies
+//   just short of it.
 
 #include <cstddef>
 #include <functional>
@@ -78,6 +81,8 @@ struct EventBlock {
 // concurrently: it is called on each slice of bodies at both ends of every step, and on
 // single interpolated states while a crossing is located. What it throws leaves the set and
 // the clock as before the call (a call with a user event keeps a copy of the state for that).
+// A value that is NaN has no sign: it is refused as a throw is (kinema::Error naming the
+// event, the body and the time), never taken as "no crossing".
 template <class T>
 using EventFunction = std::function<void(const EventBlock<T>& block, T* value)>;
 

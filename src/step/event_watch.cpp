@@ -6,6 +6,7 @@
 #include <string>
 #include <type_traits>
 
+#include "core/text.hpp"
 #include "kinema/dense_output.hpp"
 #include "kinema/error.hpp"
 #include "parallel/blocks.hpp"
@@ -24,6 +25,17 @@ bool finite(const Vec& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) &&
 
 [[noreturn]] void refuse(std::size_t e, const std::string& what) {
   throw Error("events[" + std::to_string(e) + "]: " + what);
+}
+
+// A user's value that is NaN has no sign: no crossing could be found in it, or ruled out.
+template <class T>
+void check_given(int e, const T* values, std::size_t count, std::size_t first, double t) {
+  for (std::size_t i = 0; i < count; ++i) {
+    if (std::isnan(values[i])) {
+      refuse(std::size_t(e), "the event function gave NaN for body " + std::to_string(first + i) + " at t = " +
+                                 shortest_text(t));
+    }
+  }
 }
 
 // An event's value at a fraction of the step, and its slope there where known (NaN if not).
@@ -173,6 +185,7 @@ void EventWatch<T>::set(EventOptions<T> options) {
   calls_user_ = std::any_of(events_.begin(), events_.end(),
                             [](const Event<T>& e) { return std::holds_alternative<EventFunction<T>>(e.kind); });
   settled_.reset();
+  settled_hits_.clear();
   clear();
 }
 
@@ -275,6 +288,8 @@ std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const Sli
   alignas(64) T g0[kEventSliceBodies<T>], g1[kEventSliceBodies<T>];
   (*fn)(view(slice.before, t0), g0);
   (*fn)(view(slice.after, t0 + h), g1);
+  check_given(e, g0, real, slice.first, t0);
+  check_given(e, g1, real, slice.first, t0 + h);
   const std::size_t batched = (real + call.table->width - 1) / call.table->width * call.table->width;
   std::fill(g0 + real, g0 + batched, T(0));
   std::fill(g1 + real, g1 + batched, T(0));
@@ -423,11 +438,13 @@ void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& 
   const std::size_t body = slice.first + local;
   const Track track(ends);
   const double theta =
-      crossing_fraction([&](double f) { return sample(events_[e], track, ends, body, t0, f); }, tolerance_ / h);
-  // The crossing a stop left the set at, found again at the next call's start when the body's
-  // state in T lies a rounding short of it: the same crossing, not a new one.
-  const bool settled_here = settled_ && settled_->body == body && settled_->event == e && settled_->time == t0;
-  if (settled_here && theta <= std::sqrt(std::numeric_limits<T>::epsilon())) return;
+      crossing_fraction([&](double f) {
+        const Sample at = sample(events_[e], track, ends, body, t0, f);
+        const bool given = std::holds_alternative<EventFunction<T>>(events_[e].kind);
+        if (given && std::isnan(at.value)) check_given(e, &at.value, 1, body, t0 + f * h);
+        return at;
+      }, tolerance_ / h);
+  if (found_at_settle(body, e, t0, theta)) return;
   EventHit<T> hit{t0 + theta * h, body, e, narrow<T>(dense_position(ends, theta)),
                   narrow<T>(dense_velocity(ends, theta))};
   std::lock_guard lock(mutex_);
@@ -437,9 +454,28 @@ void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& 
 }
 
 template <class T>
+void EventWatch<T>::remember_settled(const Stop& stop, double h) {
+  settled_ = stop;
+  settled_hits_.clear();
+  const double window = std::sqrt(std::numeric_limits<T>::epsilon()) * h;
+  for (const EventHit<T>& hit : hits_) {
+    if (hit.time <= stop.time && hit.time >= stop.time - window) settled_hits_.emplace_back(hit.body, hit.event);
+  }
+  std::sort(settled_hits_.begin(), settled_hits_.end());
+}
+
+// A crossing a stop left the set at, found again at the next call's start where the body's
+// state in T lies a rounding short of it: the same crossing, reported already, not a new one.
+template <class T>
+bool EventWatch<T>::found_at_settle(std::size_t body, int e, double t0, double theta) const {
+  if (!settled_ || settled_->time != t0 || theta > std::sqrt(std::numeric_limits<T>::epsilon())) return false;
+  return std::binary_search(settled_hits_.begin(), settled_hits_.end(), std::pair<std::size_t, int>(body, e));
+}
+
+template <class T>
 void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const EventCall<T>& call,
                            const T* const before[6], const Stop& stop, double h) {
-  settled_ = stop;
+  remember_settled(stop, h);
   const double theta = stop.theta;
   const std::size_t n = b.padded_size();
   for (auto& a : acc_) {
@@ -493,7 +529,7 @@ void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const Even
 template <class T>
 void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBlockPath<T>& probe, bool renormalize,
                            const T* const before[13], const Stop& stop, double t0, double h) {
-  settled_ = stop;
+  remember_settled(stop, h);
   const StateArrays<T> set = state_arrays(b);
   T* const* const state = set.data.data();
   const std::size_t n = b.padded_size(), size = b.size();

@@ -8,6 +8,7 @@
 #include <array>
 #include <mutex>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "kernels/kernels.hpp"
@@ -93,8 +94,10 @@ class EventWatch {
 
   // Puts every body of the set (at the step's end now, `before` its start) on the dense
   // output at theta of the step of size h: where a stop event ended the call.
-  // The set is left at `stop`: its body, whose state in T may lie a rounding short of the
-  // crossing, is not stopped again by the same crossing at the next call's start.
+  // The set is left at `stop`: a body whose crossing was reported at the stop's time (within
+  // sqrt(epsilon of T) of the step), and whose state in T may lie a rounding short of it,
+  // is not found crossing again at the next call's start (the stop's body, and any other
+  // event or body crossing with it).
   void settle(const Workers& workers, ParticleSet<T>& bodies, const EventCall<T>& call,
               const T* const before[6], const Stop& stop, double h);
   // Every rigid body (at the step's end now, `before` its 13 components at its start t0) on
@@ -107,6 +110,9 @@ class EventWatch {
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
                          double h, std::uint32_t* found) const;
   void locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0, double h);
+  // settle's record of the stop and of the (body, event) hits at its time.
+  void remember_settled(const Stop& stop, double h);
+  bool found_at_settle(std::size_t body, int e, double t0, double theta) const;
 
   std::vector<Event<T>> events_;
   std::vector<kernels::EventScanJob<T>> jobs_;  // the built-in events' sign tests
@@ -117,6 +123,7 @@ class EventWatch {
   std::vector<EventHit<T>> hits_;
   std::optional<Stop> stop_;
   std::optional<Stop> settled_;  // the stop the set was last left at
+  std::vector<std::pair<std::size_t, int>> settled_hits_;  // (body, event) reported at its time, sorted
   AlignedArray<T> acc_[6];  // settle: the accelerations at both ends
   std::array<AlignedArray<T>, 13> end_state_, end_rates_;  // a rigid settle: the step's end
 };

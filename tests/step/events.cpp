@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
 
 #include <xmmintrin.h>
@@ -626,6 +627,31 @@ TEST_CASE("dense output is exact inside a projectile's step, of rk4's order unde
   CHECK_THROWS_AS(unused.state_at(0, p, p), Error);
 }
 
+TEST_CASE("dense output refuses an end that does not close one step of the same set", "[events][dense]") {
+  Stepper<double> s(falling(), rk4, test::serial_options());
+  ParticleSet<double> b;
+  b.add({0, 10, 0}, {0, 3, 0}, 1);
+  DenseOutput<double> dense;
+  ParticleSet<double> empty;
+  CHECK_THROWS_WITH(dense.end(s, empty), "DenseOutput::end: call begin on the same set first");
+  dense.begin(s, b);
+  s.advance(b, 0.01, 100);
+  CHECK_THROWS_WITH(dense.end(s, b), "DenseOutput::end: 100 steps since begin; begin and end bracket one step");
+  dense.begin(s, b);
+  b.add({1, 0, 0}, {0, 0, 0}, 1);
+  s.step(b, 0.01);
+  CHECK_THROWS_WITH(dense.end(s, b), "DenseOutput::end: the set has 2 bodies, 1 at begin");
+  dense.begin(s, b);
+  s.step(b, 0.01);
+  CHECK_NOTHROW(dense.end(s, b));
+  RigidBodySet<double> r;
+  r.add({});
+  RigidDenseOutput<double> rigid;
+  rigid.begin(s, r);
+  s.advance(r, 0.01, 3);
+  CHECK_THROWS_WITH(rigid.end(s, r), Catch::Contains("RigidDenseOutput::end: 3 steps since begin"));
+}
+
 TEST_CASE("calls that stop again and again make progress: a crossing a stop settled at is not found twice",
           "[events]") {
   Stepper<float> s(ForceModel<float>{}, rk4, test::serial_options());
@@ -655,6 +681,44 @@ TEST_CASE("calls that stop again and again make progress: a crossing a stop sett
   CHECK(stops > 10);
 }
 
+TEST_CASE("after a stop, no crossing reported at its time is found again: other bodies, other events",
+          "[events]") {
+  // Three bodies on one path, a record and a stop event on one plane: every one of the six
+  // (body, event) crossings is reported once, and the call after the stop goes on from it.
+  for (const Method* m : {&rk4, &rk6, &symplectic_euler, &bs3, &dopri5}) {
+    INFO(m->name);
+    Stepper<double> s(falling(), *m, test::serial_options());
+    s.set_events({{floor_event(EventAction::record), floor_event(EventAction::stop)}});
+    ParticleSet<double> b;
+    for (int i = 0; i < 3; ++i) b.add({double(i), 10, 0}, {1, 5, 0}, 1);
+    std::map<std::pair<std::size_t, int>, int> reported;
+    double last = s.time();
+    for (int call = 0; call < 6; ++call) {
+      s.advance(b, 0.1, 10, StopRequest{});
+      INFO("call " << call << " at t = " << s.time());
+      CHECK(s.time() > last);
+      last = s.time();
+      for (const EventHit<double>& hit : s.event_hits()) ++reported[{hit.body, hit.event}];
+    }
+    CHECK(reported.size() == 6);
+    for (const auto& [key, count] : reported) CHECK(count == 1);
+  }
+  // The same under error control, a call to each next second.
+  Stepper<double> s(falling(), dopri5, test::serial_options());
+  s.set_events({{floor_event(EventAction::record), floor_event(EventAction::stop)}});
+  ParticleSet<double> b;
+  for (int i = 0; i < 3; ++i) b.add({double(i), 10, 0}, {1, 5, 0}, 1);
+  std::map<std::pair<std::size_t, int>, int> reported;
+  for (int call = 0; call < 6; ++call) {
+    const double before = s.time();
+    s.advance_to(b, std::floor(before) + 1, Tolerances{1e-9, 1e-9});
+    CHECK(s.time() > before);
+    for (const EventHit<double>& hit : s.event_hits()) ++reported[{hit.body, hit.event}];
+  }
+  CHECK(reported.size() == 6);
+  for (const auto& [key, count] : reported) CHECK(count == 1);
+}
+
 namespace {
 
 // Ten steps of a set of several blocks whose event function throws on the third block's
@@ -679,6 +743,22 @@ void check_throwing_event_function(Set b, const ForceModel<double>& forces) {
 
 TEST_CASE("a throwing event function leaves the set and the clock as before the call", "[events]") {
   check_throwing_event_function(test::cloud<double>(3000), test::all_local_terms<double>());
+}
+
+TEST_CASE("an event function's NaN is refused by name, the set and the clock as before the call", "[events]") {
+  // +1 until t = 1.55, then NaN: no sign to cross with, at a step's end or inside one.
+  ParticleSet<double> b;
+  b.add({0, 10, 0}, {0, 0, 0}, 1);
+  const std::uint64_t before = test::state_hash(b);
+  Stepper<double> s(falling(), rk4, test::serial_options());
+  s.set_events({{{EventFunction<double>([](const EventBlock<double>& block, double* value) {
+                    for (std::size_t i = 0; i < block.count; ++i) value[i] = block.t < 1.55 ? 1 : std::nan("");
+                  }),
+                  Crossing::either}}});
+  CHECK_THROWS_WITH(s.advance(b, 0.1, 30), Catch::Contains("events[0]: the event function gave NaN for body 0 at t = 1.6"));
+  CHECK(test::state_hash(b) == before);
+  CHECK(s.time() == 0);
+  CHECK(s.event_hits().empty());
 }
 
 TEST_CASE("rigid dense output: a spinning body's orientation to rk4's order and of unit length, its centre exact",
