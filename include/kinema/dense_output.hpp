@@ -14,7 +14,9 @@
 #include <cmath>
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <initializer_list>
+#include <string>
 
 #include "kinema/bodies.hpp"
 #include "kinema/error.hpp"
@@ -88,6 +90,31 @@ inline std::array<double, 3> dense_velocity(const StepEnds& e, double theta) {
 // first call allocates. Forces applied to single bodies are cleared by the step (unless the
 // set keeps them, ParticleSet::keep_forces), so end() would not see them: keep them over a
 // step that dense output spans.
+// What end() refuses of a begin() it closes: none, another set size, or steps of one size
+// that are more than one (the interpolant spans one step; a stop event may end it early).
+struct DenseSpan {
+  StepperClock start;
+  std::size_t bodies = 0;
+  bool begun = false;
+
+  void check_end(const char* who, const StepperClock& now, std::size_t bodies_now) const {
+    const std::string name(who);
+    if (!begun) throw Error(name + "::end: call begin on the same set first");
+    if (bodies_now != bodies) {
+      throw Error(name + "::end: the set has " + std::to_string(bodies_now) + " bodies, " + std::to_string(bodies) +
+                  " at begin");
+    }
+    // Steps of one size since begin: counted on from begin's clock, or from its time where
+    // a new size moved the origin there.
+    const double begin_time = start.origin + double(start.steps) * start.h;
+    const bool counted_on = now.origin == start.origin && now.h == start.h;
+    const std::uint64_t since = counted_on ? now.steps - start.steps : now.origin == begin_time ? now.steps : 0;
+    if (since > 1) {
+      throw Error(name + "::end: " + std::to_string(since) + " steps since begin; begin and end bracket one step");
+    }
+  }
+};
+
 template <class T>
 class DenseOutput {
  public:
@@ -95,9 +122,10 @@ class DenseOutput {
     t0_ = stepper.time();
     keep(stepper, bodies, start_);
     ended_ = false;
+    span_ = {stepper.clock(), bodies.size(), true};
   }
   void end(Stepper<T>& stepper, const ParticleSet<T>& bodies) {
-    if (start_.x[0].size() != bodies.padded_size()) throw Error("DenseOutput::end: call begin on the same set first");
+    span_.check_end("DenseOutput", stepper.clock(), bodies.size());
     t1_ = stepper.time();
     keep(stepper, bodies, end_);
     own_ = has_dopri5_interpolant(stepper.method());
@@ -205,6 +233,7 @@ class DenseOutput {
   double t0_ = 0, t1_ = 0;
   std::size_t size_ = 0;
   bool ended_ = false, own_ = false;
+  DenseSpan span_;
 };
 
 // Dense output of rigid bodies: each of the 13 state components (centre x, v; orientation q;
@@ -219,11 +248,10 @@ class RigidDenseOutput {
     t0_ = stepper.time();
     keep(stepper, bodies, start_);
     ended_ = false;
+    span_ = {stepper.clock(), bodies.size(), true};
   }
   void end(Stepper<T>& stepper, const RigidBodySet<T>& bodies) {
-    if (start_.y[0].size() != bodies.padded_size()) {
-      throw Error("RigidDenseOutput::end: call begin on the same set first");
-    }
+    span_.check_end("RigidDenseOutput", stepper.clock(), bodies.size());
     t1_ = stepper.time();
     keep(stepper, bodies, end_);
     ended_ = true;
@@ -277,6 +305,7 @@ class RigidDenseOutput {
   double t0_ = 0, t1_ = 0;
   std::size_t size_ = 0;
   bool ended_ = false;
+  DenseSpan span_;
 };
 
 }  // namespace kinema
