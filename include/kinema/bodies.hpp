@@ -249,8 +249,8 @@ class ParticleSet {
   // a bad index, a factor that is not finite or a rate that is negative or not finite.
   void set_gravity_factor(std::size_t i, T factor) { set_parameter(BodyParameter::gravity_factor, i, factor); }
   void set_linear_damping(std::size_t i, T rate) { set_parameter(BodyParameter::linear_damping, i, rate); }
-  T gravity_factor(std::size_t i) const { return params_.at(BodyParameter::gravity_factor, i); }
-  T linear_damping(std::size_t i) const { return params_.at(BodyParameter::linear_damping, i); }
+  T gravity_factor(std::size_t i) const { return parameter(BodyParameter::gravity_factor, i); }
+  T linear_damping(std::size_t i) const { return parameter(BodyParameter::linear_damping, i); }
   const BodyParameters<T>& parameters() const { return params_; }
 
   // Removes body i by moving the last body into its place (no reallocation, no shift).
@@ -269,6 +269,10 @@ class ParticleSet {
   friend struct detail::CheckpointCodec;
   friend struct detail::StateSwap;
   void check_index(std::size_t i) const;
+  T parameter(BodyParameter k, std::size_t i) const {
+    check_index(i);
+    return params_.at(k, i);
+  }
   void set_parameter(BodyParameter k, std::size_t i, T value);
   // Whether copying `other` in place needs no allocation.
   bool copy_fits(const ParticleSet& other) const {
@@ -364,7 +368,7 @@ class RigidBodySet {
   void set_angular_damping(std::size_t i, T rate) { centers_.set_parameter(BodyParameter::angular_damping, i, rate); }
   T gravity_factor(std::size_t i) const { return centers_.gravity_factor(i); }
   T linear_damping(std::size_t i) const { return centers_.linear_damping(i); }
-  T angular_damping(std::size_t i) const { return centers_.params_.at(BodyParameter::angular_damping, i); }
+  T angular_damping(std::size_t i) const { return centers_.parameter(BodyParameter::angular_damping, i); }
   const BodyParameters<T>& parameters() const { return centers_.params_; }
 
   // As ParticleSet::remove: the last body moves into i; returns its old index or kNoBody.

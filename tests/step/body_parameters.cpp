@@ -157,6 +157,12 @@ TEST_CASE("a set carries parameter arrays only once one is set, and keeps them w
   r.add({});
   CHECK_THROWS_WITH(r.set_angular_damping(0, INFINITY), Catch::Contains("angular damping"));
   CHECK(r.angular_damping(0) == 0);
+  // Reading past the set, with the arrays there or not: refused (it read past them).
+  CHECK_THROWS_WITH(copy.gravity_factor(copy.size()), Catch::Contains("no such body"));
+  CHECK_THROWS_WITH(copy.linear_damping(100000), Catch::Contains("no such body"));
+  r.set_angular_damping(0, 0.5);
+  CHECK_THROWS_WITH(r.angular_damping(1), Catch::Contains("no such body"));
+  CHECK_THROWS_WITH(r.gravity_factor(1), Catch::Contains("no such body"));
 }
 
 TEST_CASE("the fused, staged and block paths give parameters the same bits", "[determinism][parameters]") {
