@@ -103,7 +103,9 @@ struct StepperOptions {
   // Implicit methods (implicit_euler, ros2): each stage's linear system is solved by
   // conjugate gradients until the residual is at most implicit_tolerance times the right
   // side's (0: 1e-5 for float, 1e-10 for double) or implicit_max_iterations have run (the
-  // solve then stops where it is and ImplicitStats::unconverged counts it).
+  // solve then stops where it is and ImplicitStats::unconverged counts it). A solve whose
+  // sums overflow T (springs far too stiff for the step in this precision) throws
+  // kinema::Error, the set and the clock as before the step.
   double implicit_tolerance = 0;
   int implicit_max_iterations = 1000;
   ImplicitPreconditioner implicit_preconditioner = ImplicitPreconditioner::automatic;

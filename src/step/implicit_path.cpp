@@ -4,6 +4,7 @@
 #include <cmath>
 #include <type_traits>
 
+#include "core/text.hpp"
 #include "kinema/error.hpp"
 
 namespace kinema {
@@ -252,7 +253,13 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
     }
   });
   ++step_stats_.solves;
-  if (!std::isfinite(bb)) return not_finite(c, x);
+  if (!std::isfinite(bb)) {
+    const std::size_t n = c.bodies.padded_size();
+    for (int d = 0; d < 3; ++d) {
+      if (!std::all_of(rhs_[d].data(), rhs_[d].data() + n, [](T y) { return std::isfinite(y); })) return not_finite(c, x);
+    }
+    overflows();
+  }
   if (use_multigrid_) {
     rz = precondition(c);
     for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) {
@@ -270,6 +277,7 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
     const double pq = sum_blocks(c, [&](Block b, double* sums) {
       sums[0] = product(b, p, q, T(1), a_along_.data(), a_across_.data());
     })[0];
+    if (!std::isfinite(pq)) overflows();
     // Under multigrid the V-cycle makes z (and r . z): the update leaves them.
     T* const z = use_multigrid_ ? nullptr : z_[0].data();
     const kernels::CgUpdateJob<T> update{{x[0].data(), x[1].data(), x[2].data()},
@@ -280,6 +288,7 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
                                          {inv_diag_[0].data(), inv_diag_[1].data(), inv_diag_[2].data()},
                                          T(rz / pq)};
     auto [rz_next, rr_next] = sum_blocks(c, [&](Block b, double* sums) { kernels::cg_update(update, b.begin, b.end, sums); });
+    if (!std::isfinite(rr_next)) overflows();
     rr = rr_next;
     if (rr <= goal) {
       ++iterations;
@@ -313,6 +322,13 @@ void ImplicitPath<T>::not_finite(const StepContext<T>& c, Vec3s& x) {
       for (int d = 0; d < 3; ++d) x[d][i] = z_[d][i];
     }
   });
+}
+
+template <class T>
+void ImplicitPath<T>::overflows() const {
+  throw Error(std::string(method_.name) + ": a linear solve's sums overflow " + type_name<T>() +
+              " (the springs' stiffness times the step squared, over the masses, is too large for this precision); "
+              "the step is not taken");
 }
 
 template class ImplicitPath<float>;

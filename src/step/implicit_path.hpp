@@ -64,6 +64,8 @@ class ImplicitPath {
   // z = the multigrid V-cycle of r; returns r . z.
   double precondition(const StepContext<T>& c);
   void not_finite(const StepContext<T>& c, Vec3s& x);
+  // A solve whose right side is finite but whose sums overflow T: refused by name.
+  [[noreturn]] void overflows() const;
   // Runs pass(block, sums) over every block, each adding two partial sums; returns their
   // totals, added in block order.
   template <class Pass>
