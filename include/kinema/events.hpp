@@ -80,7 +80,9 @@ struct EventBlock {
 // pure function of the view, the time and the user's own read-only data, safe to call
 // concurrently: it is called on each slice of bodies at both ends of every step, and on
 // single interpolated states while a crossing is located. What it throws leaves the set and
-// the clock as before the call (a call with a user event keeps a copy of the state for that).
+// the clock as before the call under step() and advance() (a call with a user event keeps a
+// copy of the state for that); under advance_to, as before the step it scanned (the steps
+// accepted before that one stay, their hits too).
 // A value that is NaN has no sign: it is refused as a throw is (kinema::Error naming the
 // event, the body and the time), never taken as "no crossing".
 template <class T>
