@@ -19,10 +19,7 @@ namespace kinema {
 
 // The dominant eigenvalue (pair) of the force model's Jacobian d(v, a)/d(x, v) at a state.
 struct StiffnessEstimate {
-  double magnitude = 0;  // |lambda| (1/s); 0 when the forces do not depend on the state, or
-                         // |lambda| is below what finite differences resolve there: e or
-                         // sqrt(e), the smaller, e = sqrt(epsilon of T) times the largest rate
-                         // over the largest state component (or 1 if that is larger)
+  double magnitude = 0;  // |lambda| (1/s); 0 when the forces do not depend on the state
   double angle = 0;      // from the negative real axis, 0 (decay) to pi/2 (undamped oscillation);
                          // a growing mode is taken as its decaying mirror
   int evaluations = 0;   // force evaluations it took

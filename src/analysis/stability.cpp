@@ -270,18 +270,6 @@ class JacobianProducts {
     return w;
   }
 
-  // The smallest |lambda| these products resolve. Each carries a rounding of about
-  // e = sqrt(epsilon) max|f(y)| / y_scale (f's rounding over times' eps): e itself for a
-  // first-order mode, sqrt(e) where it enters as lambda^2 (positions through accelerations).
-  // An estimate below the smaller cannot be told from 0 (a free body's rotation state read
-  // 1e-27 1/s).
-  double resolution() const {
-    double rates = 0;
-    for (double c : f0_) rates = std::max(rates, std::abs(c));
-    const double e = std::sqrt(double(std::numeric_limits<typename D::value_type>::epsilon())) * rates / y_scale_;
-    return std::min(e, std::sqrt(e));
-  }
-
   double position_scale = 1;
 
  private:
@@ -384,9 +372,6 @@ StiffnessEstimate dominant_mode(D& f, int iterations) {
     dominant = arnoldi_cycle(jacobian, v, m, done, iterations);
   }
   e.evaluations = f.evaluations;
-  // Below the products' resolution: 0, as for forces that do not depend on the state (an
-  // estimate that is not finite is kept: it says the state overflows).
-  if (const double floor = jacobian.resolution(); std::isfinite(floor) && std::abs(dominant) < floor) return e;
   e.magnitude = std::abs(dominant);
   // A mode that grows (Re lambda > 0: a body falling away from a saddle, or an oscillation
   // whose finite differences lean that way) is judged as its decaying mirror: no step keeps
