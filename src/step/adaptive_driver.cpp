@@ -25,9 +25,9 @@ bool scanned_to_stop(const AdaptiveEvents<T>& events, const Workers& workers, co
   try {
     events.watch->scan_blocks(workers, events.call, before, after, padded, start.time(), h);
   } catch (...) {
-    take_back();
-    clock = start;
+    clock = start;  // first: a take-back whose own enqueue throws puts the bodies back, then throws
     events.watch->rollback(kept);  // the step's hits go with it, a stop among them too
+    take_back();
     throw;
   }
   const auto stop = events.watch->first_stop();

@@ -73,7 +73,10 @@ void StagedPath<T>::reserve(std::size_t padded) {
       for (auto& a : kept) a.resize(padded);
     }
   }
-  if (method_.embedded_order > 0) block_error_.resize(block_count(padded)), block_saved_.resize(block_count(padded));
+  if (method_.embedded_order > 0) {
+    block_error_.resize(block_count(padded));
+    block_saved_.resize(block_count(padded));
+  }
   capacity_ = padded;
 }
 
@@ -100,10 +103,10 @@ double StagedPath<T>::attempt(const StepContext<T>& c, const Attempt& a) {
   attempt_ = &a;
   std::fill(block_error_.begin(), block_error_.end(), 0.0);
   std::fill(block_saved_.begin(), block_saved_.end(), std::uint8_t(0));
-  if (!saves_in_block()) {
-    for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { save_for_attempt(c, b); });
-  }
   try {
+    if (!saves_in_block()) {
+      for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) { save_for_attempt(c, b); });
+    }
     run_phases(c);
   } catch (...) {
     attempt_ = nullptr;

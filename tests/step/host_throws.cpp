@@ -21,13 +21,15 @@ class ThrowingJobs final : public JobSystem {
  public:
   unsigned worker_count() const override { return 2; }
   JobHandle enqueue(RangeTask task, std::size_t count, std::size_t, void* context) override {
-    if (++calls == throw_at) throw std::runtime_error("enqueue failed");
+    ++calls;
+    if (calls == throw_at || (keeps_failing && throw_at > 0 && calls > throw_at)) throw std::runtime_error("enqueue failed");
     task(0, count, 0, context);
     return nullptr;
   }
   void wait(JobHandle) override {}
   int calls = 0;
   int throw_at = 0;  // 0: never
+  bool keeps_failing = false;  // every enqueue from throw_at on throws (a queue out of memory)
 };
 
 StepperOptions every_call_on(ThrowingJobs& jobs, FiniteGuard guard = FiniteGuard::off) {
@@ -179,18 +181,24 @@ TEST_CASE("a throwing enqueue inside advance_to leaves the bodies at an accepted
       }
       const int enqueues = jobs.calls;
       for (int k = 1; k <= enqueues; k += std::max(1, enqueues / 40)) {
-        INFO("enqueue " << k << " of " << enqueues);
-        jobs.calls = 0, jobs.throw_at = k;
-        ParticleSet<double> b = cloud;
-        Stepper<double> s(*forces, *m, every_call_on(jobs));
-        s.set_events(*events);
-        try {
+        for (bool keeps_failing : {false, true}) {
+          INFO("enqueue " << k << " of " << enqueues << (keeps_failing ? " and every one after" : ""));
+          jobs.calls = 0, jobs.throw_at = k, jobs.keeps_failing = keeps_failing;
+          ParticleSet<double> b = cloud;
+          Stepper<double> s(*forces, *m, every_call_on(jobs));
+          s.set_events(*events);
+          try {
+            s.advance_to(b, t_end, tol);
+          } catch (const std::runtime_error& e) {
+            CHECK(std::string(e.what()) == "enqueue failed");
+          }
+          const std::pair<double, std::uint64_t> left{s.time(), test::state_hash(b)};
+          CHECK(std::find(accepted.begin(), accepted.end(), left) != accepted.end());
+          jobs.throw_at = 0;  // the same stepper goes on to the end
           s.advance_to(b, t_end, tol);
-        } catch (const std::runtime_error& e) {
-          CHECK(std::string(e.what()) == "enqueue failed");
+          CHECK(s.time() == t_end);
+          CHECK(all_finite(b));
         }
-        const std::pair<double, std::uint64_t> left{s.time(), test::state_hash(b)};
-        CHECK(std::find(accepted.begin(), accepted.end(), left) != accepted.end());
       }
     }
   }
