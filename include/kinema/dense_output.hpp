@@ -77,6 +77,36 @@ inline std::array<double, 3> dense_velocity(const StepEnds& e, double theta) {
   return v;
 }
 
+namespace detail {
+
+// What end() refuses of the begin() it closes: none, another number of bodies, or more than
+// one step of one size since (the interpolant spans one step; a stop event may end it
+// early). Steps of several sizes between (advance_to's, or a call stopped at an event after
+// several steps) are not seen.
+struct DenseSpan {
+  StepperClock start;
+  std::size_t bodies = 0;
+  bool begun = false;
+
+  void check_end(const char* who, const StepperClock& now, std::size_t bodies_now) const {
+    if (!begun) throw Error(std::string(who) + "::end: call begin on the same set first");
+    if (bodies_now != bodies) {
+      throw Error(std::string(who) + "::end: the set has " + std::to_string(bodies_now) + " bodies, " +
+                  std::to_string(bodies) + " at begin");
+    }
+    // Counted on from begin's clock, or from its time where a new size moved the origin there.
+    const double begin_time = start.origin + double(start.steps) * start.h;
+    const bool counted_on = now.origin == start.origin && now.h == start.h && now.steps >= start.steps;
+    const std::uint64_t since = counted_on ? now.steps - start.steps : now.origin == begin_time ? now.steps : 0;
+    if (since > 1) {
+      throw Error(std::string(who) + "::end: " + std::to_string(since) +
+                  " steps since begin; begin and end bracket one step");
+    }
+  }
+};
+
+}  // namespace detail
+
 // The state of every body of a set at any time inside a step, for a caller that wants it
 // (drawing between steps at the step's own accuracy, sampling at exact times):
 //   dense.begin(stepper, bodies);   // before the step: x, v and the accelerations there
@@ -90,31 +120,6 @@ inline std::array<double, 3> dense_velocity(const StepEnds& e, double theta) {
 // first call allocates. Forces applied to single bodies are cleared by the step (unless the
 // set keeps them, ParticleSet::keep_forces), so end() would not see them: keep them over a
 // step that dense output spans.
-// What end() refuses of a begin() it closes: none, another set size, or steps of one size
-// that are more than one (the interpolant spans one step; a stop event may end it early).
-struct DenseSpan {
-  StepperClock start;
-  std::size_t bodies = 0;
-  bool begun = false;
-
-  void check_end(const char* who, const StepperClock& now, std::size_t bodies_now) const {
-    const std::string name(who);
-    if (!begun) throw Error(name + "::end: call begin on the same set first");
-    if (bodies_now != bodies) {
-      throw Error(name + "::end: the set has " + std::to_string(bodies_now) + " bodies, " + std::to_string(bodies) +
-                  " at begin");
-    }
-    // Steps of one size since begin: counted on from begin's clock, or from its time where
-    // a new size moved the origin there.
-    const double begin_time = start.origin + double(start.steps) * start.h;
-    const bool counted_on = now.origin == start.origin && now.h == start.h;
-    const std::uint64_t since = counted_on ? now.steps - start.steps : now.origin == begin_time ? now.steps : 0;
-    if (since > 1) {
-      throw Error(name + "::end: " + std::to_string(since) + " steps since begin; begin and end bracket one step");
-    }
-  }
-};
-
 template <class T>
 class DenseOutput {
  public:
@@ -233,7 +238,7 @@ class DenseOutput {
   double t0_ = 0, t1_ = 0;
   std::size_t size_ = 0;
   bool ended_ = false, own_ = false;
-  DenseSpan span_;
+  detail::DenseSpan span_;
 };
 
 // Dense output of rigid bodies: each of the 13 state components (centre x, v; orientation q;
@@ -305,7 +310,7 @@ class RigidDenseOutput {
   double t0_ = 0, t1_ = 0;
   std::size_t size_ = 0;
   bool ended_ = false;
-  DenseSpan span_;
+  detail::DenseSpan span_;
 };
 
 }  // namespace kinema
