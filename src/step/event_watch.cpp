@@ -12,6 +12,7 @@
 #include "parallel/blocks.hpp"
 #include "step/finite_guard.hpp"
 #include "step/rigid_block_path.hpp"
+#include "step/step_checks.hpp"
 
 namespace kinema {
 
@@ -132,12 +133,9 @@ void EventWatch<T>::set(EventOptions<T> options) {
   bool stops = false;
   for (std::size_t e = 0; e < options.events.size(); ++e) {
     const Event<T>& event = options.events[e];
-    if (static_cast<int>(event.direction) < 0 || static_cast<int>(event.direction) > static_cast<int>(Crossing::either)) {
-      refuse(e, "direction has no value " + std::to_string(static_cast<int>(event.direction)));
-    }
-    if (static_cast<int>(event.action) < 0 || static_cast<int>(event.action) > static_cast<int>(EventAction::stop)) {
-      refuse(e, "action has no value " + std::to_string(static_cast<int>(event.action)));
-    }
+    const std::string field = "events[" + std::to_string(e) + "]: ";
+    check_named(field + "direction", event.direction, Crossing::either);
+    check_named(field + "action", event.action, EventAction::stop);
     kernels::EventScanJob<T> job{};
     job.down = event.direction != Crossing::up;
     job.up = event.direction != Crossing::down;
@@ -475,7 +473,6 @@ bool EventWatch<T>::found_at_settle(std::size_t body, int e, double t0, double t
 template <class T>
 void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const EventCall<T>& call,
                            const T* const before[6], const Stop& stop, double h) {
-  remember_settled(stop, h);
   const double theta = stop.theta;
   const std::size_t n = b.padded_size();
   for (auto& a : acc_) {
@@ -522,6 +519,7 @@ void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const Even
       }
     }
   });
+  remember_settled(stop, h);  // last: a settle that throws leaves the one before
 }
 
 // The rates at the step's end, then at its start (the set put back there for the probe), then
@@ -529,7 +527,6 @@ void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const Even
 template <class T>
 void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBlockPath<T>& probe, bool renormalize,
                            const T* const before[13], const Stop& stop, double t0, double h) {
-  remember_settled(stop, h);
   const StateArrays<T> set = state_arrays(b);
   T* const* const state = set.data.data();
   const std::size_t n = b.padded_size(), size = b.size();
@@ -562,6 +559,7 @@ void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBloc
       for (int c = 0; c < 13; ++c) state[c][i] = T(y[c]);
     }
   });
+  remember_settled(stop, h);  // last: a settle that throws leaves the one before
 }
 
 template <class T>

@@ -27,24 +27,12 @@ void check_reach(const CoupledForces<T>& coupled, const ParticleSet<T>& bodies) 
   }
 }
 
-namespace {
-
-// An enumeration given a value none of its names has (a cast, a corrupt host setting).
-template <class E>
-void check_named(const char* field, E value, E last) {
-  if (static_cast<int>(value) < 0 || static_cast<int>(value) > static_cast<int>(last)) {
-    throw Error(std::string("stepper options: ") + field + " has no value " + std::to_string(static_cast<int>(value)));
-  }
-}
-
-}  // namespace
-
 template <class T>
 void check_stepper_options(const StepperOptions& o) {
-  check_named("isa", o.isa, Isa::avx512);
-  check_named("guard", o.guard, FiniteGuard::clamp);
-  check_named("workers", o.workers, WorkerChoice::all);
-  check_named("implicit_preconditioner", o.implicit_preconditioner, ImplicitPreconditioner::multigrid);
+  check_named("stepper options: isa", o.isa, Isa::avx512);
+  check_named("stepper options: guard", o.guard, FiniteGuard::clamp);
+  check_named("stepper options: workers", o.workers, WorkerChoice::all);
+  check_named("stepper options: implicit_preconditioner", o.implicit_preconditioner, ImplicitPreconditioner::multigrid);
   if (!(o.implicit_tolerance >= 0 && o.implicit_tolerance < 1)) {
     throw Error("stepper options: implicit_tolerance must be in [0, 1), got " + shortest_text(o.implicit_tolerance));
   }

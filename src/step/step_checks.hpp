@@ -2,10 +2,13 @@
 // What a stepper refuses before any body moves: each check throws kinema::Error naming the
 // value and the limit it breaks.
 
+#include <string>
+
 #include "forces/coupled_forces.hpp"
 #include "kernels/kernels.hpp"
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
+#include "kinema/error.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/stepper.hpp"
 
@@ -18,6 +21,15 @@ void check_step_positive(T h);
 // Springs must not reach past the set.
 template <class T>
 void check_reach(const CoupledForces<T>& coupled, const ParticleSet<T>& bodies);
+
+// An enumeration given a value none of its names has (a cast, a corrupt host setting):
+// kinema::Error "<field> has no value N". `last`: its last name.
+template <class E>
+void check_named(const std::string& field, E value, E last) {
+  if (static_cast<int>(value) < 0 || static_cast<int>(value) > static_cast<int>(last)) {
+    throw Error(field + " has no value " + std::to_string(static_cast<int>(value)));
+  }
+}
 
 // The options' enumerations named values; the implicit solves' tolerance and iteration cap;
 // the clamp's speed limits, and their squares, finite and > 0 in T.
