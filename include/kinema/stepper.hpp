@@ -7,8 +7,10 @@
 // user's own without coupled terms; else the staged path (one parallel pass per stage).
 // Forces applied to single bodies (ParticleSet::apply_force, ...) act on every path. All scratch is allocated at construction or at the first
 // step that sees a larger body count (see reserve); a step allocates nothing, starts no
-// thread and throws only on a bad argument, before any body moves, or, under a finiteness
-// guard, a NonFiniteError with the bodies put back to the last finite state.
+// thread and throws only on a bad argument, before any body moves; under a finiteness guard,
+// a NonFiniteError with the bodies put back to the last finite state; or for what happens
+// inside it (user code that throws, a host's enqueue that throws, an event function's NaN,
+// an implicit solve whose sums overflow), with the bodies and the clock as before the step.
 
 #include <cstddef>
 #include <cstdint>
