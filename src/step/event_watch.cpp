@@ -545,20 +545,25 @@ void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBloc
       std::copy(before[c] + k.begin, before[c] + k.end, state[c] + k.begin);
     }
   });
-  probe.evaluate_rates(call, workers, t0);
   const HermiteWeights weights = HermiteWeights::at(stop.theta);
-  for_each_block(workers, n, [&](Block k) {
-    for (std::size_t i = k.begin; i < k.end; ++i) {
-      double y[13];
-      for (int c = 0; c < 13; ++c) {
-        y[c] = i < size ? weights.of(state[c][i], probe.rate_of(c)[i], end_state_[c][i], end_rates_[c][i], h)
-                        : double(end_state_[c][i]);  // padding as the step left it
+  try {
+    probe.evaluate_rates(call, workers, t0);
+    for_each_block(workers, n, [&](Block k) {
+      for (std::size_t i = k.begin; i < k.end; ++i) {
+        double y[13];
+        for (int c = 0; c < 13; ++c) {
+          y[c] = i < size ? weights.of(state[c][i], probe.rate_of(c)[i], end_state_[c][i], end_rates_[c][i], h)
+                          : double(end_state_[c][i]);  // padding as the step left it
+        }
+        const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
+        if (i < size) for (int c = 6; c < 10; ++c) y[c] /= norm;
+        for (int c = 0; c < 13; ++c) state[c][i] = T(y[c]);
       }
-      const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
-      if (i < size) for (int c = 6; c < 10; ++c) y[c] /= norm;
-      for (int c = 0; c < 13; ++c) state[c][i] = T(y[c]);
-    }
-  });
+    });
+  } catch (...) {  // a host's enqueue that threw ran no block: the set back at the step's end, with the clock
+    for (int c = 0; c < 13; ++c) std::copy(end_state_[c].data(), end_state_[c].data() + n, state[c]);
+    throw;
+  }
   remember_settled(stop, h);  // last: a settle that throws leaves the one before
 }
 

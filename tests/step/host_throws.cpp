@@ -203,3 +203,31 @@ TEST_CASE("a throwing enqueue inside advance_to leaves the bodies at an accepted
     }
   }
 }
+
+TEST_CASE("a throwing enqueue at a stop event leaves rigid bodies where the clock says", "[job_system][throws][events]") {
+  // Free fall from rest onto a floor: vy = -g t whatever the step, so the bodies and the
+  // clock agree exactly where they were left together.
+  RigidBodySet<double> initial;
+  for (std::size_t i = 0; i < kBodies; ++i) {
+    initial.add({{double(i % 50), 1 + 1e-4 * double(i), 0}, {}, {1, 0, 0, 0}, {0, 0, 0.1}, 1, {1, 2, 3}});
+  }
+  ForceModel<double> gravity;
+  gravity.add(Gravity{{0, -9.81, 0}});
+  const EventOptions<double> stop{{{PlaneEvent{{0, 1, 0}, 0}, Crossing::down, EventAction::stop}}};
+  ThrowingJobs jobs;
+  Stepper<double> counting(gravity, rk4, every_call_on(jobs));
+  counting.set_events(stop);
+  RigidBodySet<double> clean = initial;
+  counting.advance(clean, 0.05, 20, StopRequest{});
+  REQUIRE(counting.stopped_at_event());
+  const int enqueues = jobs.calls;
+  for (int k = 1; k <= enqueues; ++k) {
+    INFO("enqueue " << k << " of " << enqueues);
+    jobs.calls = 0, jobs.throw_at = k;
+    RigidBodySet<double> b = initial;
+    Stepper<double> s(gravity, rk4, every_call_on(jobs));
+    s.set_events(stop);
+    CHECK_THROWS_WITH(s.advance(b, 0.05, 20, StopRequest{}), "enqueue failed");
+    CHECK(b.centers().velocity(0)[1] == Approx(-9.81 * s.time()).margin(1e-12));
+  }
+}
