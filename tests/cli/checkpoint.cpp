@@ -281,7 +281,14 @@ TEST_CASE("outputs never overwrite the scene or each other", "[cli][checkpoint][
       {"run", scene_copy.string(), "-q", "--checkpoint", same, "--out", same},
       {"stress", "-q", "--scene", scene_copy.string(), "--report", scene_copy.string()},
       {"stress", "-q", "--bodies", "100", "--report", same, "--checkpoint", other_name},
+      // Relative and absolute spellings of a file that does not exist yet (the program runs
+      // in this process's folder).
+      {"run", scene_copy.string(), "-q", "--out", "kinema-rel.out", "--summary", "./kinema-rel.out"},
+      {"run", scene_copy.string(), "-q", "--out", "kinema-rel.out", "--checkpoint",
+       (fs::current_path() / "kinema-rel.out").string()},
+      {"stress", "-q", "--bodies", "100", "--report", "./kinema-rel.out", "--checkpoint", "kinema-rel.out"},
   };
+  fs::remove("kinema-rel.out");
   for (const auto& args : cases) {
     INFO(args.back());
     const Result r = run_kinema(args);
@@ -290,6 +297,7 @@ TEST_CASE("outputs never overwrite the scene or each other", "[cli][checkpoint][
   }
   CHECK(read(scene_copy) == before);
   CHECK_FALSE(fs::exists(same));
+  CHECK_FALSE(fs::exists("kinema-rel.out"));
   // Devices are no files to clobber.
   CHECK(run_kinema({"run", scene_copy.string(), "-q", "--out", "/dev/null", "--summary", "/dev/null"}).code == 0);
 }

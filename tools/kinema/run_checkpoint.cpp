@@ -48,8 +48,11 @@ bool same_file(const std::string& a, const std::string& b) {
   std::error_code error;
   if (std::filesystem::exists(a, error) && !std::filesystem::is_regular_file(a, error)) return false;
   if (std::filesystem::equivalent(a, b, error)) return true;
-  const auto canonical_a = std::filesystem::weakly_canonical(a, error);
-  const auto canonical_b = std::filesystem::weakly_canonical(b, error);
+  // Absolute first: a relative path none of whose parts exists yet (y.csv) stays relative
+  // under weakly_canonical, and would differ from ./y.csv or $PWD/y.csv.
+  const auto canonical_a = std::filesystem::weakly_canonical(std::filesystem::absolute(a, error), error);
+  if (error) return false;
+  const auto canonical_b = std::filesystem::weakly_canonical(std::filesystem::absolute(b, error), error);
   return !error && canonical_a == canonical_b;
 }
 
