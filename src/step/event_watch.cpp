@@ -143,6 +143,9 @@ void EventWatch<T>::set(EventOptions<T> options) {
     if (const auto* plane = std::get_if<PlaneEvent>(&event.kind)) {
       if (!finite(plane->normal) || !std::isfinite(plane->offset)) refuse(e, "plane normal and offset must be finite");
       if (dot(plane->normal, plane->normal) == 0) refuse(e, "plane normal must not be zero");
+      if (!std::isfinite(dot(plane->normal, plane->normal))) {  // n . x would overflow near the plane
+        refuse(e, "plane normal's length overflows double: scale it down (the times do not depend on it)");
+      }
       for (int d = 0; d < 3; ++d) job.a[d] = T(plane->normal[d]);
       job.b = T(plane->offset);
       const int zeros = int(job.a[0] == 0) + int(job.a[1] == 0) + int(job.a[2] == 0);

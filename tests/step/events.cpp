@@ -512,6 +512,7 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   CHECK_THROWS_WITH(s.set_events({{floor_event(), {DistanceEvent{{0, 0, 0}, 0}}}}),
                     Catch::Contains("events[1]") && Catch::Contains("radius"));
   CHECK_THROWS_WITH(s.set_events({{{SpeedEvent{-1}}}}), Catch::Contains("speed"));
+  CHECK_THROWS_WITH(s.set_events({{{PlaneEvent{{1e308, 1e308, 0}, 0}}}}), Catch::Contains("plane normal's length overflows"));
   CHECK_THROWS_WITH(s.set_events({{{EventFunction<double>{}}}}), Catch::Contains("empty"));
   CHECK_THROWS_WITH(s.set_events({{floor_event()}, -1}), Catch::Contains("time_tolerance"));
   Event<double> unnamed = floor_event();
