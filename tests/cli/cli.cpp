@@ -736,10 +736,16 @@ TEST_CASE("run writes the scene's events to events.csv beside the trajectory; a 
       std::string line;
       std::getline(rows, line);
       CHECK(line == "time,body,event,type,px,py,pz,vx,vy,vz");
-      std::vector<double> times;
+      std::vector<double> times, vy;  // vy: column 9, the state to double's digits (it had 9)
       while (std::getline(rows, line)) {
         CHECK(line.find(",plane,") != std::string::npos);
         times.push_back(std::stod(line));
+        std::size_t at = 0;
+        for (int comma = 0; comma < 8; ++comma) at = line.find(',', at) + 1;
+        vy.push_back(std::stod(line.substr(at)));
+      }
+      for (std::size_t k = 0; k < times.size(); ++k) {  // each body's vy at its landing: 3 - g t, -2 - g t
+        CHECK(std::abs(vy[k] - ((k == 0 ? 3 : -2) - g * times[k])) < 1e-12);
       }
       const auto j = nlohmann::json::parse(read(summary));
       CHECK(j["complete"] == true);

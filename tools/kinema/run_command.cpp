@@ -380,8 +380,11 @@ const char* event_type(const EventSpec& e) {
 template <class T>
 void record_events(const World<T>& world, const Scene& scene, Stepped& s) {
   for (const EventHit<T>& hit : world.event_hits()) {
+    // The state round-trips T, as the trajectory's does (%.9g float, %.17g double).
+    const char* format = sizeof(T) == 4 ? "%.17g,%zu,%d,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n"
+                                         : "%.17g,%zu,%d,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n";
     char row[400];
-    std::snprintf(row, sizeof row, "%.17g,%zu,%d,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", hit.time, hit.body, hit.event,
+    std::snprintf(row, sizeof row, format, hit.time, hit.body, hit.event,
                   event_type(scene.events[std::size_t(hit.event)]), double(hit.position[0]), double(hit.position[1]),
                   double(hit.position[2]), double(hit.velocity[0]), double(hit.velocity[1]), double(hit.velocity[2]));
     s.event_rows += row;
