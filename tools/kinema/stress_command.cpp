@@ -306,9 +306,10 @@ class StressLoop {
 
   double timed_advance(std::uint64_t n) {
     const auto t0 = Clock::now();
+    const std::uint64_t before = out_.done;
     advance(n);
     const double took = seconds_since(t0);
-    out_.stepping_seconds += took, open_.stepping += took, open_.steps += n;
+    out_.stepping_seconds += took, open_.stepping += took, open_.steps += out_.done - before;
     return took;
   }
 
@@ -318,17 +319,22 @@ class StressLoop {
   }
 
   // n steps of every group; under a guard a group that fails stops at its last finite step.
+  // `done` counts the steps every group has taken: at a failure, the failing group's own
+  // where it is the last (the groups before it took all n, those after none).
   void advance(std::uint64_t n) {
     for (auto& g : setup_.groups) {
+      const bool last = &g == &setup_.groups.back();
       try {
         g.advance(T(setup_.dt), n);
       } catch (const NonFiniteError& e) {
         out_.failure = Failure{g.name(), e.body, e.field, out_.done + e.step, out_.done + e.step};
+        if (last) out_.done += e.step - 1;
         return;
       }
       if (o_.guard == FiniteGuard::off) {
         if (const auto bad = g.first_non_finite()) {
           out_.failure = Failure{g.name(), bad->body, bad->field, out_.done + 1, out_.done + n};
+          if (last) out_.done += n;
           return;
         }
       }
