@@ -858,7 +858,11 @@ template <class T>
 int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context, ReportFile& summary_file) {
   const StepperOptions options = stepper_options(o);
   World<T> world = build_world<T>(scene, o, options);
-  world.watch_events();
+  try {
+    world.watch_events();
+  } catch (const Error& e) {  // the library's check of a value the scene gave: named with the file
+    throw Error(o.scene_path + ": " + e.what());
+  }
   double initial_energy = world.total_energy(interrupt_request());
   StepPlan plan;
   Stepped stepped;
