@@ -34,8 +34,11 @@ RunRecord decode(std::span<const std::byte> data, const std::string& command, co
     throw Error(where + "a checkpoint of kinema " + printable(j["command"].get<std::string>()) + ", not of kinema " + command);
   }
   if (j["fingerprint"] != fingerprint) {
-    throw Error(where + "taken under another scene or other options (method, dt, steps, precision, tolerances, "
-                "guard, --every, --out): resume with the command line that made it");
+    const char* options = command == "stress" ? "bodies, seed, method, dt, steps, seconds, precision, guard and speeds"
+                                              : "method, dt, steps, precision, tolerances, --every, --out, "
+                                                "--relaxed-fma, the implicit solves'";
+    throw Error(where + "taken under another scene or other options (" + options +
+                "): resume with the command line that made it");
   }
   return {command, fingerprint, j["fields"]};
 }

@@ -341,9 +341,9 @@ int stability_scene(const StabilityOptions& o) {
   progress.finish();
   if (!o.quiet) {
     std::printf("kinema stability: %s, h = %g, %llu steps; wrote %s/{energy,trajectory,"
-                "stability_region,thresholds}.csv and charts%s\n",
+                "stability_region,thresholds,step_limits%s}.csv and charts%s\n",
                 printable(scene.name).c_str(), dt, static_cast<unsigned long long>(steps),
-                printable(o.out).c_str(),
+                printable(o.out).c_str(), springs.empty() ? "" : ",spring_limit",
                 planar ? "" : " (no trajectory chart: the motion is not planar)");
     std::fputs(springs.c_str(), stdout);
     std::fputs(steps_line.c_str(), stdout);
