@@ -15,8 +15,9 @@ namespace {
 
 // An accepted step's scan, from the attempt's start `before` to the set's state `after` (their
 // first six arrays: px .. vz); at a stop event `settle` puts the set there (a stop at the
-// step's end needs none) and the clock goes to the hit's own time. A throwing event function
-// puts the step back (`take_back`), the clock and the step's hits too.
+// step's end needs none) and the clock goes to the hit's own time. A throwing event function,
+// or a settle whose host enqueue throws, puts the step back (`take_back`), the clock and the
+// step's hits too.
 template <class T, class TakeBack, class Settle>
 bool scanned_to_stop(const AdaptiveEvents<T>& events, const Workers& workers, const T* const* before,
                      const T* const* after, std::size_t padded, Clock<T>& clock, const Clock<T>& start, double h,
@@ -24,17 +25,17 @@ bool scanned_to_stop(const AdaptiveEvents<T>& events, const Workers& workers, co
   const std::size_t kept = events.watch->hits().size();
   try {
     events.watch->scan_blocks(workers, events.call, before, after, padded, start.time(), h);
+    const auto stop = events.watch->first_stop();
+    if (!stop) return false;
+    if (stop->theta < 1) settle(*stop);
+    clock.set(stop->time);  // the hit's own time, also at a last step's end
+    return true;
   } catch (...) {
     clock = start;  // first: a take-back whose own enqueue throws puts the bodies back, then throws
     events.watch->rollback(kept);  // the step's hits go with it, a stop among them too
     take_back();
     throw;
   }
-  const auto stop = events.watch->first_stop();
-  if (!stop) return false;
-  if (stop->theta < 1) settle(*stop);
-  clock.set(stop->time);  // the hit's own time, also at a last step's end
-  return true;
 }
 
 // The size of the next attempt from t toward t_end: h, capped at max_step (h keeps the cap);

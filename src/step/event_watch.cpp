@@ -142,9 +142,14 @@ void EventWatch<T>::set(EventOptions<T> options) {
     stops = stops || event.action == EventAction::stop;
     if (const auto* plane = std::get_if<PlaneEvent>(&event.kind)) {
       if (!finite(plane->normal) || !std::isfinite(plane->offset)) refuse(e, "plane normal and offset must be finite");
-      if (dot(plane->normal, plane->normal) == 0) refuse(e, "plane normal must not be zero");
-      if (!std::isfinite(dot(plane->normal, plane->normal))) {  // n . x would overflow near the plane
-        refuse(e, "plane normal's length overflows double: scale it down (the times do not depend on it)");
+      // |n|^2 in T's range: n . x is formed in T (the times do not depend on n's length).
+      const double length2 = dot(plane->normal, plane->normal);
+      if (plane->normal[0] == 0 && plane->normal[1] == 0 && plane->normal[2] == 0) {
+        refuse(e, "plane normal must not be zero");
+      }
+      if (length2 == 0) refuse(e, "plane normal's squared length underflows double: scale it up");
+      if (!(length2 <= double(std::numeric_limits<T>::max()))) {
+        refuse(e, "plane normal's squared length overflows " + type_name<T>() + ": scale it down");
       }
       for (int d = 0; d < 3; ++d) job.a[d] = T(plane->normal[d]);
       job.b = T(plane->offset);
@@ -169,8 +174,7 @@ void EventWatch<T>::set(EventOptions<T> options) {
       refuse(e, "the event function is empty");
     }
     if (!std::isfinite(double(job.a[0])) || !std::isfinite(double(job.a[1])) || !std::isfinite(double(job.a[2]))) {
-      refuse(e, std::holds_alternative<PlaneEvent>(event.kind) ? "plane normal overflows the precision"
-                                                              : "distance point overflows the precision");
+      refuse(e, "distance point overflows the precision");  // a plane's normal: its squared length, above
     }
     if (!std::isfinite(double(job.b))) {
       refuse(e, std::holds_alternative<PlaneEvent>(event.kind)      ? "plane offset overflows the precision"
@@ -548,25 +552,20 @@ void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBloc
       std::copy(before[c] + k.begin, before[c] + k.end, state[c] + k.begin);
     }
   });
+  probe.evaluate_rates(call, workers, t0);
   const HermiteWeights weights = HermiteWeights::at(stop.theta);
-  try {
-    probe.evaluate_rates(call, workers, t0);
-    for_each_block(workers, n, [&](Block k) {
-      for (std::size_t i = k.begin; i < k.end; ++i) {
-        double y[13];
-        for (int c = 0; c < 13; ++c) {
-          y[c] = i < size ? weights.of(state[c][i], probe.rate_of(c)[i], end_state_[c][i], end_rates_[c][i], h)
-                          : double(end_state_[c][i]);  // padding as the step left it
-        }
-        const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
-        if (i < size) for (int c = 6; c < 10; ++c) y[c] /= norm;
-        for (int c = 0; c < 13; ++c) state[c][i] = T(y[c]);
+  for_each_block(workers, n, [&](Block k) {
+    for (std::size_t i = k.begin; i < k.end; ++i) {
+      double y[13];
+      for (int c = 0; c < 13; ++c) {
+        y[c] = i < size ? weights.of(state[c][i], probe.rate_of(c)[i], end_state_[c][i], end_rates_[c][i], h)
+                        : double(end_state_[c][i]);  // padding as the step left it
       }
-    });
-  } catch (...) {  // a host's enqueue that threw ran no block: the set back at the step's end, with the clock
-    for (int c = 0; c < 13; ++c) std::copy(end_state_[c].data(), end_state_[c].data() + n, state[c]);
-    throw;
-  }
+      const double norm = std::sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9]);
+      if (i < size) for (int c = 6; c < 10; ++c) y[c] /= norm;
+      for (int c = 0; c < 13; ++c) state[c][i] = T(y[c]);
+    }
+  });
   remember_settled(stop, h);  // last: a settle that throws leaves the one before
 }
 

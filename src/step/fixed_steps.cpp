@@ -91,6 +91,7 @@ template <class Set>
 void FixedSteps<T>::advance_to_stop(const Workers& w, Set& b, T h, std::uint64_t steps) {
   for (std::uint64_t k = 0; k < steps; ++k) {
     const double t0 = core_.clock.time();
+    const std::size_t hits = events_.hits().size();
     try {
       advance_checked(w, b, h, 1);
     } catch (const NonFiniteError& e) {
@@ -100,7 +101,15 @@ void FixedSteps<T>::advance_to_stop(const Workers& w, Set& b, T h, std::uint64_t
     if (!stop) continue;
     steps_to_stop_ = k + 1;
     if (stop->theta == 1) return;
-    settle(w, b, *stop, t0, h);
+    try {
+      settle(w, b, *stop, t0, h);
+    } catch (...) {  // a host's enqueue: the step taken back, its hits and its stop too
+      const StateArrays<T> state = state_arrays(b);
+      for (int a = 0; a < state.count; ++a) std::copy(previous_[a].data(), previous_[a].data() + b.padded_size(), state.data[a]);
+      --core_.clock.steps;
+      events_.rollback(hits);
+      throw;
+    }
     core_.clock.set(stop->time);
     return;
   }
