@@ -512,7 +512,12 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   CHECK_THROWS_WITH(s.set_events({{floor_event(), {DistanceEvent{{0, 0, 0}, 0}}}}),
                     Catch::Contains("events[1]") && Catch::Contains("radius"));
   CHECK_THROWS_WITH(s.set_events({{{SpeedEvent{-1}}}}), Catch::Contains("speed"));
-  CHECK_THROWS_WITH(s.set_events({{{PlaneEvent{{1e308, 1e308, 0}, 0}}}}), Catch::Contains("plane normal's length overflows"));
+  CHECK_THROWS_WITH(s.set_events({{{PlaneEvent{{1e308, 1e308, 0}, 0}}}}),
+                    Catch::Contains("plane normal's squared length overflows double"));
+  CHECK_THROWS_WITH(s.set_events({{{PlaneEvent{{0, 1e-300, 0}, 0}}}}),
+                    Catch::Contains("plane normal's squared length underflows double"));
+  CHECK_THROWS_WITH(Stepper<float>(ForceModel<float>{}, rk4, test::serial_options()).set_events({{{PlaneEvent{{1e30, 1e30, 0}, 0}}}}),
+                    Catch::Contains("plane normal's squared length overflows float"));
   CHECK_THROWS_WITH(s.set_events({{{EventFunction<double>{}}}}), Catch::Contains("empty"));
   CHECK_THROWS_WITH(s.set_events({{floor_event()}, -1}), Catch::Contains("time_tolerance"));
   Event<double> unnamed = floor_event();
@@ -526,7 +531,7 @@ TEST_CASE("events are refused where they cannot be watched, and checked when set
   CHECK_THROWS_WITH(single.set_events({{{PlaneEvent{{0, 1, 0}, 1e300}}}}), Catch::Contains("plane offset overflows"));
   CHECK_THROWS_WITH(single.set_events({{{DistanceEvent{{0, 0, 0}, 1e30}}}}), Catch::Contains("distance radius squared"));
   CHECK_THROWS_WITH(single.set_events({{{SpeedEvent{1e30}}}}), Catch::Contains("speed squared overflows"));
-  CHECK_THROWS_WITH(single.set_events({{{PlaneEvent{{0, 1e39, 0}, 0}}}}), Catch::Contains("plane normal overflows"));
+  CHECK_THROWS_WITH(single.set_events({{{PlaneEvent{{0, 1e39, 0}, 0}}}}), Catch::Contains("plane normal's squared length overflows float"));
   CHECK_THROWS_WITH(single.set_events({{{DistanceEvent{{1e39, 0, 0}, 1}}}}), Catch::Contains("distance point overflows"));
   s.set_events({{floor_event()}});
   ParticleSet<double> b;
@@ -645,6 +650,11 @@ TEST_CASE("dense output refuses an end that does not close one step of the same 
   dense.begin(s, b);
   s.step(b, 0.01);
   CHECK_NOTHROW(dense.end(s, b));
+  dense.begin(s, b);
+  StepperClock back = s.clock();
+  back.steps -= 2;  // the same origin and size, two steps back
+  s.set_clock(back);
+  CHECK_THROWS_WITH(dense.end(s, b), "DenseOutput::end: the clock was set back since begin");
   RigidBodySet<double> r;
   r.add({});
   RigidDenseOutput<double> rigid;
