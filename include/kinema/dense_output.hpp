@@ -96,7 +96,9 @@ struct DenseSpan {
     }
     // Counted on from begin's clock, or from its time where a new size moved the origin there.
     const double begin_time = start.origin + double(start.steps) * start.h;
-    const bool counted_on = now.origin == start.origin && now.h == start.h && now.steps >= start.steps;
+    const bool same_count = now.origin == start.origin && now.h == start.h;
+    if (same_count && now.steps < start.steps) throw Error(std::string(who) + "::end: the clock was set back since begin");
+    const bool counted_on = same_count;
     const std::uint64_t since = counted_on ? now.steps - start.steps : now.origin == begin_time ? now.steps : 0;
     if (since > 1) {
       throw Error(std::string(who) + "::end: " + std::to_string(since) +

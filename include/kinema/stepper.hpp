@@ -10,7 +10,8 @@
 // thread and throws only on a bad argument, before any body moves; under a finiteness guard,
 // a NonFiniteError with the bodies put back to the last finite state; or for what happens
 // inside it (user code that throws, a host's enqueue that throws, an event function's NaN,
-// an implicit solve whose sums overflow), with the bodies and the clock as before the step.
+// an implicit solve whose sums overflow), with the bodies and the clock as before the step
+// (for an event function under step() and advance(), as before the call: kinema/events.hpp).
 
 #include <cstddef>
 #include <cstdint>

@@ -36,7 +36,7 @@ RunRecord decode(std::span<const std::byte> data, const std::string& command, co
   if (j["fingerprint"] != fingerprint) {
     const char* options = command == "stress" ? "bodies, seed, method, dt, steps, seconds, precision, guard and speeds"
                                               : "method, dt, steps, precision, tolerances, --every, --out, "
-                                                "--relaxed-fma, the implicit solves'";
+                                                "--relaxed-fma, the --implicit-* options";
     throw Error(where + "taken under another scene or other options (" + options +
                 "): resume with the command line that made it");
   }
@@ -53,9 +53,13 @@ bool same_file(const std::string& a, const std::string& b) {
   if (std::filesystem::equivalent(a, b, error)) return true;
   // Absolute first: a relative path none of whose parts exists yet (y.csv) stays relative
   // under weakly_canonical, and would differ from ./y.csv or $PWD/y.csv.
-  const auto canonical_a = std::filesystem::weakly_canonical(std::filesystem::absolute(a, error), error);
+  const auto absolute_a = std::filesystem::absolute(a, error);
   if (error) return false;
-  const auto canonical_b = std::filesystem::weakly_canonical(std::filesystem::absolute(b, error), error);
+  const auto absolute_b = std::filesystem::absolute(b, error);
+  if (error) return false;
+  const auto canonical_a = std::filesystem::weakly_canonical(absolute_a, error);
+  if (error) return false;
+  const auto canonical_b = std::filesystem::weakly_canonical(absolute_b, error);
   return !error && canonical_a == canonical_b;
 }
 
