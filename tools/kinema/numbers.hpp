@@ -9,6 +9,7 @@
 #include <cstdlib>
 
 #include <optional>
+#include <string>
 
 #include <nlohmann/json.hpp>
 
@@ -30,6 +31,22 @@ inline double significant(double x, int digits) {
 }
 
 inline double measured(double x) { return significant(x, kMeasuredDigits); }
+
+// A comma and a value of T in the shortest fixed width that round-trips it (%.9g float,
+// %.17g double): the trajectory's and events.csv's state columns.
+template <class T>
+constexpr const char* kRoundTripColumn = sizeof(T) == 4 ? ",%.9g" : ",%.17g";
+
+// Runs f; a library Error it throws (a value the scene gave, checked there) is thrown on
+// with the scene file's name in front.
+template <class F>
+decltype(auto) naming_scene(const std::string& scene_path, F&& f) {
+  try {
+    return f();
+  } catch (const Error& e) {
+    throw Error(scene_path + ": " + e.what());
+  }
+}
 
 // A --dt the run's precision cannot hold (0 or infinite once rounded to float) is the
 // option's fault, not the scene file's: said so before the scene's own checks.

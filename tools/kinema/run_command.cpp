@@ -75,7 +75,7 @@ Scene scene_with_overrides(const RunOptions& o) {
   check_method_options(o, scene.method);
   check_relaxed_fma(o);
   check_dt_option(o.dt, scene.precision);
-  try {
+  naming_scene(o.scene_path, [&] {
     if (scene.method == "auto" && !scene.tolerance) {
       throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
     }
@@ -90,9 +90,7 @@ Scene scene_with_overrides(const RunOptions& o) {
                   "library); the scene has rigid bodies");
     }
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
-  } catch (const Error& e) {
-    throw Error(o.scene_path + ": " + e.what());
-  }
+  });
   return scene;
 }
 
@@ -270,13 +268,10 @@ StepperOptions stepper_options(const RunOptions& o) {
   return options;
 }
 
+// Bodies or forces the precision cannot hold are the scene file's fault.
 template <class T>
 World<T> build_world(const Scene& scene, const RunOptions& o, const StepperOptions& options) {
-  try {
-    return World<T>(scene, method_by_name(scene.method), options);
-  } catch (const Error& e) {  // bodies or forces the precision cannot hold: name the file
-    throw Error(o.scene_path + ": " + e.what());
-  }
+  return naming_scene(o.scene_path, [&] { return World<T>(scene, method_by_name(scene.method), options); });
 }
 
 template <class T>
@@ -380,14 +375,17 @@ const char* event_type(const EventSpec& e) {
 template <class T>
 void record_events(const World<T>& world, const Scene& scene, Stepped& s) {
   for (const EventHit<T>& hit : world.event_hits()) {
-    // The state round-trips T, as the trajectory's does (%.9g float, %.17g double).
-    const char* format = sizeof(T) == 4 ? "%.17g,%zu,%d,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n"
-                                         : "%.17g,%zu,%d,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n";
-    char row[400];
-    std::snprintf(row, sizeof row, format, hit.time, hit.body, hit.event,
-                  event_type(scene.events[std::size_t(hit.event)]), double(hit.position[0]), double(hit.position[1]),
-                  double(hit.position[2]), double(hit.velocity[0]), double(hit.velocity[1]), double(hit.velocity[2]));
-    s.event_rows += row;
+    char text[80];
+    std::snprintf(text, sizeof text, "%.17g,%zu,%d,%s", hit.time, hit.body, hit.event,
+                  event_type(scene.events[std::size_t(hit.event)]));
+    s.event_rows += text;
+    for (const auto& state : {hit.position, hit.velocity}) {
+      for (int d = 0; d < 3; ++d) {
+        std::snprintf(text, sizeof text, kRoundTripColumn<T>, double(state[d]));
+        s.event_rows += text;
+      }
+    }
+    s.event_rows += '\n';
     ++s.events;
   }
   if (!world.stopped_at_event()) return;
@@ -858,11 +856,7 @@ template <class T>
 int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context, ReportFile& summary_file) {
   const StepperOptions options = stepper_options(o);
   World<T> world = build_world<T>(scene, o, options);
-  try {
-    world.watch_events();
-  } catch (const Error& e) {  // the library's check of a value the scene gave: named with the file
-    throw Error(o.scene_path + ": " + e.what());
-  }
+  naming_scene(o.scene_path, [&] { world.watch_events(); });
   double initial_energy = world.total_energy(interrupt_request());
   StepPlan plan;
   Stepped stepped;

@@ -594,13 +594,11 @@ std::optional<Scene> stress_scene(const StressOptions& o) {
   if (o.dt) scene.dt = *o.dt;
   if (o.method) scene.method = *o.method;
   check_dt_option(o.dt, scene.precision);  // the option's fault, before the scene's checks blame its dt
-  try {
+  naming_scene(o.scene_path, [&] {
     if (scene.method == "auto") throw Error("stress runs a fixed method: give one with --method");
     method_by_name(scene.method);
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
-  } catch (const Error& e) {
-    throw Error(o.scene_path + ": " + e.what());
-  }
+  });
   return scene;
 }
 

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include "kinema/error.hpp"
+#include "numbers.hpp"
 
 namespace kinema::cli {
 
@@ -58,16 +59,12 @@ TrajectoryWriter::~TrajectoryWriter() {
 
 namespace {
 
-// %.9g and %.17g are the shortest fixed widths that round-trip float and double.
-template <class T>
-constexpr const char* kValue = sizeof(T) == 4 ? ",%.9g" : ",%.17g";
-
 template <class T>
 void write_centre(std::FILE* f, std::uint64_t step, double t, std::size_t body,
                   const ParticleSet<T>& b, std::size_t i) {
   std::fprintf(f, "%llu,%.17g,%zu", static_cast<unsigned long long>(step), t, body);
   for (const T* a : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()}) {
-    std::fprintf(f, kValue<T>, double(a[i]));
+    std::fprintf(f, kRoundTripColumn<T>, double(a[i]));
   }
 }
 
@@ -82,8 +79,8 @@ void TrajectoryWriter::write(std::uint64_t step, double t, const ParticleSet<T>&
   }
   for (std::size_t i = 0; i < rigid.size(); ++i) {
     write_centre(file_, step, t, particles.size() + i, rigid.centers(), i);
-    for (int k = 0; k < 4; ++k) std::fprintf(file_, kValue<T>, double(rigid.q(k)[i]));
-    for (int d = 0; d < 3; ++d) std::fprintf(file_, kValue<T>, double(rigid.l(d)[i]));
+    for (int k = 0; k < 4; ++k) std::fprintf(file_, kRoundTripColumn<T>, double(rigid.q(k)[i]));
+    for (int d = 0; d < 3; ++d) std::fprintf(file_, kRoundTripColumn<T>, double(rigid.l(d)[i]));
     std::fputc('\n', file_);
   }
   if (std::ferror(file_) != 0) fail();  // stop at the first failed write, not at the end
