@@ -135,14 +135,20 @@ template <bool Residual, class T>
   for (int d = 0; d < 3; ++d) load_lanes(own[d], job.p[d] + first), sum[d] = cm_mass * own[d];
   if (first < job.covered) {
     const std::size_t slice = first / kLanes;
+    const std::size_t entries = job.slice_offset[(job.covered + kLanes - 1) / kLanes];
     alignas(64) T gathered[3][kLanes];
     for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
       const T* other[3];
       other_ends<true>(job, e, kLanes, gathered, other);
       const std::size_t at = e * kLanes;
-      constexpr std::size_t ahead = 32 * kLanes;
+      constexpr std::size_t ahead_entries = 32, ahead = ahead_entries * kLanes;
       for (const T* a : {job.unit[0] + at, job.unit[1] + at, job.unit[2] + at, job.along + at, job.across + at}) {
         __builtin_prefetch(a + ahead);
+      }
+      // A gathered entry's neighbour indices are read for it alone (a few entries in a
+      // hundred): a miss each, unless fetched as early as the slots' arrays.
+      if (e + ahead_entries < entries && job.contiguous[e + ahead_entries] < 0) {
+        __builtin_prefetch(job.neighbor + ahead + at);
       }
       V ux, uy, uz, ox, oy, oz, along, across;
       load_lanes(ux, job.unit[0] + at), load_lanes(uy, job.unit[1] + at), load_lanes(uz, job.unit[2] + at);
@@ -191,13 +197,12 @@ template <bool Residual, class T>
 // One slice's lanes of one array, through restrict parameters: stores through the job's
 // pointers could otherwise alias alpha and each other, and the loop would not vectorize.
 // WithZ false: z and r . z are left to another preconditioner.
-template <bool Full, bool WithZ, class T>
+template <bool WithZ, class T>
 [[gnu::always_inline]] inline void update_lanes(T* __restrict x, T* __restrict r, T* __restrict z,
                                                 const T* __restrict p, const T* __restrict q,
                                                 const T* __restrict inv_diag, T alpha, std::size_t lanes,
                                                 double (&rz)[kLanes], double (&rr)[kLanes]) {
-  const std::size_t n = Full ? kLanes : lanes;
-  for (std::size_t l = 0; l < n; ++l) {
+  for (std::size_t l = 0; l < lanes; ++l) {
     x[l] += alpha * p[l];
     const T rl = r[l] - alpha * q[l];
     r[l] = rl;
@@ -210,21 +215,47 @@ template <bool Full, bool WithZ, class T>
   }
 }
 
+// A whole slice as update_lanes does it, with the running sums in registers (vectors of
+// the slice's lanes) where update_lanes' arrays went to memory and back for every array.
+template <bool WithZ, class T, class D>
+[[gnu::always_inline]] inline void update_slice_full(const CgUpdateJob<T>& job, std::size_t first, D& rz, D& rr) {
+  using V = typename SliceVectors<T>::V;
+  for (int d = 0; d < 3; ++d) {
+    V x, r, p, q;
+    load_lanes(x, job.x[d] + first), load_lanes(r, job.r[d] + first);
+    load_lanes(p, job.p[d] + first), load_lanes(q, job.q[d] + first);
+    x += job.alpha * p;
+    r = r - job.alpha * q;
+    std::memcpy(job.x[d] + first, &x, sizeof x);
+    std::memcpy(job.r[d] + first, &r, sizeof r);
+    const D r_wide = __builtin_convertvector(r, D);
+    if constexpr (WithZ) {
+      V inv_diag;
+      load_lanes(inv_diag, job.inv_diag[d] + first);
+      const V z = inv_diag * r;
+      std::memcpy(job.z[d] + first, &z, sizeof z);
+      rz += r_wide * __builtin_convertvector(z, D);
+    }
+    rr += r_wide * r_wide;
+  }
+}
+
 template <bool WithZ, class T>
 [[gnu::always_inline]] inline void update_of(const CgUpdateJob<T>& job, std::size_t begin, std::size_t end,
                                              double sums[2]) {
-  double rz[kLanes] = {}, rr[kLanes] = {};
-  const T alpha = job.alpha;
-  for (std::size_t first = begin; first < end; first += kLanes) {
-    const std::size_t lanes = std::min(kLanes, end - first);
+  using D = typename SliceVectors<T>::D;
+  D rz_lanes = {}, rr_lanes = {};
+  // A copy no store can reach: the job's pointers stay in registers across the stores.
+  const CgUpdateJob<T> local = job;
+  std::size_t first = begin;
+  for (; first + kLanes <= end; first += kLanes) update_slice_full<WithZ>(local, first, rz_lanes, rr_lanes);
+  double rz[kLanes], rr[kLanes];
+  std::memcpy(rz, &rz_lanes, sizeof rz), std::memcpy(rr, &rr_lanes, sizeof rr);
+  if (first < end) {  // a set padded to less than a slice past its last whole one
     for (int d = 0; d < 3; ++d) {
-      T *x = job.x[d] + first, *r = job.r[d] + first, *z = WithZ ? job.z[d] + first : nullptr;
-      const T *p = job.p[d] + first, *q = job.q[d] + first, *inv_diag = job.inv_diag[d] + first;
-      if (lanes == kLanes) {
-        update_lanes<true, WithZ>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
-      } else {
-        update_lanes<false, WithZ>(x, r, z, p, q, inv_diag, alpha, lanes, rz, rr);
-      }
+      update_lanes<WithZ>(job.x[d] + first, job.r[d] + first, WithZ ? job.z[d] + first : nullptr,
+                                 job.p[d] + first, job.q[d] + first, job.inv_diag[d] + first, job.alpha, end - first,
+                                 rz, rr);
     }
   }
   for (std::size_t l = 0; l < kLanes; ++l) sums[0] += rz[l], sums[1] += rr[l];
