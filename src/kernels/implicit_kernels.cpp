@@ -20,8 +20,7 @@ constexpr std::size_t kLanes = kSpringSlice;
 
 // The other ends of one entry's lanes: consecutive bodies (read where they are), or gathered
 // into `gathered` by the slots' neighbours. A masked run (some lanes' slots empty) is
-// gathered too: an empty slot's neighbour is its body, whose value is the one the run's
-// layout gives it, and a gather vectorizes where a per-lane choice did not.
+// gathered too: an empty slot's neighbour is its body. (Whole slices: load_other_ends.)
 template <bool Full, class T>
 [[gnu::always_inline]] inline void other_ends(const SpringProductJob<T>& job, std::size_t entry, std::size_t lanes,
                                               T (&gathered)[3][kLanes], const T* (&other)[3]) {
@@ -123,6 +122,40 @@ template <class V, class T>
   std::memcpy(&v, p, sizeof v);
 }
 
+// A whole entry's other ends as vectors. A masked run (contiguous -(base + 2): lane l's other
+// end is base + l where the lane has a spring, the lane's own body where it has none) loads
+// base's run and takes the own value in the empty lanes, the values a gather would give.
+template <class T, class V>
+[[gnu::always_inline]] inline void load_other_ends(const SpringProductJob<T>& job, std::size_t entry,
+                                                   std::size_t first, const V (&own)[3], V (&other)[3]) {
+  using B = typename SliceVectors<T>::B;
+  const std::int32_t code = job.contiguous[entry];
+  if (code >= 0) {
+    for (int d = 0; d < 3; ++d) load_lanes(other[d], job.p[d] + code);
+    return;
+  }
+  if (code == -1) {
+    alignas(64) T gathered[3][kLanes];
+    const T* from[3];
+    other_ends<true>(job, entry, kLanes, gathered, from);
+    for (int d = 0; d < 3; ++d) load_lanes(other[d], from[d]);
+    return;
+  }
+  typedef std::int32_t I __attribute__((vector_size(kLanes * sizeof(std::int32_t))));
+  typedef std::make_signed_t<typename SliceVectors<T>::Bits> S;
+  typedef S Wide __attribute__((vector_size(kLanes * sizeof(T))));
+  I neighbor, self;
+  load_lanes(neighbor, job.neighbor + entry * kLanes);
+  for (std::size_t l = 0; l < kLanes; ++l) self[l] = std::int32_t(first + l);
+  const B empty = (B)__builtin_convertvector(neighbor == self, Wide);
+  const std::size_t base = std::size_t(-code - 2);
+  for (int d = 0; d < 3; ++d) {
+    V run;
+    load_lanes(run, job.p[d] + base);
+    other[d] = (V)(((B)run & ~empty) | ((B)own[d] & empty));
+  }
+}
+
 template <bool Residual, class T>
 [[gnu::always_inline]] inline void product_slice_full(const SpringProductJob<T>& job, std::size_t first,
                                                       double (&dots)[kLanes]) {
@@ -136,10 +169,9 @@ template <bool Residual, class T>
   if (first < job.covered) {
     const std::size_t slice = first / kLanes;
     const std::size_t entries = job.slice_offset[(job.covered + kLanes - 1) / kLanes];
-    alignas(64) T gathered[3][kLanes];
     for (std::size_t e = job.slice_offset[slice]; e < job.slice_offset[slice + 1]; ++e) {
-      const T* other[3];
-      other_ends<true>(job, e, kLanes, gathered, other);
+      V other[3];
+      load_other_ends(job, e, first, own, other);
       const std::size_t at = e * kLanes;
       constexpr std::size_t ahead_entries = 32, ahead = ahead_entries * kLanes;
       for (const T* a : {job.unit[0] + at, job.unit[1] + at, job.unit[2] + at, job.along + at, job.across + at}) {
@@ -150,11 +182,10 @@ template <bool Residual, class T>
       if (e + ahead_entries < entries && job.contiguous[e + ahead_entries] < 0) {
         __builtin_prefetch(job.neighbor + ahead + at);
       }
-      V ux, uy, uz, ox, oy, oz, along, across;
+      V ux, uy, uz, along, across;
       load_lanes(ux, job.unit[0] + at), load_lanes(uy, job.unit[1] + at), load_lanes(uz, job.unit[2] + at);
-      load_lanes(ox, other[0]), load_lanes(oy, other[1]), load_lanes(oz, other[2]);
       load_lanes(along, job.along + at), load_lanes(across, job.across + at);
-      const V dx = ox - own[0], dy = oy - own[1], dz = oz - own[2];
+      const V dx = other[0] - own[0], dy = other[1] - own[1], dz = other[2] - own[2];
       const V s = along * (ux * dx + uy * dy + uz * dz);
       sum[0] += s * ux + across * dx;
       sum[1] += s * uy + across * dy;
