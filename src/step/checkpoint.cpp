@@ -535,9 +535,29 @@ void check_quaternions(const RigidBodySet<T>& b, std::size_t k) {
   }
 }
 
+// Applied forces or torques (data(d): component d, or nullptr when none), which the setters
+// keep finite.
+template <class Data>
+void check_applied(Data data, const char* what, std::size_t k, std::size_t n) {
+  for (int d = 0; d < 3 && data(0) != nullptr; ++d) {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!std::isfinite(data(d)[i])) {
+        throw Error("checkpoint record " + std::to_string(k) + ": body " + std::to_string(i) + "'s applied " + what +
+                    " is not finite");
+      }
+    }
+  }
+}
+
 template <class Set>
 void check_values(const Set& b, std::size_t k) {
   check_parameters(b.parameters(), k, b.size());
+  if constexpr (requires { b.centers(); }) {
+    check_applied([&](int d) { return b.centers().applied_force_data(d); }, "force", k, b.size());
+    check_applied([&](int d) { return b.applied_torque_data(d); }, "torque", k, b.size());
+  } else {
+    check_applied([&](int d) { return b.applied_force_data(d); }, "force", k, b.size());
+  }
   if (const auto bad = first_non_finite(b)) {
     throw Error("checkpoint record " + std::to_string(k) + ": body " + std::to_string(bad->body) + "'s " +
                 bad->field + " is not finite");
@@ -587,12 +607,13 @@ AdaptiveContinuation continuation_in(const std::byte* h) {
   return c;
 }
 
-// What a controller can have left: finite tolerances and sizes (the cap may be infinite), and
-// a kept stage exactly when it says it kept one.
+// What a controller can have left: a finite end (of either sign, as the clock), finite
+// tolerances and sizes (the cap may be infinite), and a kept stage exactly when it says it
+// kept one.
 void check_continuation(const AdaptiveContinuation& c, bool kept, std::size_t k) {
   const auto finite = [](double x) { return std::isfinite(x) && x >= 0; };
   const bool valid = !c.active ? !kept
-                               : finite(c.t_end) && finite(c.rtol) && finite(c.atol) && c.max_step > 0 && c.h > 0 &&
+                               : std::isfinite(c.t_end) && finite(c.rtol) && finite(c.atol) && c.max_step > 0 && c.h > 0 &&
                                      finite(c.h) && c.controller.err_prev > 0 && finite(c.controller.err_prev) &&
                                      finite(c.kept_scale) && kept == (c.kept_scale > 0);
   if (!valid) throw Error("checkpoint record " + std::to_string(k) + ": its error control's state is not one it can have");
@@ -622,6 +643,11 @@ void CheckpointReader::restore_stepper(std::size_t k, Stepper<T>& io_stepper) co
     throw Error("checkpoint record " + std::to_string(k) + ": this stepper keeps no stages");
   }
   const std::size_t n = records_[k].bodies;
+  for (std::size_t i = 0; stage != nullptr && i < 3 * n; ++i) {
+    if (!std::isfinite(get<T>(stage + i * sizeof(T)))) {
+      throw Error("checkpoint record " + std::to_string(k) + ": its kept stage is not finite");
+    }
+  }
   // Everything that can throw (the clock's values, the stage's memory) before anything changes.
   const std::array<T*, 3> into = stage != nullptr ? staged->first_stage_for(padded_count<T>(n)) : std::array<T*, 3>{};
   io_stepper.set_clock(clock(k));

@@ -214,6 +214,27 @@ TEST_CASE("an error-controlled call stopped early goes on, in the stepper or fro
   CHECK(t.time() == 0.2999);
 }
 
+TEST_CASE("a call stopped early on a clock below zero goes on from a checkpoint bit for bit", "[checkpoint][adaptive]") {
+  // The end of a call is a time like the clock, of either sign.
+  const ForceModel<double> f = chain_and_cluster<double>(40);
+  const Tolerances tol{1e-8, 1e-8};
+  ParticleSet<double> straight = test::cloud<double>(40);
+  Stepper<double> a(f, dopri5, test::serial_options());
+  a.set_time(-10);
+  a.advance_to(straight, -9.5, tol);
+  ParticleSet<double> b = test::cloud<double>(40);
+  Stepper<double> s(f, dopri5, test::serial_options());
+  s.set_time(-10);
+  int accepted = 0;
+  REQUIRE(s.advance_to(b, -9.5, tol, [&] { return ++accepted == 2; }).stopped);
+  ParticleSet<double> resumed;
+  Stepper<double> r(f, dopri5, test::serial_options());
+  CheckpointReader(bits(b, s)).restore(0, resumed, r);
+  CHECK_FALSE(r.advance_to(resumed, -9.5, tol).stopped);
+  CHECK(test::state_hash(resumed) == test::state_hash(straight));
+  CHECK(r.time() == a.time());
+}
+
 TEST_CASE("a call stopped early keeps its stable-step cap and the forces applied for it", "[checkpoint][adaptive]") {
   // The cap comes from the bodies at the call's start and the forces last to the call's end:
   // a call that goes on must not take either from the bodies as they are when it resumes.
@@ -434,6 +455,48 @@ TEST_CASE("a checkpoint made to pass its checksums with a state no set can hold 
   patch(negative, arrays + 4 * 3 * 6, -1.0f);  // body 0's inverse mass
   reseal(negative);
   CHECK_THAT(refusal(negative), Catch::Contains("inverse mass"));
+}
+
+TEST_CASE("a checkpoint made to pass its checksums with applied forces or a kept stage not finite is refused",
+          "[checkpoint][adaptive]") {
+  // Three bodies, an applied force on body 1 and a call stopped early that kept dopri5's
+  // last stage: the arrays px .. vz, the inverse masses, the applied forces, the kept stage.
+  ParticleSet<float> b = test::cloud<float>(3);
+  b.apply_force(1, {1.25f, 2, 3});
+  b.keep_forces(true);
+  const ForceModel<float> f = test::all_local_terms<float>();
+  Stepper<float> s(f, dopri5, test::serial_options());
+  int accepted = 0;
+  REQUIRE(s.advance_to(b, 1.0, {1e-6, 1e-6}, [&] { return ++accepted == 2; }).stopped);
+  const std::vector<std::byte> good = bits(b, s);
+  const auto array_at = [](int array, int body) {
+    return kCheckpointHeaderBytes + kCheckpointRecordBytes + std::size_t(array * 3 + body) * sizeof(float);
+  };
+  float fx = 0;
+  std::memcpy(&fx, good.data() + array_at(7, 1), sizeof fx);
+  REQUIRE(fx == 1.25f);  // the layout this test patches
+  const auto refused = [&](std::size_t at, float value) {
+    std::vector<std::byte> bytes = good;
+    patch(bytes, at, value);
+    reseal(bytes);
+    ParticleSet<float> into = b;
+    Stepper<float> r(f, dopri5, test::serial_options());
+    try {
+      CheckpointReader(std::move(bytes)).restore(0, into, r);
+    } catch (const Error& e) {
+      CHECK(test::state_hash(into) == test::state_hash(b));
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  CHECK_THAT(refused(array_at(7, 1), std::numeric_limits<float>::quiet_NaN()),
+             Catch::Contains("body 1's applied force is not finite"));
+  CHECK_THAT(refused(array_at(9, 2), std::numeric_limits<float>::infinity()),
+             Catch::Contains("body 2's applied force is not finite"));
+  CHECK_THAT(refused(array_at(10, 0), std::numeric_limits<float>::quiet_NaN()),
+             Catch::Contains("its kept stage is not finite"));
+  CHECK_THAT(refused(array_at(12, 2), -std::numeric_limits<float>::infinity()),
+             Catch::Contains("its kept stage is not finite"));
 }
 
 TEST_CASE("a rigid checkpoint whose orientation cannot be normalized is refused", "[checkpoint][rigid]") {
