@@ -46,6 +46,9 @@ class AlignedArray {
     return *this;
   }
 
+  // Throws kinema::Error when `count` elements would overflow memory, as resize does.
+  static void check_count(std::size_t count);
+
   T* data() { return data_.get(); }
   const T* data() const { return data_.get(); }
   std::size_t size() const { return size_; }
@@ -188,7 +191,8 @@ class ParticleSet {
   }
   // Adds a body that forces do not move (inv_mass 0); it keeps its velocity.
   std::size_t add_kinematic(const Vec3<T>& position, const Vec3<T>& velocity = {});
-  // Adds many bodies at once (one growth of the buffers).
+  // Adds many bodies at once (one growth of the buffers), all or none: a body refused (as
+  // add refuses it, named by the index it would have had) leaves the set as it was.
   void add(std::span<const ParticleDesc<T>> bodies);
   void reserve(std::size_t count);
   void clear();

@@ -65,10 +65,15 @@ Placement placement_for(std::size_t bytes) {
 }  // namespace
 
 template <class T>
-void AlignedArray<T>::resize(std::size_t count) {
+void AlignedArray<T>::check_count(std::size_t count) {
   if (count > (std::numeric_limits<std::size_t>::max() - 2 * kPageBytes) / sizeof(T)) {
     throw Error("cannot hold " + std::to_string(count) + " bodies: the arrays would overflow memory");
   }
+}
+
+template <class T>
+void AlignedArray<T>::resize(std::size_t count) {
+  check_count(count);
   count = padded_count<T>(count);
   if (count <= size_) return;
   const Placement at = placement_for<T>(count * sizeof(T));
@@ -314,8 +319,14 @@ std::size_t ParticleSet<T>::add_kinematic(const Vec3<T>& position, const Vec3<T>
   return i;
 }
 
+// Every body checked before any is added: all or nothing.
 template <class T>
 void ParticleSet<T>::add(std::span<const ParticleDesc<T>> bodies) {
+  for (std::size_t k = 0; k < bodies.size(); ++k) {
+    check_finite(bodies[k].position, size_ + k, "position");
+    check_finite(bodies[k].velocity, size_ + k, "velocity");
+    inverse_mass(bodies[k].mass, size_ + k);
+  }
   reserve(size_ + bodies.size());
   for (const auto& b : bodies) add(b);
 }

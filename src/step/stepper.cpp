@@ -294,6 +294,7 @@ void Stepper<T>::prepare() {
 
 template <class T>
 void Stepper<T>::reserve(std::size_t bodies) {
+  AlignedArray<T>::check_count(bodies);  // before padded_count, which would wrap
   if (impl_->core.paths.staged) impl_->core.paths.staged->reserve(padded_count<T>(bodies));
   if (impl_->core.paths.rigid_block) impl_->core.paths.rigid_block->reserve(padded_count<T>(bodies));
   if (impl_->core.paths.block) impl_->core.paths.block->reserve(padded_count<T>(bodies));

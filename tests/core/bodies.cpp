@@ -98,4 +98,17 @@ TEST_CASE("bad bodies are refused with the body and field named", "[bodies][erro
   CHECK_THROWS_WITH(set.set_velocity(0, {nan, 0, 0}), "body 0: velocity is not finite");
   CHECK_THROWS_WITH(set.set_position(5, {0, 0, 0}), "body 5: no such body (the set has 1)");
   CHECK(set.size() == 1);  // nothing half-added
+  // Many at once: all or none, the refused one named by the index it would have had.
+  const std::vector<ParticleDesc<float>> four = {{{1, 0, 0}, {}, 1}, {{2, 0, 0}, {}, 1}, {{3, 0, 0}, {}, -1}, {{4, 0, 0}, {}, 1}};
+  const std::uint64_t before = test::state_hash(set);
+  CHECK_THROWS_WITH(set.add(std::span<const ParticleDesc<float>>(four)), Catch::Contains("body 3: mass"));
+  CHECK(set.size() == 1);
+  CHECK(test::state_hash(set) == before);
+  // A count no array can hold, for a set and for a stepper's scratch (padded, it would wrap to 0).
+  const std::size_t most = std::numeric_limits<std::size_t>::max();
+  CHECK_THROWS_WITH(set.reserve(most), Catch::Contains("the arrays would overflow memory"));
+  ForceModel<float> springs;
+  springs.add(Springs{{{0, 1, 1, 1, 0}}});
+  Stepper<float> stepper(springs, rk4);
+  CHECK_THROWS_WITH(stepper.reserve(most), Catch::Contains("the arrays would overflow memory"));
 }
