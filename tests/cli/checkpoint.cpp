@@ -300,6 +300,23 @@ TEST_CASE("outputs never overwrite the scene or each other", "[cli][checkpoint][
   CHECK_FALSE(fs::exists("kinema-rel.out"));
   // Devices are no files to clobber.
   CHECK(run_kinema({"run", scene_copy.string(), "-q", "--out", "/dev/null", "--summary", "/dev/null"}).code == 0);
+  // A --resume file is an input too, except to the --checkpoint that goes on from it.
+  const std::string ck = (dir / "resume.ck").string(), stress_ck = (dir / "resume-stress.ck").string();
+  REQUIRE(run_kinema({"run", scene_copy.string(), "-q", "--steps", "3", "--checkpoint", ck}).code == 0);
+  REQUIRE(run_kinema({"stress", "-q", "--bodies", "100", "--steps", "3", "--checkpoint", stress_ck}).code == 0);
+  const std::string saved = read(ck), stress_saved = read(stress_ck);
+  for (const auto& args : std::vector<std::vector<std::string>>{
+           {"run", scene_copy.string(), "-q", "--steps", "3", "--resume", ck, "--summary", ck},
+           {"run", scene_copy.string(), "-q", "--steps", "3", "--resume", ck, "--out", (dir / "." / "resume.ck").string()},
+           {"stress", "-q", "--bodies", "100", "--steps", "3", "--resume", stress_ck, "--report", stress_ck}}) {
+    INFO(args[args.size() - 2] << " " << args.back());
+    const Result r = run_kinema(args);
+    CHECK(r.code == 1);
+    CHECK_THAT(r.err, Catch::Contains("is the input --resume names: one would overwrite the other"));
+  }
+  CHECK(read(ck) == saved);
+  CHECK(read(stress_ck) == stress_saved);
+  CHECK(run_kinema({"run", scene_copy.string(), "-q", "--steps", "3", "--resume", ck, "--checkpoint", ck}).code == 0);
 }
 
 TEST_CASE("an energy that overflows is said, not left as a silent null", "[cli][hostile]") {

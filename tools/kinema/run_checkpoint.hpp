@@ -50,8 +50,8 @@ struct NamedPath {
 };
 
 // kinema::Error before any work when two outputs are one file, or an output is an input (the
-// scene): one would clobber the other. Empty paths are not given. (A --resume file may also be
-// the --checkpoint: the run reads it before it writes the next.)
+// scene, the --resume file): one would clobber the other. Empty paths are not given. (A
+// --resume file may also be the --checkpoint: the run reads it before it writes the next.)
 void check_distinct(const std::vector<NamedPath>& inputs, const std::vector<NamedPath>& outputs);
 
 // Whether a checkpoint is due: every `every` seconds from construction or the last save().

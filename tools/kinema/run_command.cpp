@@ -901,6 +901,7 @@ int run_typed(const Scene& scene, const RunOptions& o, const RunContext& context
 int run_scene(const RunOptions& o) {
   check_distinct({{"the scene", o.scene_path}},
                  {{"--out", o.trajectory_path}, {"--summary", o.summary_path}, {"--checkpoint", o.checkpoint.path}});
+  check_distinct({{"--resume", o.checkpoint.resume_path}}, {{"--out", o.trajectory_path}, {"--summary", o.summary_path}});
   Scene scene = scene_with_overrides(o);
   check_events(scene, o);
   // Before any work: a path that cannot be written is refused now.

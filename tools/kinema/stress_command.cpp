@@ -631,6 +631,7 @@ struct StressPlan {
 
 StressPlan plan_stress(const StressOptions& o) {
   check_distinct({{"--scene", o.scene_path}}, {{"--report", o.report_path}, {"--checkpoint", o.checkpoint.path}});
+  check_distinct({{"--resume", o.checkpoint.resume_path}}, {{"--report", o.report_path}});
   if (o.method == "auto") throw Error("stress runs a fixed method; auto is for kinema run");
   if (o.method) method_by_name(*o.method);  // a bad name fails before any work
   const Precision asked = o.precision.value_or(Precision::single);
