@@ -18,8 +18,14 @@ namespace kinema {
 // directory. A WholeFile destroyed without commit() removes its temporary, and `path` keeps
 // whatever it held. Construction checks that the directory takes a new file (a path that
 // cannot be written is refused before any work); the temporary is made at the first write.
-// A device or FIFO that exists at `path` (/dev/stdout) is written directly. Every failure
-// throws kinema::Error naming the path and the reason.
+// A device or FIFO that exists at `path` (/dev/null, a pipe) is written directly, and so is
+// the file the process's standard output or error is (/dev/stdout when it is redirected to
+// a file: replacing that file would lose what the stream wrote). Every failure throws
+// kinema::Error naming the path and the reason.
+// 1 or 2 when `path` names the file the process's standard output or error is open on
+// (/dev/stdout, /proc/self/fd/2, or that file by its own name), else -1.
+int standard_stream_at(const std::filesystem::path& path);
+
 class WholeFile {
  public:
   // `what` names the file in messages ("summary", "checkpoint").

@@ -3,6 +3,7 @@
 #include <array>
 #include <atomic>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <fcntl.h>
 #include <string>
@@ -52,8 +53,26 @@ void sync_directory(const std::filesystem::path& file) {
 
 }  // namespace
 
+int standard_stream_at(const std::filesystem::path& path) {
+  struct stat named{};
+  if (::stat(path.c_str(), &named) != 0) return -1;
+  for (int fd : {1, 2}) {
+    struct stat stream{};
+    if (::fstat(fd, &stream) == 0 && stream.st_dev == named.st_dev && stream.st_ino == named.st_ino) return fd;
+  }
+  return -1;
+}
+
 WholeFile::WholeFile(std::filesystem::path path, std::string what) : what_(std::move(what)) {
   path_ = resolved(path);
+  if (const int stream = standard_stream_at(path); stream >= 0) {
+    // Written through the stream's own open file, after what the program printed to it.
+    std::fflush(stream == 1 ? stdout : stderr);
+    fd_ = ::fcntl(stream, F_DUPFD_CLOEXEC, 0);
+    if (fd_ < 0) fail("cannot write", errno);
+    device_ = true;
+    return;
+  }
   struct stat existing{};
   const bool exists = ::stat(path_.c_str(), &existing) == 0;
   if (exists && S_ISDIR(existing.st_mode)) fail("cannot write", EISDIR);

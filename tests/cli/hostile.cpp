@@ -9,6 +9,7 @@
 #include <map>
 #include <sstream>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <nlohmann/json.hpp>
@@ -294,6 +295,15 @@ std::vector<Case> option_cases() {
       {"", run({"--summary", "/dev/full"}), 1, "/dev/full: cannot write the summary: No space left on device"},
       {"", run({"--out", "/dev/full"}), 1, "/dev/full: cannot write the trajectory: No space left on device"},
       {"", run({"--out", "/nonexistent/dir/t.csv"}), 1, "/nonexistent/dir/t.csv: cannot write the trajectory"},
+      {"", run({"--out", "/dev/null", "--checkpoint", (work_dir() / "never.ck").string()}), 1,
+       "--out /dev/null: with --checkpoint the trajectory is a file that a resumed run continues, not a device or a pipe"},
+      // Steps that would take the clock past every double.
+      {"", run({"--dt", "1e305", "--steps", "100000"}), 1, "dt x steps (100000 steps of 1e+305 s) overflows the clock"},
+      // What stress would not do with a scene is refused, not skipped.
+      {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0, "action": "stop"}], )" + P + "}",
+       {"stress", "-q", "--scene", "{}"}, 1, "stress watches no events: kinema run takes a scene's \"events\""},
+      {R"({"method": "dopri5", "rtol": 1e-6, "steps": 10, )" + P + "}", {"stress", "-q", "--scene", "{}"}, 1,
+       "stress takes fixed steps of dt: kinema run takes a scene's \"rtol\" and \"atol\""},
       {"", run({"--summary", "/"}), 1, "/: cannot write the summary"},
       {"", {"chart", scene, "-q", "--out", "/dev/null/charts"}, 1, "/dev/null/charts"},
       {"", {"stability", scene, "-q", "--out", "/dev/null/charts"}, 1, "/dev/null/charts"},
@@ -536,6 +546,34 @@ TEST_CASE("a full standard output is an error, not a silent success", "[cli][hos
   const Result r = run_kinema({"run", kSpring}, "/dev/full");
   CHECK(r.code == 1);
   CHECK(r.err == "kinema: error: standard output: cannot write: No space left on device\n");
+}
+
+TEST_CASE("/dev/stdout redirected to a file takes the outputs after what the program printed", "[cli][hostile]") {
+  // Replacing the file the stream is open on (as a summary file is replaced) lost the text
+  // summary; opening it anew (as the trajectory was) wrote over it from the start.
+  const fs::path printed = work_dir() / "redirected.txt";
+  const Result summary = run_kinema({"run", kSpring, "--steps", "3", "--summary", "/dev/stdout"}, printed);
+  REQUIRE(summary.code == 0);
+  const std::string both = read(printed);
+  CHECK(both.find("\"scene\"") != std::string::npos);       // the JSON
+  CHECK(both.find("state_crc32c") != std::string::npos);     // and the text summary
+  const fs::path file = work_dir() / "trajectory-file.csv";
+  REQUIRE(run_kinema({"run", kSpring, "--steps", "3", "-q", "--out", file.string()}).code == 0);
+  REQUIRE(run_kinema({"run", kSpring, "--steps", "3", "--out", "/dev/stdout"}, printed).code == 0);
+  const std::string mixed = read(printed);
+  CHECK(mixed.find(read(file)) != std::string::npos);  // every trajectory line, in order
+  CHECK(mixed.find("state_crc32c") != std::string::npos);
+}
+
+TEST_CASE("a FIFO no reader has open is refused at once as the trajectory", "[cli][hostile]") {
+  // A blocking open would wait for a reader for ever (and restart after a first signal).
+  const fs::path fifo = work_dir() / "no-reader.fifo";
+  fs::remove(fifo);
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  const Result r = run_kinema({"run", kSpring, "-q", "--out", fifo.string()});
+  CHECK(r.code == 1);
+  CHECK_THAT(r.err, Catch::Contains("cannot write the trajectory: a FIFO that no reader has open"));
+  fs::remove(fifo);
 }
 
 TEST_CASE("a blow-up names the very step, body and component", "[cli][hostile]") {

@@ -10,6 +10,7 @@
 #include <functional>
 #include <optional>
 #include <span>
+#include <sys/stat.h>
 #include <variant>
 
 #include <nlohmann/json.hpp>
@@ -62,6 +63,17 @@ void check_relaxed_fma(const RunOptions& o) {
 
 }  // namespace
 
+// A run that keeps checkpoints syncs its trajectory with them and a resumed run continues
+// it from the length it had: a device or a pipe can do neither (refused before any work).
+void check_trajectory_resumable(const RunOptions& o) {
+  if (o.checkpoint.path.empty() || o.trajectory_path.empty()) return;
+  struct stat st{};
+  if (::stat(o.trajectory_path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    throw Error("--out " + printable(o.trajectory_path) +
+                ": with --checkpoint the trajectory is a file that a resumed run continues, not a device or a pipe");
+  }
+}
+
 Scene scene_with_overrides(const RunOptions& o) {
   Scene scene = load_scene(o.scene_path);
   if (o.method) scene.method = *o.method;
@@ -76,6 +88,12 @@ Scene scene_with_overrides(const RunOptions& o) {
   check_relaxed_fma(o);
   check_dt_option(o.dt, scene.precision);
   naming_scene(o.scene_path, [&] {
+    if (!std::isfinite(scene.dt * double(scene.steps))) {
+      char text[160];
+      std::snprintf(text, sizeof text, "dt x steps (%llu steps of %g s) overflows the clock",
+                    static_cast<unsigned long long>(scene.steps), scene.dt);
+      throw Error(text);
+    }
     if (scene.method == "auto" && !scene.tolerance) {
       throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
     }
@@ -902,6 +920,7 @@ int run_scene(const RunOptions& o) {
   check_distinct({{"the scene", o.scene_path}},
                  {{"--out", o.trajectory_path}, {"--summary", o.summary_path}, {"--checkpoint", o.checkpoint.path}});
   check_distinct({{"--resume", o.checkpoint.resume_path}}, {{"--out", o.trajectory_path}, {"--summary", o.summary_path}});
+  check_trajectory_resumable(o);
   Scene scene = scene_with_overrides(o);
   check_events(scene, o);
   // Before any work: a path that cannot be written is refused now.

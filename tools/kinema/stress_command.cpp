@@ -597,6 +597,11 @@ std::optional<Scene> stress_scene(const StressOptions& o) {
   naming_scene(o.scene_path, [&] {
     if (scene.method == "auto") throw Error("stress runs a fixed method: give one with --method");
     method_by_name(scene.method);
+    // Neither would act here: refused rather than left silently undone.
+    if (!scene.events.empty()) throw Error("stress watches no events: kinema run takes a scene's \"events\"");
+    if (scene.rtol || scene.atol) {
+      throw Error("stress takes fixed steps of dt: kinema run takes a scene's \"rtol\" and \"atol\"");
+    }
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   });
   return scene;

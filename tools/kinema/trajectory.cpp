@@ -1,20 +1,48 @@
 #include "trajectory.hpp"
 
 #include <cerrno>
+#include <cstdio>
+#include <fcntl.h>
 #include <cstring>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include "kinema/error.hpp"
+#include "kinema/files.hpp"
 #include "numbers.hpp"
 
 namespace kinema::cli {
 
+namespace {
+
+// The trajectory's file: the standard stream's own open file where the path names it (so
+// that the stream's lines and the trajectory's follow one another), a FIFO only if a reader
+// has it open (never blocking), else a file truncated or made.
+int open_trajectory(const std::string& path) {
+  if (const int stream = standard_stream_at(path); stream >= 0) {
+    std::fflush(stream == 1 ? stdout : stderr);
+    return ::fcntl(stream, F_DUPFD_CLOEXEC, 0);
+  }
+  struct stat st{};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    const int fd = ::open(path.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd >= 0) ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+    return fd;
+  }
+  return ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+}
+
+}  // namespace
+
 TrajectoryWriter::TrajectoryWriter(const std::string& path, bool rigid_columns)
     : rigid_columns_(rigid_columns), path_(path) {
-  file_ = std::fopen(path.c_str(), "w");
+  const int fd = open_trajectory(path);
+  file_ = fd < 0 ? nullptr : ::fdopen(fd, "w");
   if (file_ == nullptr) {
-    throw Error(printable(path) + ": cannot write the trajectory: " + std::strerror(errno));
+    const int error = errno;
+    if (fd >= 0) ::close(fd);
+    throw Error(printable(path) + ": cannot write the trajectory: " +
+                (error == ENXIO ? std::string("a FIFO that no reader has open") : std::strerror(error)));
   }
   std::fputs(rigid_columns ? "step,t,body,px,py,pz,vx,vy,vz,qw,qx,qy,qz,lx,ly,lz\n"
                            : "step,t,body,px,py,pz,vx,vy,vz\n",
