@@ -186,12 +186,17 @@ RunBytes run_bytes(const Scene& scene) {
   RunBytes r;
   r.state = 3 * state_bytes<T>(scene) + kListedBody * double(scene.particles.size() + scene.rigid_bodies.size());
   const bool coupled = scene.nbody || !scene.springs.empty() || !scene.body_springs.springs.empty();
+  const Method& method = scene.method == "auto" ? rk6 : method_by_name(scene.method);
+  // A rigid body's stage state is about twice a particle's.
+  const double n = double(scene.particles.size()) + 2 * double(scene.rigid_bodies.size()) +
+                   (scene.generate ? double(scene.generate->count) * (scene.generate->rigid ? 2 : 1) : 0);
+  const double stages = double(std::max(method.evaluations(), 1));
+  if (!coupled && method.kind == MethodKind::runge_kutta && builtin_index(method) < 0) {
+    // No fused kernel (bs3, dopri5, rk6): local terms too take stages kept in memory (peak
+    // resident sizes at 2M float particles: 22, 42 and 48 scalars a body more than rk4).
+    r.scratch = n * (stages * 6 + 9) * sizeof(T);
+  }
   if (coupled) {
-    // A rigid body's stage state is about twice a particle's.
-    const double n = double(scene.particles.size()) + 2 * double(scene.rigid_bodies.size()) +
-                     (scene.generate ? double(scene.generate->count) * (scene.generate->rigid ? 2 : 1) : 0);
-    const Method& method = scene.method == "auto" ? rk6 : method_by_name(scene.method);
-    const double stages = double(std::max(method.evaluations(), 1));
     r.scratch = std::min(kEstimateVectors * n, kEstimateCap) + n * (kDoubleProbe + (stages * 9 + 9) * sizeof(T));
     double pairs = 0;
     for (const Springs& network : scene.springs) pairs += double(network.pairs.size());

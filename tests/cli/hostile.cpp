@@ -502,6 +502,28 @@ TEST_CASE("a scene that would not fit is refused before it is built, naming what
   CHECK(text.find("this process may use") != std::string::npos);
 }
 
+TEST_CASE("the memory check counts the stages of a method without a fused kernel", "[cli][hostile][memory]") {
+  // 4M float particles: about 0.4 GiB for rk4, 1.3 GiB under rk6, whose stages stay in
+  // memory. The check counted stages only for coupled terms: rk6 passed it here and then ran
+  // out of memory after building the set.
+#ifdef KINEMA_SANITIZED
+  SUCCEED("sanitizers reserve terabytes of address space: ulimit -v cannot be tested there");
+  return;
+#endif
+  const fs::path scene = write("many_rk6.json", R"({"method": "rk6", "steps": 1,
+      "generate": {"count": 4000000, "position_min": [-1, -1, -1], "position_max": [1, 1, 1]}})");
+  const fs::path err = work_dir() / "limited_stderr.txt";
+  const std::string command = "ulimit -v 1000000 && exec '" + std::string(KINEMA_CLI) + "' run '" + scene.string() +
+                              "' -q --threads 1 2> '" + err.string() + "'";
+  const int status = std::system(command.c_str());
+  REQUIRE(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 1);
+  const std::string text = read(err);
+  CHECK(lines(text) == 1);
+  CHECK(text.find("many_rk6.json: the scene needs about 1.3 GiB") != std::string::npos);
+  CHECK(text.find("for the stiffness estimate and the stages") != std::string::npos);
+}
+
 TEST_CASE("a stiffness estimate that would cost more than the run is left out, and the summary says so",
           "[cli][hostile]") {
   // 65536 bodies and 260610 springs for one step: the estimate's 57 evaluations in double

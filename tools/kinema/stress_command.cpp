@@ -609,7 +609,11 @@ std::optional<Scene> stress_scene(const StressOptions& o) {
 
 void check_fits(const StressOptions& o, Precision precision) {
   const double scalar = precision == Precision::single ? 4 : 8;
-  const double need = double(o.bodies) * kBytesPerBodyPerScalar * scalar;
+  // A method without a fused kernel (bs3, dopri5, rk6) keeps its stages in memory besides.
+  const Method* method = o.method ? &method_by_name(*o.method) : nullptr;
+  const bool staged = method != nullptr && method->kind == MethodKind::runge_kutta && builtin_index(*method) < 0;
+  const double stages = staged ? double(method->evaluations()) * 6 + 9 : 0;
+  const double need = double(o.bodies) * (kBytesPerBodyPerScalar + stages) * scalar;
   if (need > usable_memory_bytes()) {
     throw Error("--bodies " + std::to_string(o.bodies) + " needs about " + std::to_string(std::uint64_t(mib(need))) +
                 " MiB, more than the " + std::to_string(std::uint64_t(mib(usable_memory_bytes()))) +
