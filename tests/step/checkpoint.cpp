@@ -396,6 +396,22 @@ TEST_CASE("a checkpoint of another version, size, scene, method or precision is 
   Stepper<float> with_guard(test::all_local_terms<float>(), rk4, guarded);
   CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(0, b, with_guard), Catch::Contains("guard off"));
   CHECK_THROWS_WITH(CheckpointReader(saved.bytes).restore(1, b, same), Catch::Contains("no record 1"));
+  // Rigid steps with or without renormalized quaternions differ in their bits: either way
+  // round is refused, and the record resumes under the option it was taken with.
+  RigidBodySet<double> turning = tumbling<double>(20);
+  StepperOptions unnormalized = test::serial_options();
+  unnormalized.renormalize_quaternions = false;
+  for (const bool renormalized : {true, false}) {
+    Stepper<double> taken(test::rotational_terms<double>(), rk4, renormalized ? test::serial_options() : unnormalized);
+    taken.advance(turning, 0.01, 3);
+    const std::vector<std::byte> record = bits(turning, taken);
+    RigidBodySet<double> into;
+    Stepper<double> other(test::rotational_terms<double>(), rk4, renormalized ? unnormalized : test::serial_options());
+    CHECK_THROWS_WITH(CheckpointReader(record).restore(0, into, other),
+                      Catch::Contains(renormalized ? "taken with renormalize_quaternions" : "taken without renormalize_quaternions"));
+    Stepper<double> like(test::rotational_terms<double>(), rk4, renormalized ? test::serial_options() : unnormalized);
+    CHECK_NOTHROW(CheckpointReader(record).restore(0, into, like));
+  }
 }
 
 TEST_CASE("an implicit record without its solve options is refused by name", "[checkpoint][implicit]") {
