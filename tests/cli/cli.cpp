@@ -625,6 +625,20 @@ TEST_CASE("stability: a table of predicted and measured steps, and where an orbi
   }
   CHECK(spring.out.find(" *\n") == std::string::npos);
   CHECK(spring.out.find("breaks the linear bound") == std::string::npos);
+  for (const auto& row : csv_rows(out / "step_limits.csv")) CHECK(row.at("capped_by_duration") == "0");
+
+  // A run shorter than the limits: every step under the duration holds, which bounds the
+  // limit from below and says nothing of the linear bound (it read as broken, 0.34x).
+  const Result brief = kinema_cli("stability " + scene("damped_spring.json") + " --methods rk4 --duration 0.5 --out " + out.string());
+  REQUIRE(brief.code == 0);
+  const auto capped = csv_rows(out / "step_limits.csv");
+  REQUIRE(capped.size() == 1);
+  CHECK(capped[0].at("capped_by_duration") == "1");
+  CHECK(number(capped[0], "measured_step") < 0.5);
+  CHECK(number(capped[0], "measured_step") > 0.49);
+  CHECK(brief.out.find(" >= 0.499   -\n") != std::string::npos);
+  CHECK(brief.out.find("give a longer --duration") != std::string::npos);
+  CHECK(brief.out.find("breaks the linear bound") == std::string::npos);
 
   // A spring network with every method by default: the table says how to draw the implicit
   // ones, which the default leaves out; named methods get no such line.

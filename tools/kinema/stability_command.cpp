@@ -166,21 +166,27 @@ bool holds(const Scene& scene, const Method& m, double h, double duration) {
 }
 
 // The largest step that holds, by bisection on a log scale around `guess` (to 0.5%); 0 or
-// infinity when even guess / 512 fails or guess * 512 holds.
+// infinity when even guess / 512 fails or guess * 512 holds. Capped: no step under the
+// duration failed (a step is never longer than the run), so the limit is at least `step`.
+struct MeasuredStep {
+  double step;
+  bool capped;
+};
+
 template <class T>
-double measured_step(const Scene& scene, const Method& m, double guess, double duration) {
+MeasuredStep measured_step(const Scene& scene, const Method& m, double guess, double duration) {
   double lo = guess / 7, hi = guess * 9;  // not centred on the guess: its first midpoint is not the guess
   const auto ok = [&](double h) { return h < duration && holds<T>(scene, m, h, duration); };
   for (int k = 0; k < 3 && !ok(lo); ++k) hi = lo, lo /= 8;
-  if (!ok(lo)) return 0;
+  if (!ok(lo)) return {0, false};
   for (int k = 0; k < 3 && ok(hi); ++k) lo = hi, hi *= 8;
-  if (ok(hi)) return std::numeric_limits<double>::infinity();
+  if (ok(hi)) return {std::numeric_limits<double>::infinity(), false};
   while (hi / lo > 1.005) {
     stop_if_interrupted();
     const double mid = std::sqrt(lo * hi);
     (ok(mid) ? lo : hi) = mid;
   }
-  return lo;
+  return {lo, hi >= duration};
 }
 
 // One method's largest stable step on the scene: predicted from the stiffness at the start,
@@ -188,8 +194,9 @@ double measured_step(const Scene& scene, const Method& m, double guess, double d
 struct MethodLimit {
   const Method* method;
   double predicted, measured;
+  bool capped;  // every step under the duration held: the limit is at least `measured`
   // The measured limit well below the prediction: the scene broke the linear bound.
-  bool broken() const { return std::isfinite(predicted) && predicted > 0 && measured < 0.8 * predicted; }
+  bool broken() const { return !capped && std::isfinite(predicted) && predicted > 0 && measured < 0.8 * predicted; }
 };
 
 std::vector<MethodLimit> measure_limits(const Scene& scene, const std::vector<const Method*>& methods,
@@ -199,10 +206,10 @@ std::vector<MethodLimit> measure_limits(const Scene& scene, const std::vector<co
     stop_if_interrupted();
     const double predicted = largest_stable_step(*m, e);
     const double guess = predicted > 0 && std::isfinite(predicted) ? predicted : dt;
-    const double measured = with_precision(scene.precision, [&]<class T>() {
+    const MeasuredStep measured = with_precision(scene.precision, [&]<class T>() {
       return measured_step<T>(scene, *m, guess, duration);
     });
-    limits.push_back({m, predicted, measured});
+    limits.push_back({m, predicted, measured.step, measured.capped});
   }
   return limits;
 }
@@ -210,10 +217,11 @@ std::vector<MethodLimit> measure_limits(const Scene& scene, const std::vector<co
 // step_limits.csv and its chart.
 void write_limits(const std::vector<MethodLimit>& limits, const StiffnessEstimate& e, double dt, const fs::path& dir) {
   OutputFile csv(dir / "step_limits.csv");
-  csv << "method,stiffness,angle,predicted_step,measured_step\n";
+  csv << "method,stiffness,angle,predicted_step,measured_step,capped_by_duration\n";
   std::vector<StepLimit> chart;
   for (const MethodLimit& l : limits) {
-    csv << l.method->name << ',' << e.magnitude << ',' << e.angle << ',' << l.predicted << ',' << l.measured << '\n';
+    csv << l.method->name << ',' << e.magnitude << ',' << e.angle << ',' << l.predicted << ',' << l.measured << ','
+        << int(l.capped) << '\n';
     chart.push_back({std::string(l.method->name), l.predicted, l.measured});
   }
   csv.close();
@@ -225,9 +233,12 @@ std::string table_row(const MethodLimit& l) {
   if (l.predicted > 0 && std::isfinite(l.predicted) && std::isfinite(l.measured)) {
     std::snprintf(ratio, sizeof ratio, "%.2f%s", l.measured / l.predicted, l.broken() ? " *" : "");
   }
+  if (l.capped) std::snprintf(ratio, sizeof ratio, "-");  // a lower bound has no ratio
+  char measured[32];
+  std::snprintf(measured, sizeof measured, "%s%.4g", l.capped ? ">= " : "", l.measured);
   char row[160];
-  std::snprintf(row, sizeof row, "  %-18s %10.4g %10.4g   %s\n", std::string(l.method->name).c_str(), l.predicted,
-                l.measured, ratio);
+  std::snprintf(row, sizeof row, "  %-18s %10.4g %10s   %s\n", std::string(l.method->name).c_str(), l.predicted,
+                measured, ratio);
   return row;
 }
 
@@ -265,6 +276,9 @@ std::string limits_table(const Scene& scene, const std::vector<MethodLimit>& lim
   table += text;
   if (std::any_of(limits.begin(), limits.end(), [](const MethodLimit& l) { return l.broken(); })) {
     table += broken_note(scene);
+  }
+  if (std::any_of(limits.begin(), limits.end(), [](const MethodLimit& l) { return l.capped; })) {
+    table += ">= every step up to the duration held (a step is never longer than the run): give a longer --duration\n";
   }
   return table;
 }
