@@ -215,8 +215,10 @@ class Stepper {
   // watched on each accepted step, a stop event ending the call at it, as for particles.
   AdaptiveStats advance_to(RigidBodySet<T>& io_bodies, double t_end, const Tolerances& tolerances);
   // Throws the kinema::Error a step of size h would throw (h not positive and finite in T,
-  // or h times the force parameters, a rigid body's point forces included, overflowing T),
-  // without touching any body.
+  // or h times the force parameters, a rigid body's point forces included, overflowing T;
+  // for a Runge-Kutta method, h times the most its stages' weights add up to, about 25 for
+  // dopri5: a stage's sum of rates must fit too), without touching any body. The steps of
+  // advance_to, which its error control shrinks, are checked with h alone.
   void check_step_size(T h) const;
   // The accelerations (force / mass; 0 for bodies with inv_mass 0) the model gives the
   // bodies at time t, into out[0..2] (padded_size() each). Not for the inside of a frame:

@@ -133,7 +133,7 @@ class AdaptiveRun {
 
  private:
   StepContext<T> start_attempt(T size) {
-    StepContext<T> c = core_.start(bodies_, size, core_.lowered().particle, workers_);
+    StepContext<T> c = core_.start(bodies_, size, core_.lowered().particle, workers_, true);
     c.t0 = core_.clock.time();
     c.stop = interrupt_;
     return c;
@@ -211,7 +211,7 @@ class AdaptiveRun {
   // stage 0's accelerations, which the first attempt then reuses.
   double first_step(double span) {
     const T probe = T(std::min(span, 1.0));
-    core_.check_step_size(probe, core_.lowered().particle);
+    core_.check_step_size(probe, core_.lowered().particle, true);
     const StepContext<T> c{bodies_, probe, core_.accel_scale(probe), core_.clock.time(), workers_, interrupt_};
     staged_.evaluate_first_stage(c);
     ++stats_.evaluations;
@@ -289,7 +289,7 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
   while (t < t_end) {
     const auto [size, last] = next_attempt<T>(t, t_end, h, tol.max_step);
     if (underflows(t, size)) throw Error(underflow_message(t, type_name<T>()));
-    core.begin(size, core.lowered().rigid, bodies.parameters());
+    core.begin(size, core.lowered().rigid, bodies.parameters(), true);
     const typename RigidBlockPath<T>::Call call{bodies, size, core.options.renormalize_quaternions};
     path.prepare(call);
     const double err = path.attempt(call, workers, t, tol.rtol, tol.atol);

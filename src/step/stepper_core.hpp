@@ -31,14 +31,20 @@ class StepperCore {
   // What the stage accelerations are multiplied by: sigma h for Runge-Kutta methods (see
   // kernels::acceleration_scale), 1 for kicks, which scale by their own weight.
   T accel_scale(T h) const;
+  // What the step size checks scale the forces by: h times the most a stage's sum of rates
+  // adds up to, so that a step whose sums would overflow is refused. Controlled (error
+  // control, whose steps are not the caller's to choose, rejects and shrinks such a step):
+  // accel_scale alone.
+  T check_scale(T h, bool controlled) const;
   // Throws what a step of size h would throw to a set feeling `local` (the particles' or the
   // rigid bodies' terms, which add the point forces' push).
-  void check_step_size(T h, const kernels::LocalForces<T>& local) const;
+  void check_step_size(T h, const kernels::LocalForces<T>& local, bool controlled = false) const;
   // Starts a call of steps of size h for a set whose own parameters are `own`: checks h (and
   // the parameters' overflow with it), and a new h moves the clock's origin to now.
-  void begin(T h, const kernels::LocalForces<T>& local, const BodyParameters<T>& own);
+  void begin(T h, const kernels::LocalForces<T>& local, const BodyParameters<T>& own, bool controlled = false);
   // begin(), and the call's context.
-  StepContext<T> start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local, const Workers& workers);
+  StepContext<T> start(ParticleSet<T>& bodies, T h, const kernels::LocalForces<T>& local, const Workers& workers,
+                       bool controlled = false);
   // The staged path that evaluates accelerations alone (Euler's first stage), made at the
   // first call and kept until the model changes.
   StagedPath<T>& acceleration_probe();
