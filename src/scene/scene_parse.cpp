@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstring>
 #include <cmath>
 #include <fcntl.h>
 #include <initializer_list>
@@ -389,7 +390,7 @@ Scene load_scene(const std::filesystem::path& path) {
   // O_NONBLOCK for the open alone: a FIFO nobody writes to must not hold it forever (with no
   // writer its read ends at once, empty), and signals must still be answered.
   const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
-  if (fd < 0) throw Error(name + ": cannot open the file");
+  if (fd < 0) throw Error(name + ": cannot open the file (" + std::strerror(errno) + ")");
   ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   // In chunks, up to one byte past the cap: a device or a pipe may never end.
   std::string text;

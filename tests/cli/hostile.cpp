@@ -65,7 +65,7 @@ std::vector<Case> scene_cases() {
   return {
       // JSON as text: syntax, numbers out of range, duplicate keys, bytes that end parsing.
       {"{\"particles\": [", run_args(), 1, "particles[0]: invalid JSON: parse error at line 1, column 16: syntax error while parsing value"},
-      {"", {"run", (work_dir() / "missing.json").string()}, 1, "cannot open the file"},
+      {"", {"run", (work_dir() / "missing.json").string()}, 1, "cannot open the file (No such file or directory)"},
       {"", {"run", write("empty.json", "").string()}, 1, "invalid JSON"},
       {" ", run_args(), 1, "invalid JSON"},
       {"[1, 2, 3]", run_args(), 1, "(top level): expected an object"},
@@ -299,6 +299,9 @@ std::vector<Case> option_cases() {
        "--out /dev/null: with --checkpoint the trajectory is a file that a resumed run continues, not a device or a pipe"},
       // Steps that would take the clock past every double.
       {"", run({"--dt", "1e305", "--steps", "100000"}), 1, "dt x steps (100000 steps of 1e+305 s) overflows the clock"},
+      {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0}], )" + P + "}",
+       {"run", "{}", "-q", "--out", "/dev/null"}, 1,
+       "its events go to events.csv beside the trajectory, and --out /dev/null is no file in a folder (a device or a pipe)"},
       // What stress would not do with a scene is refused, not skipped.
       {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0, "action": "stop"}], )" + P + "}",
        {"stress", "-q", "--scene", "{}"}, 1, "stress watches no events: kinema run takes a scene's \"events\""},

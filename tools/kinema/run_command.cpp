@@ -432,6 +432,12 @@ void check_events(const Scene& scene, const RunOptions& o) {
   if (scene.nbody || !scene.springs.empty()) {
     throw Error(o.scene_path + ": events are watched with local terms only: a scene with nbody or springs cannot have them");
   }
+  struct stat st{};
+  if (!o.trajectory_path.empty() && ::stat(o.trajectory_path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    // Beside /dev/null it would be /dev/events.csv.
+    throw Error(o.scene_path + ": its events go to events.csv beside the trajectory, and --out " +
+                printable(o.trajectory_path) + " is no file in a folder (a device or a pipe)");
+  }
   if (!o.trajectory_path.empty()) {
     check_distinct({{"the scene", o.scene_path}, {"--out", o.trajectory_path}, {"--summary", o.summary_path},
                     {"--checkpoint", o.checkpoint.path}}, {{"events.csv", events_path(o).string()}});

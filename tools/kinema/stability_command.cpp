@@ -120,7 +120,9 @@ std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t
   for (std::uint64_t k = 0; k <= steps; k += every) {
     const double t = double(k) * dt, e = world.total_energy(), rel = (e - e0) / std::abs(e0);
     const auto x = centres.position(0);
-    energy_csv << m.name << ',' << t << ',' << e << ',' << rel << '\n';
+    energy_csv << m.name << ',' << t << ',' << e << ',';
+    if (e0 != 0) energy_csv << rel;  // no relative error from an energy of 0: an empty cell
+    energy_csv << '\n';
     path_csv << m.name << ',' << t << ',' << x[0] << ',' << x[1] << ',' << x[2] << '\n';
     if (std::isfinite(rel)) energy_dat << t << ' ' << std::max(std::abs(rel), 1e-17) << '\n', ++plotted;
     path_dat << x[0] << ' ' << x[1] << '\n';
