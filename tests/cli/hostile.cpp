@@ -482,6 +482,24 @@ TEST_CASE("the long analyses answer a signal: chart and stability runs, auto's p
   }
 }
 
+namespace {
+
+// `kinema run scene -q` under an address-space limit of `kib`: its stderr, once it exited 1.
+std::string refused_under_limit(const fs::path& scene, long kib) {
+  const fs::path err = work_dir() / "limited_stderr.txt";
+  const std::string command = "ulimit -v " + std::to_string(kib) + " && exec '" + std::string(KINEMA_CLI) + "' run '" +
+                              scene.string() + "' -q --threads 1 2> '" + err.string() + "'";
+  const int status = std::system(command.c_str());
+  REQUIRE(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 1);
+  const std::string text = read(err);
+  CHECK(lines(text) == 1);
+  CHECK(text.find("this process may use") != std::string::npos);
+  return text;
+}
+
+}  // namespace
+
 TEST_CASE("a scene that would not fit is refused before it is built, naming what it needs", "[cli][hostile][memory]") {
   // A 512 x 512 cloth (about 700 MiB at its peak: the springs' layouts and the stiffness
   // estimate, not its 7 MiB of state) under a 400 MB address-space limit: this used to end in
@@ -492,17 +510,9 @@ TEST_CASE("a scene that would not fit is refused before it is built, naming what
 #endif
   const fs::path scene = write("big_grid.json", R"({"steps": 1000, "dt": 0.0001,
       "forces": [{"type": "springs", "grid": {"rows": 512, "columns": 512, "spacing": 1, "k": 10}}]})");
-  const fs::path err = work_dir() / "limited_stderr.txt";
-  const std::string command = "ulimit -v 400000 && exec '" + std::string(KINEMA_CLI) + "' run '" + scene.string() +
-                              "' -q 2> '" + err.string() + "'";
-  const int status = std::system(command.c_str());
-  REQUIRE(WIFEXITED(status));
-  CHECK(WEXITSTATUS(status) == 1);
-  const std::string text = read(err);
-  CHECK(lines(text) == 1);
+  const std::string text = refused_under_limit(scene, 400000);
   CHECK(text.find("big_grid.json: the scene needs about ") != std::string::npos);
   CHECK(text.find(" for its springs, ") != std::string::npos);
-  CHECK(text.find("this process may use") != std::string::npos);
 }
 
 TEST_CASE("the memory check counts the stages of a method without a fused kernel", "[cli][hostile][memory]") {
@@ -515,14 +525,7 @@ TEST_CASE("the memory check counts the stages of a method without a fused kernel
 #endif
   const fs::path scene = write("many_rk6.json", R"({"method": "rk6", "steps": 1,
       "generate": {"count": 4000000, "position_min": [-1, -1, -1], "position_max": [1, 1, 1]}})");
-  const fs::path err = work_dir() / "limited_stderr.txt";
-  const std::string command = "ulimit -v 1000000 && exec '" + std::string(KINEMA_CLI) + "' run '" + scene.string() +
-                              "' -q --threads 1 2> '" + err.string() + "'";
-  const int status = std::system(command.c_str());
-  REQUIRE(WIFEXITED(status));
-  CHECK(WEXITSTATUS(status) == 1);
-  const std::string text = read(err);
-  CHECK(lines(text) == 1);
+  const std::string text = refused_under_limit(scene, 1000000);
   CHECK(text.find("many_rk6.json: the scene needs about 1.3 GiB") != std::string::npos);
   CHECK(text.find("for the stiffness estimate and the stages") != std::string::npos);
 }
