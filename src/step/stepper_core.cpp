@@ -10,10 +10,29 @@
 
 namespace kinema {
 
+namespace {
+
+// The most a stage's or the step's weighted sum of rates adds up, in units of one rate:
+// max(max_s sum_j |a_sj|, sum |b|, sum |b_hat|) (dopri5 about 25, rk4 1).
+double weights_reach(const ButcherTableau& t) {
+  double reach = 1;
+  for (int s = 0; s < t.stages; ++s) {
+    double row = 0;
+    for (int j = 0; j < s; ++j) row += std::abs(t.a[s][j]);
+    reach = std::max(reach, row);
+  }
+  double b = 0, b_hat = 0;
+  for (int s = 0; s < t.stages; ++s) b += std::abs(t.b[s]), b_hat += std::abs(t.b_hat[s]);
+  return std::max({reach, b, b_hat});
+}
+
+}  // namespace
+
 template <class T>
 StepperCore<T>::StepperCore(std::shared_ptr<const ForceModel<T>> f, const Method& m, const StepperOptions& o)
     : method(m), options(o) {
   validate(method);
+  if (method.kind == MethodKind::runge_kutta) weights_reach_ = weights_reach(method.tableau);
   check_stepper_options<T>(options);
   table = &kernels::kernel_table<T>(options.isa, options.relaxed_fma);
   use(std::move(f));
@@ -34,30 +53,13 @@ T StepperCore<T>::accel_scale(T h) const {
   return T(kernels::acceleration_scale(method.tableau)) * h;
 }
 
-namespace {
-
-// The most a stage's or the step's weighted sum of rates adds up, in units of one rate:
-// max(max_s sum_j |a_sj|, sum |b|, sum |b_hat|) (dopri5 about 25, rk4 1).
-double weights_reach(const ButcherTableau& t) {
-  double reach = 1;
-  for (int s = 0; s < t.stages; ++s) {
-    double row = 0;
-    for (int j = 0; j < s; ++j) row += std::abs(t.a[s][j]);
-    reach = std::max(reach, row);
-  }
-  double b = 0, b_hat = 0;
-  for (int s = 0; s < t.stages; ++s) b += std::abs(t.b[s]), b_hat += std::abs(t.b_hat[s]);
-  return std::max({reach, b, b_hat});
-}
-
-}  // namespace
 
 // h times the weights' reach, never past T's range (a force whose product with that still
 // fits is no risk).
 template <class T>
 T StepperCore<T>::check_scale(T h, bool controlled) const {
   if (controlled || method.kind != MethodKind::runge_kutta) return accel_scale(h);
-  const double reach = weights_reach(method.tableau) * double(h);
+  const double reach = weights_reach_ * double(h);
   return std::max(accel_scale(h), T(std::min(reach, double(std::numeric_limits<T>::max()))));
 }
 

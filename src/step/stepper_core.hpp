@@ -62,6 +62,7 @@ class StepperCore {
   const kernels::KernelTable<T>* table = nullptr;
 
  private:
+  double weights_reach_ = 1;  // the method's, for check_scale: computed once
   // Before the paths, which refer to it: destroyed after them.
   std::shared_ptr<const ForceModel<T>> forces_;
 
