@@ -302,6 +302,9 @@ std::vector<Case> option_cases() {
       {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0}], )" + P + "}",
        {"run", "{}", "-q", "--out", "/dev/null"}, 1,
        "its events go to events.csv beside the trajectory, and --out /dev/null is no file in a folder (a device or a pipe)"},
+      // The default sweep leaves out steps longer than a one-step scene's duration.
+      {R"({"steps": 1, "precision": "double", "forces": [{"type": "central", "mu": 1}], )" + P + "}",
+       {"chart", "{}", "-q", "--methods", "rk4", "--out", (work_dir() / "one_step_chart").string()}, 0, ""},
       // What stress would not do with a scene is refused, not skipped.
       {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0, "action": "stop"}], )" + P + "}",
        {"stress", "-q", "--scene", "{}"}, 1, "stress watches no events: kinema run takes a scene's \"events\""},

@@ -138,12 +138,14 @@ struct Sweep {
   int repeat;
 };
 
-// The step sizes asked for (default: the scene's dt times 2^-3 .. 2^4), smallest first, one
-// per step count.
+// The step sizes asked for (default: the scene's dt times 2^-3 .. 2^4, those no longer than
+// the duration), smallest first, one per step count.
 std::vector<double> step_sizes(const ChartOptions& o, const Scene& full, double duration) {
   std::vector<double> dts = o.dts;
   if (dts.empty()) {
-    for (int k = -3; k <= 4; ++k) dts.push_back(full.dt * std::ldexp(1.0, k));
+    for (int k = -3; k <= 4; ++k) {
+      if (full.dt * std::ldexp(1.0, k) <= duration) dts.push_back(full.dt * std::ldexp(1.0, k));
+    }
   }
   std::sort(dts.begin(), dts.end());
   dts.erase(std::unique(dts.begin(), dts.end(), [&](double a, double b) {
