@@ -436,7 +436,12 @@ void interpolate(const InterpolateJob<value_t<V>>& job, std::size_t begin, std::
   for (std::size_t i = begin; i < end; i += Lane<V>::width) {
     const Vec<V> p = load3<V>(job.previous, i), c = load3<V>(job.current, i);
     Vec<V> out;
-    for (int d = 0; d < 3; ++d) out.c[d] = mul_add(alpha, c.c[d] - p.c[d], p.c[d]);
+    for (int d = 0; d < 3; ++d) {
+      const V diff = c.c[d] - p.c[d];
+      // Ends far apart, near T's range, whose difference overflows: the weighted sum of both,
+      // which cannot (and gives each end at alpha 0 and 1).
+      out.c[d] = pick(diff - diff == V(0), mul_add(alpha, diff, p.c[d]), mul_add(alpha, c.c[d], (V(1) - alpha) * p.c[d]));
+    }
     store3(job.out, i, out);
     if (job.out_q[0] == nullptr) continue;
     const Quat4<V> a = load_n<4, V>(job.previous_q, i);

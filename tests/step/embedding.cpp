@@ -420,6 +420,13 @@ TEST_CASE("interpolate: positions by lerp, orientations by the short-arc normali
     CHECK(q[0] == Approx(c));
     CHECK(q[3] == Approx(n));
     CHECK(drawn.centers().position(0)[0] == 1);
+    // Ends whose difference overflows float: each end at alpha 0 and 1, finite between.
+    ParticleSet<float> west, east, far;
+    west.add({-3e38f, 0, 0}, {}, 1), east.add({3e38f, 0, 0}, {}, 1);
+    for (const float alpha : {0.0f, 0.5f, 1.0f}) {
+      interpolate(west, east, alpha, far, isa);
+      CHECK(far.position(0)[0] == (alpha == 0 ? -3e38f : alpha == 1 ? 3e38f : 0.0f));
+    }
   }
   ParticleSet<float> one = test::cloud<float>(3), two = test::cloud<float>(4), out;
   CHECK_THROWS_WITH(interpolate(one, two, 0.5f, out), "interpolate: the previous set has 3 bodies, the current one 4");
