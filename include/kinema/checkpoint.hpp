@@ -17,7 +17,7 @@
 // proposed, and what the record
 // may only be restored under: the precision, the kind of set, the method, the force model's
 // fingerprint (ForceModel::fingerprint), the finiteness guard's settings, relaxed_fma, for a
-// rigid set renormalize_quaternions (records from before it was kept read as true), and
+// rigid set renormalize_quaternions (records from before it was kept restore under either), and
 // for an implicit method its solves' tolerance and iteration cap (as they run: a 0
 // tolerance is the precision's default, so naming the default restores too);
 // and when an advance_to call was stopped early (AdaptiveStats::stopped), what its next call

@@ -12,6 +12,10 @@
 
 namespace kinema {
 
+// 1 or 2 when `path` names the file the process's standard output or error is open on
+// (/dev/stdout, /proc/self/fd/2, or that file by its own name), else -1.
+int standard_stream_at(const std::filesystem::path& path);
+
 // A file that a reader sees either as it was before or complete, never half written: the
 // bytes go to a temporary file beside `path` (same directory, so the rename stays on one
 // file system), and commit() flushes and syncs it, renames it over `path` and syncs the
@@ -22,10 +26,6 @@ namespace kinema {
 // the file the process's standard output or error is (/dev/stdout when it is redirected to
 // a file: replacing that file would lose what the stream wrote). Every failure throws
 // kinema::Error naming the path and the reason.
-// 1 or 2 when `path` names the file the process's standard output or error is open on
-// (/dev/stdout, /proc/self/fd/2, or that file by its own name), else -1.
-int standard_stream_at(const std::filesystem::path& path);
-
 class WholeFile {
  public:
   // `what` names the file in messages ("summary", "checkpoint").
@@ -38,7 +38,8 @@ class WholeFile {
   void write(std::string_view text) { write(std::as_bytes(std::span(text.data(), text.size()))); }
   void commit();
   const std::filesystem::path& path() const { return path_; }
-  // Whether `path` is a device or FIFO, written directly (nothing to rename).
+  // Whether `path` is written directly (nothing to rename): a device, a FIFO, or the file a
+  // standard stream is open on.
   bool is_device() const { return device_; }
 
  private:
@@ -50,6 +51,7 @@ class WholeFile {
   int fd_ = -1;
   unsigned mode_ = 0;  // of the file replaced; 0: a new file
   bool device_ = false, finished_ = false;
+  int stream_ = -1;  // 1 or 2: the standard stream written through, flushed before each write
 };
 
 // Writes `bytes` to `path` as one WholeFile.

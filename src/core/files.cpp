@@ -67,10 +67,10 @@ WholeFile::WholeFile(std::filesystem::path path, std::string what) : what_(std::
   path_ = resolved(path);
   if (const int stream = standard_stream_at(path); stream >= 0) {
     // Written through the stream's own open file, after what the program printed to it.
-    std::fflush(stream == 1 ? stdout : stderr);
     fd_ = ::fcntl(stream, F_DUPFD_CLOEXEC, 0);
     if (fd_ < 0) fail("cannot write", errno);
     device_ = true;
+    stream_ = stream;
     return;
   }
   struct stat existing{};
@@ -121,6 +121,7 @@ void WholeFile::fail(const char* doing, int error) {
 void WholeFile::write(std::span<const std::byte> bytes) {
   if (finished_) throw Error(printable(path_.string()) + ": the " + what_ + " is already written, or failed");
   if (fd_ < 0) open_temporary();
+  if (stream_ >= 0) std::fflush(stream_ == 1 ? stdout : stderr);
   while (!bytes.empty()) {
     const ssize_t n = ::write(fd_, bytes.data(), bytes.size());
     if (n < 0 && errno == EINTR) continue;

@@ -12,6 +12,7 @@
 
 #include "core/text.hpp"
 #include "kinema/error.hpp"
+#include "step/step_checks.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/stepper.hpp"
 
@@ -240,7 +241,13 @@ void check_scene(const Scene& scene) {
   }
   if (scene.method == "auto") return;
   try {
-    stepper->check_step_size(T(scene.dt));
+    // Under error control dt is the output interval, not a step: its steps are checked as
+    // advance_to takes them (and shrunk where their sums would overflow).
+    if (scene.rtol || scene.atol) {
+      check_step_positive(T(scene.dt));
+    } else {
+      stepper->check_step_size(T(scene.dt));
+    }
   } catch (const Error& e) {
     throw Error(std::string("dt: ") + e.what());
   }

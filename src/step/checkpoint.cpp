@@ -50,8 +50,8 @@ constexpr std::size_t kind = 0, scalar = 1, flags = 2, guard = 3, bodies = 8, mo
                       steps = 40, h = 48, proposed = 56, max_speed = 64, max_angular = 72, name = 80,
                       // the continuation of an error-controlled call stopped early
                       continues = 112, rejected = 113, relaxed = 114, preconditioner = 115,
-                      // 1: rigid steps taken with renormalize_quaternions false (older records: 0)
-                      unnormalized = 116, t_end = 120, rtol = 128, atol = 136, max_step = 144,
+                      // rigid steps' renormalize_quaternions: 1 true, 2 false, 0 either (older records)
+                      quaternions = 116, t_end = 120, rtol = 128, atol = 136, max_step = 144,
                       next_h = 152, err_prev = 160, kept_scale = 168,
                       // an implicit method's solves (0 for the others)
                       implicit_tolerance = 176, implicit_iterations = 184, crc = 188;
@@ -250,7 +250,7 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   put(h + rec::continues, std::uint8_t(cont.active));
   put(h + rec::rejected, std::uint8_t(cont.controller.rejected));
   put(h + rec::relaxed, std::uint8_t(o.relaxed_fma));
-  put(h + rec::unnormalized, std::uint8_t(!o.renormalize_quaternions));
+  put(h + rec::quaternions, std::uint8_t(o.renormalize_quaternions ? 1 : 2));
   const ImplicitSolves solves = implicit_solves(stepper);
   put(h + rec::implicit_tolerance, solves.tolerance);
   put(h + rec::implicit_iterations, solves.iterations);
@@ -367,7 +367,7 @@ std::size_t check_record_header(const std::byte* h, std::size_t left, std::size_
                      flags < 128 && !(kind == SetKind::particles && (flags & (kTorques | kAngularDamping))) &&
                      !(kind == SetKind::rigid && (flags & kKeptStage)) && get<std::uint8_t>(h + rec::guard) < 3 &&
                      get<std::uint8_t>(h + rec::continues) < 2 && get<std::uint8_t>(h + rec::rejected) < 2 &&
-                     get<std::uint8_t>(h + rec::relaxed) < 2 && get<std::uint8_t>(h + rec::unnormalized) < 2;
+                     get<std::uint8_t>(h + rec::relaxed) < 2 && get<std::uint8_t>(h + rec::quaternions) < 3;
   if (!known) refuse(which + ": unknown kind, precision or flags");
   const std::uint64_t bodies = get<std::uint64_t>(h + rec::bodies);
   const std::size_t per_body = arrays_of(kind, flags) * scalar;
@@ -459,7 +459,8 @@ void CheckpointReader::check_record(std::size_t k, bool rigid, const Stepper<T>&
     throw Error(which + " was taken " + (o.relaxed_fma ? "without" : "with") +
                 " relaxed_fma, which changes the last bits on the scalar and SSE2 paths");
   }
-  if (kind == SetKind::rigid && (get<std::uint8_t>(h + rec::unnormalized) == 0) != o.renormalize_quaternions) {
+  const auto quaternions = get<std::uint8_t>(h + rec::quaternions);
+  if (kind == SetKind::rigid && quaternions != 0 && (quaternions == 1) != o.renormalize_quaternions) {
     throw Error(which + " was taken " + (o.renormalize_quaternions ? "without" : "with") +
                 " renormalize_quaternions, which changes the rigid steps' bits");
   }

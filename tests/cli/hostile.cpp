@@ -301,7 +301,13 @@ std::vector<Case> option_cases() {
       {"", run({"--dt", "1e305", "--steps", "100000"}), 1, "dt x steps (100000 steps of 1e+305 s) overflows the clock"},
       {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0}], )" + P + "}",
        {"run", "{}", "-q", "--out", "/dev/null"}, 1,
-       "its events go to events.csv beside the trajectory, and --out /dev/null is no file in a folder (a device or a pipe)"},
+       "its events go to events.csv beside the trajectory, and --out /dev/null is no file in a folder"},
+      {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0}], )" + P + "}",
+       {"run", "{}", "-q", "--out", "/dev/stderr"}, 1, "is no file in a folder (a device, a pipe or a standard stream)"},
+      // Under error control dt is the output interval: a pull whose product with dopri5's
+      // weights would overflow float at a step of dt is no reason to refuse the run.
+      {R"({"precision": "float", "method": "dopri5", "rtol": 1e-3, "dt": 1, "steps": 1,
+           "forces": [{"type": "gravity", "g": [0, -2e37, 0]}], )" + P + "}", {"run", "{}", "-q"}, 0, ""},
       // The default sweep leaves out steps longer than a one-step scene's duration.
       {R"({"steps": 1, "precision": "double", "forces": [{"type": "central", "mu": 1}], )" + P + "}",
        {"chart", "{}", "-q", "--methods", "rk4", "--out", (work_dir() / "one_step_chart").string()}, 0, ""},

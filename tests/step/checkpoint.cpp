@@ -411,6 +411,11 @@ TEST_CASE("a checkpoint of another version, size, scene, method or precision is 
                       Catch::Contains(renormalized ? "taken with renormalize_quaternions" : "taken without renormalize_quaternions"));
     Stepper<double> like(test::rotational_terms<double>(), rk4, renormalized ? test::serial_options() : unnormalized);
     CHECK_NOTHROW(CheckpointReader(record).restore(0, into, like));
+    // A record from before the option was kept (its byte 0) restores under either.
+    std::vector<std::byte> older = record;
+    patch(older, kCheckpointHeaderBytes + 116, std::uint8_t(0));
+    reseal(older);
+    CHECK_NOTHROW(CheckpointReader(older).restore(0, into, other));
   }
 }
 

@@ -17,6 +17,7 @@
 
 #include "auto_choice.hpp"
 #include "interrupt.hpp"
+#include "kinema/files.hpp"
 #include "kinema/scenes.hpp"
 #include "kinema/stability.hpp"
 #include "numbers.hpp"
@@ -433,14 +434,16 @@ void check_events(const Scene& scene, const RunOptions& o) {
     throw Error(o.scene_path + ": events are watched with local terms only: a scene with nbody or springs cannot have them");
   }
   struct stat st{};
-  if (!o.trajectory_path.empty() && ::stat(o.trajectory_path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+  const bool exists = !o.trajectory_path.empty() && ::stat(o.trajectory_path.c_str(), &st) == 0;
+  if (exists && (!S_ISREG(st.st_mode) || standard_stream_at(o.trajectory_path) >= 0)) {
     // Beside /dev/null it would be /dev/events.csv.
     throw Error(o.scene_path + ": its events go to events.csv beside the trajectory, and --out " +
-                printable(o.trajectory_path) + " is no file in a folder (a device or a pipe)");
+                printable(o.trajectory_path) + " is no file in a folder (a device, a pipe or a standard stream)");
   }
   if (!o.trajectory_path.empty()) {
     check_distinct({{"the scene", o.scene_path}, {"--out", o.trajectory_path}, {"--summary", o.summary_path},
-                    {"--checkpoint", o.checkpoint.path}}, {{"events.csv", events_path(o).string()}});
+                    {"--checkpoint", o.checkpoint.path}, {"--resume", o.checkpoint.resume_path}},
+                   {{"events.csv", events_path(o).string()}});
   }
 }
 

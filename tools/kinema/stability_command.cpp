@@ -177,7 +177,9 @@ struct MeasuredStep {
 
 template <class T>
 MeasuredStep measured_step(const Scene& scene, const Method& m, double guess, double duration) {
-  double lo = guess / 7, hi = guess * 9;  // not centred on the guess: its first midpoint is not the guess
+  // Not centred on the guess: its first midpoint is not the guess. Below the duration: a
+  // step longer than the run fails for that alone.
+  double lo = std::min(guess / 7, duration / 1.01), hi = std::max(guess * 9, lo * 1.5);
   const auto ok = [&](double h) { return h < duration && holds<T>(scene, m, h, duration); };
   for (int k = 0; k < 3 && !ok(lo); ++k) hi = lo, lo /= 8;
   if (!ok(lo)) return {0, false};

@@ -41,8 +41,10 @@ TrajectoryWriter::TrajectoryWriter(const std::string& path, bool rigid_columns)
   if (file_ == nullptr) {
     const int error = errno;
     if (fd >= 0) ::close(fd);
+    struct stat st{};
+    const bool fifo = ::stat(path.c_str(), &st) == 0 && S_ISFIFO(st.st_mode);
     throw Error(printable(path) + ": cannot write the trajectory: " +
-                (error == ENXIO ? std::string("a FIFO that no reader has open") : std::strerror(error)));
+                (error == ENXIO && fifo ? std::string("a FIFO that no reader has open") : std::strerror(error)));
   }
   std::fputs(rigid_columns ? "step,t,body,px,py,pz,vx,vy,vz,qw,qx,qy,qz,lx,ly,lz\n"
                            : "step,t,body,px,py,pz,vx,vy,vz\n",
