@@ -12,9 +12,9 @@
 
 #include "core/text.hpp"
 #include "kinema/error.hpp"
-#include "step/step_checks.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/stepper.hpp"
+#include "step/step_checks.hpp"
 
 namespace kinema {
 namespace {

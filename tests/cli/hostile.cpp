@@ -296,7 +296,10 @@ std::vector<Case> option_cases() {
       {"", run({"--out", "/dev/full"}), 1, "/dev/full: cannot write the trajectory: No space left on device"},
       {"", run({"--out", "/nonexistent/dir/t.csv"}), 1, "/nonexistent/dir/t.csv: cannot write the trajectory"},
       {"", run({"--out", "/dev/null", "--checkpoint", (work_dir() / "never.ck").string()}), 1,
-       "--out /dev/null: with --checkpoint the trajectory is a file that a resumed run continues, not a device or a pipe"},
+       "--out /dev/null: with --checkpoint the trajectory is a file that a resumed run continues, not a device, a pipe "
+       "or a standard stream"},
+      {"", run({"--out", "/dev/stderr", "--checkpoint", (work_dir() / "never.ck").string()}), 1,
+       "--out /dev/stderr: with --checkpoint the trajectory is a file that a resumed run continues"},
       // Steps that would take the clock past every double.
       {"", run({"--dt", "1e305", "--steps", "100000"}), 1, "dt x steps (100000 steps of 1e+305 s) overflows the clock"},
       {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0}], )" + P + "}",

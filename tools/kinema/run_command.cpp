@@ -64,15 +64,20 @@ void check_relaxed_fma(const RunOptions& o) {
 
 }  // namespace
 
+// Whether a trajectory path is a file of its own in a folder, or none yet: not a device, a
+// pipe, or the file a standard stream is on (written through the stream).
+bool trajectory_is_own_file(const std::string& path) {
+  struct stat st{};
+  return ::stat(path.c_str(), &st) != 0 || (S_ISREG(st.st_mode) && standard_stream_at(path) < 0);
+}
+
 // A run that keeps checkpoints syncs its trajectory with them and a resumed run continues
 // it from the length it had: a device or a pipe can do neither (refused before any work).
 void check_trajectory_resumable(const RunOptions& o) {
-  if (o.checkpoint.path.empty() || o.trajectory_path.empty()) return;
-  struct stat st{};
-  if (::stat(o.trajectory_path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
-    throw Error("--out " + printable(o.trajectory_path) +
-                ": with --checkpoint the trajectory is a file that a resumed run continues, not a device or a pipe");
-  }
+  if (o.checkpoint.path.empty() || o.trajectory_path.empty() || trajectory_is_own_file(o.trajectory_path)) return;
+  throw Error("--out " + printable(o.trajectory_path) +
+              ": with --checkpoint the trajectory is a file that a resumed run continues, not a device, a pipe or a "
+              "standard stream");
 }
 
 Scene scene_with_overrides(const RunOptions& o) {
@@ -433,9 +438,7 @@ void check_events(const Scene& scene, const RunOptions& o) {
   if (scene.nbody || !scene.springs.empty()) {
     throw Error(o.scene_path + ": events are watched with local terms only: a scene with nbody or springs cannot have them");
   }
-  struct stat st{};
-  const bool exists = !o.trajectory_path.empty() && ::stat(o.trajectory_path.c_str(), &st) == 0;
-  if (exists && (!S_ISREG(st.st_mode) || standard_stream_at(o.trajectory_path) >= 0)) {
+  if (!o.trajectory_path.empty() && !trajectory_is_own_file(o.trajectory_path)) {
     // Beside /dev/null it would be /dev/events.csv.
     throw Error(o.scene_path + ": its events go to events.csv beside the trajectory, and --out " +
                 printable(o.trajectory_path) + " is no file in a folder (a device, a pipe or a standard stream)");
