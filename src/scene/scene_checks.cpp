@@ -192,7 +192,7 @@ RunBytes run_bytes(const Scene& scene) {
   const double n = double(scene.particles.size()) + 2 * double(scene.rigid_bodies.size()) +
                    (scene.generate ? double(scene.generate->count) * (scene.generate->rigid ? 2 : 1) : 0);
   const double stages = double(std::max(method.evaluations(), 1));
-  if (!coupled && method.kind == MethodKind::runge_kutta && builtin_index(method) < 0) {
+  if (!coupled && std::ranges::find(staged_methods, &method) != staged_methods.end()) {
     // No fused kernel (bs3, dopri5, rk6): local terms too take stages kept in memory (peak
     // resident sizes at 2M float particles: 22, 42 and 48 scalars a body more than rk4).
     r.scratch = n * (stages * 6 + 9) * sizeof(T);

@@ -611,7 +611,7 @@ void check_fits(const StressOptions& o, Precision precision) {
   const double scalar = precision == Precision::single ? 4 : 8;
   // A method without a fused kernel (bs3, dopri5, rk6) keeps its stages in memory besides.
   const Method* method = o.method ? &method_by_name(*o.method) : nullptr;
-  const bool staged = method != nullptr && method->kind == MethodKind::runge_kutta && builtin_index(*method) < 0;
+  const bool staged = std::ranges::find(staged_methods, method) != staged_methods.end();
   const double stages = staged ? double(method->evaluations()) * 6 + 9 : 0;
   const double need = double(o.bodies) * (kBytesPerBodyPerScalar + stages) * scalar;
   if (need > usable_memory_bytes()) {
