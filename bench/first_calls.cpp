@@ -4,11 +4,13 @@
 // workers (-1: never, or one thread). tools/bench --first-calls runs it in fresh processes, its
 // four kinds in turn:
 //   kinema_first_calls [--threads N] [--workers measured|all] [--bodies N] [--calls N]
-//                      [--warmup N] [--trace]
-//   kinema_first_calls --jobs pair [--bodies N] [--calls N] [--warmup N] [--trace]
+//                      [--warmup N] [--gap-us N] [--trace]
+//   kinema_first_calls --jobs pair [--bodies N] [--calls N] [--warmup N] [--gap-us N] [--trace]
 // --threads 0 (the default) is the default job system, 1 the calling thread alone;
 // --workers all hands every call to all of the job system's workers; --jobs pair every call
-// to SpinningPair (below). Exit code 2 for bad options, 1 for an error while stepping.
+// to SpinningPair (below); --gap-us sleeps that long before each call, as a frame loop's idle
+// time does (0, the default: back to back). Exit code 2 for bad options, 1 for an error while
+// stepping.
 #include <atomic>
 #include <chrono>
 #include <cerrno>
@@ -84,6 +86,7 @@ struct Options {
   std::size_t bodies = 16384;
   int calls = 420;
   int warmup = 20;
+  long gap_us = 0;  // sleep before each call (a frame loop's idle time)
 };
 
 [[noreturn]] void refuse(const std::string& why) {
@@ -132,6 +135,8 @@ Options parse(int argc, char** argv) {
       o.bodies = std::size_t(parse_count("--bodies", value, 1, kMaxCount));
     } else if (flag == "--calls") {
       o.calls = int(parse_count("--calls", value, 2, kMaxCount));
+    } else if (flag == "--gap-us") {
+      o.gap_us = long(parse_count("--gap-us", value, 0, 1000000));
     } else if (flag == "--warmup") {
       o.warmup = int(parse_count("--warmup", value, 0, kMaxCount));
     } else {
@@ -162,6 +167,7 @@ void step_calls(const Options& o) {
   int first_with_workers = -1;
   double timed = 0;
   for (int call = 0; call < o.calls; ++call) {
+    if (o.gap_us > 0) std::this_thread::sleep_for(std::chrono::microseconds(o.gap_us));
     const auto start = Clock::now();
     stepper.step(bodies, float(bench::kDt));
     const double seconds = std::chrono::duration<double>(Clock::now() - start).count();

@@ -119,7 +119,8 @@ void print_frame_loop_notes(const Summary& s) {
   std::printf("default: every hardware thread, the worker count measured by the stepper (wkrs: the count it "
               "favoured at the end, 0 = the calling thread alone); prepared: default with Stepper::prepare() "
               "right before each step, timed with it; 2 threads: both on every step. Back to back each variant "
-              "is a row of its own; with gaps the variants take turns in runs of 8 frames in one row.\n"
+              "is a row of its own; with gaps kinema's variants take turns in runs of 8 frames in one row, and "
+              "parallel_for with 1 thread in another (in one row, the two oneTBB users starved each other).\n"
               "worst default against 1 thread: %s; by mean step (every frame, pre-empted ones and retries "
               "of the other worker count too): %s; worst default against parallel_for at N >= 16384: %s\n",
               s.by_median.text().c_str(), s.by_mean.text().c_str(), s.against_peer.text().c_str());

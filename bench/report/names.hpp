@@ -49,14 +49,15 @@ inline std::string scaling_run(const std::string& p, const std::string& isa) {
   return "scaling/rk4/" + p + "/" + isa + "/100000";
 }
 
-// A frame-loop row: back to back (gap 0) one run per variant, with gaps one interleaved run
-// of a fixed number of rounds.
+// A frame-loop row: back to back (gap 0) one run per variant, with gaps interleaved runs of a
+// fixed number of rounds (kinema's variants in one, the peer in another).
 inline std::string frame_loop_run(const std::string& p, int gap, const char* variant, long n) {
   const std::string size = std::to_string(n);
   if (gap == 0) return "frame_loop/" + p + "/gap_us:0/" + variant + "/" + size + "/manual_time";
   const std::string rounds = gap >= 8000 ? "12" : "30";  // bench/frame_loop.cpp
-  return "frame_loop/" + p + "/gap_us:" + std::to_string(gap) + "/interleaved/" + size + "/iterations:" + rounds +
-         "/manual_time";
+  // The peer takes turns with one thread in a row of its own (bench/frame_loop.cpp says why).
+  const std::string row = std::string(variant) == "parallel_for" ? "/peer/" : "/interleaved/";
+  return "frame_loop/" + p + "/gap_us:" + std::to_string(gap) + row + size + "/iterations:" + rounds + "/manual_time";
 }
 
 }  // namespace kinema::bench::report
