@@ -277,6 +277,10 @@ std::vector<Case> option_cases() {
       {"", {"chart", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
       {"", {"chart", scene, "--repeat", "101"}, 2, "--repeat: expected 1 to 100"},
       {"", {"chart", scene, "--dts", "0.1,inf"}, 2, "--dts: expected a finite number > 0"},
+      // CLI11's delimiter dropped empty items: ",euler" ran euler alone.
+      {"", {"chart", scene, "--methods", ",euler"}, 2, "--methods: an empty item in ',euler'"},
+      {"", {"stability", scene, "--methods", "euler,,rk4"}, 2, "--methods: an empty item in 'euler,,rk4'"},
+      {"", {"chart", scene, "--dts", "0.1,"}, 2, "--dts: an empty item in '0.1,' (a comma at an end, or two together)"},
       {"", {"chart", scene, "--duration", "-1"}, 2, "--duration: expected a finite number > 0"},
       {"", {"chart", scene, "--out", ""}, 2, "--out: expected a path"},
       {"", {"chart", scene, "-q", "--dts", "1e300"}, 1, "a step of 1e+300 s over 20 s is longer than the duration"},

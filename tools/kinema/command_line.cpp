@@ -6,8 +6,11 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdint>
+#include <cstdlib>
 #include <limits>
 #include <string_view>
+#include <type_traits>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -138,6 +141,38 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   add_checkpoint_options(*run, o.checkpoint);
 }
 
+// A comma-separated list, each item checked (and rewritten) by `each` where one is given.
+// CLI11's own delimiter drops empty items, so "euler,,rk4" read as "euler,rk4" and ",euler"
+// as "euler": a list with an empty item is refused here.
+template <class Item>
+CLI::Option* add_list_option(CLI::App& command, const std::string& name, std::vector<Item>& into,
+                             const std::string& help, const CLI::Validator* each = nullptr) {
+  return command.add_option_function<std::string>(
+      name,
+      [&into, name, each](const std::string& text) {
+        into.clear();
+        for (std::size_t at = 0;;) {
+          const std::size_t comma = std::min(text.find(',', at), text.size());
+          std::string item = text.substr(at, comma - at);
+          if (item.empty()) {
+            throw CLI::ValidationError(name, "an empty item in '" + printable(text) +
+                                                 "' (a comma at an end, or two together)");
+          }
+          if (each != nullptr) {
+            if (const std::string why = (*each)(item); !why.empty()) throw CLI::ValidationError(name, why);
+          }
+          if constexpr (std::is_same_v<Item, double>) {
+            into.push_back(std::strtod(item.c_str(), nullptr));  // `each` wrote it exactly
+          } else {
+            into.push_back(item);
+          }
+          if (comma == text.size()) return;
+          at = comma + 1;
+        }
+      },
+      help);
+}
+
 // The options chart and stability share.
 void add_sweep_options(CLI::App& command, SweepOptions& o) {
   command.add_option("scene", o.scene_path, "Scene file (JSON)")->required()->check(not_empty);
@@ -146,7 +181,7 @@ void add_sweep_options(CLI::App& command, SweepOptions& o) {
              [&o](const std::string& p) { o.precision = p == "float" ? Precision::single : Precision::dual; },
              "Override the scene's precision: float or double")
       ->check(CLI::IsMember({"float", "double"}));
-  command.add_option("--methods", o.methods, "Methods to compare (default: all)")->delimiter(',');
+  add_list_option(command, "--methods", o.methods, "Methods to compare, comma-separated (default: all)");
   command.add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
       ->transform(positive_finite);
   command.add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")
@@ -159,9 +194,8 @@ void add_chart_command(CLI::App& app, ChartOptions& o) {
   CLI::App* chart = app.add_subcommand(
       "chart", "Work-precision diagram: error against cost for each method over a range of steps");
   add_sweep_options(*chart, o);
-  chart->add_option("--dts", o.dts, "Step sizes (default: the scene's dt times 1/8 .. 16)")
-      ->delimiter(',')
-      ->transform(positive_finite);
+  add_list_option(*chart, "--dts", o.dts,
+                  "Step sizes, comma-separated (default: the scene's dt times 1/8 .. 16)", &positive_finite);
   chart->add_option("--repeat", o.repeat, "Timed runs per point; the fastest counts (default 3)")
       ->transform(decimal(1, 100));
 }
