@@ -189,14 +189,6 @@ inline constexpr std::array<const Method*, 2> implicit_methods = {&implicit_eule
 // The built-in or staged method of that name; throws kinema::Error listing the known names.
 const Method& method_by_name(std::string_view name);
 
-// What a linearly implicit method is to the forces it steps explicitly (J = 0): the explicit
-// Runge-Kutta method with a = A (I - C)^-1, b = m (I - C)^-1 and the stage times as c
-// (implicit_euler: euler; ros2: heun), named as `method`. Any other method: itself. Its
-// largest stable step on the stiffness of the forces other than the springs bounds the
-// implicit method's (largest_stable_step of the implicit method itself is unbounded: it
-// takes the estimate's mode to be in J).
-Method explicit_part(const Method& method);
-
 // Index of `method` in builtin_methods when its coefficients equal a built-in's, else -1.
 int builtin_index(const Method& method);
 

@@ -57,14 +57,25 @@ template <class T>
 StiffnessEstimate estimate_stiffness(const RigidBodySet<T>& bodies,
                                      const std::type_identity_t<RigidRatesFn<T>>& rates, int iterations = 120);
 
+// Where a linearly implicit method (implicit_euler, ros2) meets the estimate's mode: in its
+// Jacobian J (the springs' mode: no step bounds it), or in the forces it steps explicitly
+// (every force but the springs), whose mode J leaves out. J still holds the positions'
+// dependence on the velocities (x' = v), so to those forces implicit_euler is symplectic
+// Euler: stable on an undamped oscillation up to h |lambda| = 2, where Euler never is.
+// Other methods ignore it.
+enum class ImplicitMode { in_jacobian, explicit_forces };
+
 // The largest h > 0 up to which every step is stable for the estimate's mode (0: none, as
-// for Euler on an undamped oscillation; infinity when the estimate's magnitude is 0).
-double largest_stable_step(const Method& method, const StiffnessEstimate& estimate);
+// for Euler on an undamped oscillation; infinity when the estimate's magnitude is 0, or for
+// an implicit method's in_jacobian mode).
+double largest_stable_step(const Method& method, const StiffnessEstimate& estimate,
+                           ImplicitMode mode = ImplicitMode::in_jacobian);
 
 // How much the estimate's mode grows (or shrinks) per step of size h under the method: the
 // spectral radius of the step's 2 x 2 matrix (see above); infinity where the step's entries
 // overflow double (h far past the stable step).
-double growth_per_step(const Method& method, const StiffnessEstimate& estimate, double h);
+double growth_per_step(const Method& method, const StiffnessEstimate& estimate, double h,
+                       ImplicitMode mode = ImplicitMode::in_jacobian);
 
 // h |lambda| at the edge of the stability region on the negative real axis (damping at the
 // rate |lambda|) and on the imaginary axis (an undamped oscillation at |lambda|): 2 and 0

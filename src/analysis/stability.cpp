@@ -17,12 +17,14 @@ namespace {
 
 using Matrix = std::array<std::array<double, 2>, 2>;
 
-// A linearly implicit step on the mode, its Jacobian exact: the mode stands for the springs'.
-std::array<double, 2> rosenbrock_step(const RosenbrockScheme& r, double h, double a, double b, std::array<double, 2> y) {
+// A linearly implicit step on the mode: its Jacobian exact where the mode stands for the
+// springs' (in_j), else J = [[0, 1], [0, 0]], the forces stepped explicitly.
+std::array<double, 2> rosenbrock_step(const RosenbrockScheme& r, double h, double a, double b, std::array<double, 2> y,
+                                      bool in_j) {
   const auto f = [&](const std::array<double, 2>& s) { return std::array<double, 2>{s[1], a * s[0] + b * s[1]}; };
-  const double g = r.gamma * h;
-  // W = I - g J, J = [[0, 1], [a, b]]; k = W^-1 r by Cramer's rule.
-  const double w00 = 1, w01 = -g, w10 = -g * a, w11 = 1 - g * b, det = w00 * w11 - w01 * w10;
+  const double g = r.gamma * h, ja = in_j ? a : 0, jb = in_j ? b : 0;
+  // W = I - g J, J = [[0, 1], [ja, jb]]; k = W^-1 r by Cramer's rule.
+  const double w00 = 1, w01 = -g, w10 = -g * ja, w11 = 1 - g * jb, det = w00 * w11 - w01 * w10;
   std::array<std::array<double, 2>, kMaxRosenbrockStages> k{};
   for (int s = 0; s < r.stages; ++s) {
     std::array<double, 2> stage = y;
@@ -41,10 +43,10 @@ std::array<double, 2> rosenbrock_step(const RosenbrockScheme& r, double h, doubl
   return y;
 }
 
-// One step of size h of `m` on x' = v, v' = a x + b v, from (x, v).
-std::array<double, 2> one_step(const Method& m, double h, double a, double b, std::array<double, 2> y) {
+// One step of size h of `m` on x' = v, v' = a x + b v, from (x, v); `in_j` as ImplicitMode.
+std::array<double, 2> one_step(const Method& m, double h, double a, double b, std::array<double, 2> y, bool in_j) {
   const auto f = [&](const std::array<double, 2>& s) { return std::array<double, 2>{s[1], a * s[0] + b * s[1]}; };
-  if (m.kind == MethodKind::linearly_implicit) return rosenbrock_step(m.rosenbrock, h, a, b, y);
+  if (m.kind == MethodKind::linearly_implicit) return rosenbrock_step(m.rosenbrock, h, a, b, y, in_j);
   if (m.kind == MethodKind::kick_drift) {
     for (int i = 0; i < m.scheme.count; ++i) {
       const KickDriftOp& op = m.scheme.ops[i];
@@ -92,13 +94,13 @@ double spectral_radius(Matrix m) {
   return std::max(std::abs(trace + root), std::abs(trace - root)) / 2;
 }
 
-double radius(const Method& m, double h, double a, double b) {
-  const auto c0 = one_step(m, h, a, b, {1, 0}), c1 = one_step(m, h, a, b, {0, 1});
+double radius(const Method& m, double h, double a, double b, bool in_j = true) {
+  const auto c0 = one_step(m, h, a, b, {1, 0}, in_j), c1 = one_step(m, h, a, b, {0, 1}, in_j);
   return spectral_radius({{{c0[0], c1[0]}, {c0[1], c1[1]}}});
 }
 
 // Is a step of h stable on the mode (a, b)? Rounding may lift a radius of exactly 1.
-bool stable(const Method& m, double h, double a, double b) { return radius(m, h, a, b) <= 1 + 1e-13; }
+bool stable(const Method& m, double h, double a, double b, bool in_j) { return radius(m, h, a, b, in_j) <= 1 + 1e-13; }
 
 // The mode (a, b) of x'' = a x + b v an estimate stands for (see stability.hpp).
 std::pair<double, double> mode_of(const StiffnessEstimate& e) {
@@ -109,14 +111,14 @@ std::pair<double, double> mode_of(const StiffnessEstimate& e) {
 
 // The largest h up to which every step is stable on the mode (a, b) whose rate is `rate`:
 // a scan of h rate from 1e-4 to 100 in steps of 0.2%, then bisection at the first failure.
-double stable_edge(const Method& m, double rate, double a, double b) {
+double stable_edge(const Method& m, double rate, double a, double b, bool in_j = true) {
   double good = 0, z = 1e-4;
-  while (z < 100 && stable(m, z / rate, a, b)) good = z, z *= 1.002;
+  while (z < 100 && stable(m, z / rate, a, b, in_j)) good = z, z *= 1.002;
   if (z >= 100) return std::numeric_limits<double>::infinity();
   double bad = z;
   for (int i = 0; i < 60 && good > 0; ++i) {
     const double mid = (good + bad) / 2;
-    (stable(m, mid / rate, a, b) ? good : bad) = mid;
+    (stable(m, mid / rate, a, b, in_j) ? good : bad) = mid;
   }
   return good / rate;
 }
@@ -420,25 +422,27 @@ std::pair<double, double> unit_mode_of(StiffnessEstimate e) {
 
 }  // namespace
 
-double largest_stable_step(const Method& method, const StiffnessEstimate& e) {
+double largest_stable_step(const Method& method, const StiffnessEstimate& e, ImplicitMode mode) {
   if (!(e.magnitude > 0)) return std::numeric_limits<double>::infinity();
+  const bool in_j = mode == ImplicitMode::in_jacobian;
   if (rate_squared_overflows(e)) {
     const auto [a, b] = unit_mode_of(e);
-    return stable_edge(method, 1, a, b) / e.magnitude;
+    return stable_edge(method, 1, a, b, in_j) / e.magnitude;
   }
   const auto [a, b] = mode_of(e);
-  return stable_edge(method, e.magnitude, a, b);
+  return stable_edge(method, e.magnitude, a, b, in_j);
 }
 
-double growth_per_step(const Method& method, const StiffnessEstimate& e, double h) {
+double growth_per_step(const Method& method, const StiffnessEstimate& e, double h, ImplicitMode mode) {
   if (!(e.magnitude > 0)) return 1;
+  const bool in_j = mode == ImplicitMode::in_jacobian;
   double growth = 0;
   if (rate_squared_overflows(e)) {
     const auto [a, b] = unit_mode_of(e);
-    growth = radius(method, h * e.magnitude, a, b);
+    growth = radius(method, h * e.magnitude, a, b, in_j);
   } else {
     const auto [a, b] = mode_of(e);
-    growth = radius(method, h, a, b);
+    growth = radius(method, h, a, b, in_j);
   }
   return std::isnan(growth) ? std::numeric_limits<double>::infinity() : growth;  // the step's entries overflowed
 }

@@ -63,29 +63,6 @@ void validate_rosenbrock(const Method& m) {
 
 }  // namespace
 
-Method explicit_part(const Method& m) {
-  if (m.kind != MethodKind::linearly_implicit) return m;
-  const RosenbrockScheme& r = m.rosenbrock;
-  // (I - C)^-1 by forward substitution: C is strictly lower triangular.
-  std::array<std::array<double, kMaxRosenbrockStages>, kMaxRosenbrockStages> inv{};
-  for (int i = 0; i < r.stages; ++i) {
-    inv[i][i] = 1;
-    for (int j = 0; j < i; ++j) {
-      for (int k = j; k < i; ++k) inv[i][j] += r.c[i][k] * inv[k][j];
-    }
-  }
-  Method out{m.name, MethodKind::runge_kutta, m.order, {}, {}, 0, {}};
-  out.tableau.stages = r.stages;
-  for (int i = 0; i < r.stages; ++i) {
-    out.tableau.c[i] = r.time[i];
-    for (int j = 0; j < r.stages; ++j) {
-      out.tableau.b[j] += r.m[i] * inv[i][j];
-      for (int k = 0; k < r.stages; ++k) out.tableau.a[i][j] += r.a[i][k] * inv[k][j];
-    }
-  }
-  return out;
-}
-
 int builtin_index(const Method& method) {
   for (std::size_t i = 0; i < builtin_methods.size(); ++i) {
     if (same_coefficients(method, *builtin_methods[i])) return int(i);

@@ -548,7 +548,7 @@ class MethodSearch {
     std::snprintf(tail, sizeof tail, "; picked %s%s (%.0f evaluations)", std::string(choice_.method->name).c_str(),
                   choice_.step_tolerance ? " with error control" : "", best_cost_);
     choice_.reason = head + reason_ + tail;
-    const double stable = largest_stable_step(*choice_.method, stiffness_);
+    const double stable = stable_step(*choice_.method);
     consider_float(pilot_scene_, duration_, tolerance_, stable > 0 ? stable : std::numeric_limits<double>::infinity(),
                    choice_);
     return choice_;
@@ -557,8 +557,8 @@ class MethodSearch {
  private:
   void note(const std::string& text) { reason_ += (reason_.empty() ? "" : ", ") + text; }
 
-  // The largest stable step of m on the scene: an implicit method's is its explicit part's
-  // on the scene without its springs (the forces it steps explicitly).
+  // The largest stable step of m on the scene: an implicit method's on the scene without its
+  // springs (the forces it steps explicitly: ImplicitMode::explicit_forces).
   double stable_step(const Method& m) {
     if (m.kind != MethodKind::linearly_implicit) return largest_stable_step(m, stiffness_);
     if (!explicit_stiffness_) {
@@ -566,7 +566,7 @@ class MethodSearch {
       without.springs.clear();
       explicit_stiffness_ = stiffness_of(without);
     }
-    return largest_stable_step(explicit_part(m), *explicit_stiffness_);
+    return largest_stable_step(m, *explicit_stiffness_, ImplicitMode::explicit_forces);
   }
 
   // Tries m at fixed steps; false when the search budget ran out on it.

@@ -548,7 +548,9 @@ TEST_CASE("run: an implicit method on a scene without springs says its steps are
   const Result orbit = kinema_cli("run " + scene("kepler_circular.json") + " --method ros2 --steps 3");
   CHECK(orbit.code == 0);
   CHECK(orbit.err.find("kinema: note: ros2 takes spring networks implicitly and this scene has none: every force is "
-                       "explicit, and each step is heun's") != std::string::npos);
+                       "explicit, each step its explicit part's\n") != std::string::npos);
+  const Result euler = kinema_cli("run " + scene("kepler_circular.json") + " --method implicit_euler --steps 3");
+  CHECK(euler.err.find("each step its explicit part's (symplectic Euler's, to rounding)") != std::string::npos);
   CHECK(kinema_cli("run " + scene("kepler_circular.json") + " --method ros2 --steps 3 -q").err.empty());
   // A scene with springs: no note.
   CHECK(kinema_cli("run " + scene("cloth.json") + " --method implicit_euler --steps 2").err.find("note:") ==

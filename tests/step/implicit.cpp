@@ -322,7 +322,7 @@ TEST_CASE("implicit_euler never gains energy on the damped cloth at 60 Hz", "[im
   // Drag and the springs' dampers only take energy: a step that adds some is the method's.
   // Through the whip of the falling cloth's lower edge at 0.5 s. ros2 gains some in its
   // first two frames and for three frames of the whip, up to a thousandfold: the compression
-  // J leaves out is stepped by its explicit part, heun.
+  // J leaves out is stepped by its two explicit stages.
   const Scene scene = load_scene(std::string(KINEMA_SCENES) + "/cloth.json");
   const ForceModel<float> forces = make_forces<float>(scene);
   ParticleSet<float> bodies = make_particles<float>(scene);
@@ -377,12 +377,40 @@ TEST_CASE("a force that is not finite reaches the state under an implicit method
   }
 }
 
-TEST_CASE("an implicit method's explicit part is the Runge-Kutta method it is to the other forces", "[implicit]") {
-  // With J = 0 implicit_euler is euler and ros2 is heun: their stable steps bound the
-  // implicit methods' on the forces other than the springs (kinema run checks them so).
-  CHECK(builtin_index(explicit_part(implicit_euler)) == builtin_index(euler));
-  CHECK(builtin_index(explicit_part(ros2)) == builtin_index(heun));
-  CHECK(explicit_part(rk4).tableau.b == rk4.tableau.b);
+TEST_CASE("to the forces it steps explicitly, implicit_euler is symplectic Euler", "[implicit]") {
+  // J keeps x' = v: with no springs, x1 = x0 + h v1 (Euler would take x0 + h v0), so an
+  // undamped oscillation of the other forces holds up to h omega = 2, where Euler never does.
+  const double omega = 30;
+  const StiffnessEstimate oscillation{omega, std::numbers::pi / 2}, damping{omega, 0};
+  const auto explicit_step = [](const Method& m, const StiffnessEstimate& e) {
+    return largest_stable_step(m, e, ImplicitMode::explicit_forces);
+  };
+  CHECK(explicit_step(implicit_euler, oscillation) * omega == Approx(2).epsilon(1e-6));
+  CHECK(explicit_step(implicit_euler, oscillation) == Approx(largest_stable_step(symplectic_euler, oscillation)));
+  CHECK(explicit_step(implicit_euler, damping) * omega == Approx(2).epsilon(1e-6));
+  CHECK(largest_stable_step(euler, oscillation) == 0);
+  CHECK(std::isinf(largest_stable_step(implicit_euler, oscillation)));  // the springs' mode, in J
+  for (const Method* m : {&implicit_euler, &ros2}) {
+    const double h = explicit_step(*m, oscillation);
+    CHECK(growth_per_step(*m, oscillation, 0.99 * h, ImplicitMode::explicit_forces) <= 1 + 1e-12);
+    CHECK(growth_per_step(*m, oscillation, 1.01 * h, ImplicitMode::explicit_forces) > 1);
+  }
+  CHECK(explicit_step(rk4, oscillation) == largest_stable_step(rk4, oscillation));  // explicit methods: the same
+
+  // Stepped: an anchored spring (a local term, explicit) at h omega = 1.9 under both.
+  ParticleSet<double> a, b;
+  a.add({1, 0, 0}, {0, 0.5, 0}, 1);
+  b = a;
+  ForceModel<double> f;
+  f.add(Spring{{0, 0, 0}, omega * omega, 0});
+  const double h = 1.9 / omega;
+  Stepper<double>(f, implicit_euler, test::serial_options()).advance(a, h, 400);
+  Stepper<double>(f, symplectic_euler, test::serial_options()).advance(b, h, 400);
+  for (int d = 0; d < 3; ++d) {
+    CHECK(a.position(0)[d] == Approx(b.position(0)[d]).margin(1e-9));
+    CHECK(a.velocity(0)[d] == Approx(b.velocity(0)[d]).margin(1e-7));
+  }
+  CHECK(std::abs(a.position(0)[0]) < 10);  // bounded: Euler's would grow (1 + 1.9^2)^200-fold
 }
 
 TEST_CASE("kinematic bodies move on their own under an implicit method", "[implicit]") {

@@ -247,8 +247,9 @@ std::string mode_name(const StiffnessEstimate& e) {
 // on an oscillation, that a run never shows is left alone).
 void check_stable_step(const Scene& scene, const RunOptions& o, const StiffnessEstimate& e, double stable) {
   if (!(scene.dt > stable)) return;
-  const Method method = explicit_part(method_by_name(scene.method));
-  const double log_growth = double(scene.steps) * std::log(growth_per_step(method, e, scene.dt));
+  const Method& method = method_by_name(scene.method);
+  const double log_growth =
+      double(scene.steps) * std::log(growth_per_step(method, e, scene.dt, ImplicitMode::explicit_forces));
   if (!(log_growth > std::log(2.0))) return;
   // Springs are what the implicit methods take implicitly: name them where they would hold
   // (and the scene would take them).
@@ -335,7 +336,9 @@ StepPlan plan_steps(const Scene& scene, const RunOptions& o, const StepperOption
   if (pays) plan.stiffness = stiffness_at_start(scene, options), plan.estimated = true;
   // An estimate that overflowed bounds nothing (check_plan says so): no stable step, no cap.
   const bool bounded = plan.estimated && std::isfinite(plan.stiffness.magnitude);
-  plan.stable_step = bounded ? largest_stable_step(explicit_part(method_by_name(scene.method)), plan.stiffness)
+  // An implicit method's estimate is of the forces it steps explicitly (stiffness_at_start).
+  plan.stable_step = bounded ? largest_stable_step(method_by_name(scene.method), plan.stiffness,
+                                                   ImplicitMode::explicit_forces)
                              : std::numeric_limits<double>::infinity();
   plan.tolerances = tolerances_of(scene);
   // Error control never goes past the stable step; fixed steps are checked against it
@@ -848,14 +851,13 @@ void warn_if_energy_overflows(double initial, double final, bool state_finite) {
 }
 
 // An implicit method takes a scene's springs implicitly; on a scene without them every force
-// is explicit, and the step is its explicit part's. Said once (not with -q).
+// is explicit (only x' = v stays implicit). Said once (not with -q).
 void note_nothing_implicit(const Scene& scene, const RunOptions& o) {
   const Method& method = method_by_name(scene.method);
   if (o.quiet || method.kind != MethodKind::linearly_implicit || !scene.springs.empty()) return;
-  const int same = builtin_index(explicit_part(method));
-  const std::string step = same >= 0 ? std::string(builtin_methods[std::size_t(same)]->name) + "'s" : "its explicit part's";
+  const std::string like = &method == &implicit_euler ? " (symplectic Euler's, to rounding)" : "";
   std::fprintf(stderr, "kinema: note: %s takes spring networks implicitly and this scene has none: every force is "
-               "explicit, and each step is %s\n", scene.method.c_str(), step.c_str());
+               "explicit, each step its explicit part's%s\n", scene.method.c_str(), like.c_str());
 }
 
 // Torques, angular drag, point forces and point springs act on rigid bodies alone: in a scene

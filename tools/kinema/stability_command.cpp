@@ -197,23 +197,29 @@ MeasuredStep measured_step(const Scene& scene, const Method& m, double guess, do
 // and measured over the duration.
 struct MethodLimit {
   const Method* method;
+  StiffnessEstimate estimate;  // what `predicted` comes from
   double predicted, measured;
   bool capped;  // every step under the duration held: the limit is at least `measured`
   // The measured limit well below the prediction: the scene broke the linear bound.
   bool broken() const { return !capped && std::isfinite(predicted) && predicted > 0 && measured < 0.8 * predicted; }
 };
 
+// `e`: the scene's estimate; `explicit_e`: its forces but the springs', which implicit methods
+// step explicitly (ImplicitMode).
 std::vector<MethodLimit> measure_limits(const Scene& scene, const std::vector<const Method*>& methods,
-                                      const StiffnessEstimate& e, double dt, double duration) {
+                                      const StiffnessEstimate& e, const StiffnessEstimate& explicit_e, double dt,
+                                      double duration) {
   std::vector<MethodLimit> limits;
   for (const Method* m : methods) {
     stop_if_interrupted();
-    const double predicted = largest_stable_step(*m, e);
+    const bool implicit = m->kind == MethodKind::linearly_implicit;
+    const StiffnessEstimate& used = implicit ? explicit_e : e;
+    const double predicted = largest_stable_step(*m, used, ImplicitMode::explicit_forces);
     const double guess = predicted > 0 && std::isfinite(predicted) ? predicted : dt;
     const MeasuredStep measured = with_precision(scene.precision, [&]<class T>() {
       return measured_step<T>(scene, *m, guess, duration);
     });
-    limits.push_back({m, predicted, measured.step, measured.capped});
+    limits.push_back({m, used, predicted, measured.step, measured.capped});
   }
   return limits;
 }
@@ -224,7 +230,8 @@ void write_limits(const std::vector<MethodLimit>& limits, const StiffnessEstimat
   csv << "method,stiffness,angle,predicted_step,measured_step,capped_by_duration\n";
   std::vector<StepLimit> chart;
   for (const MethodLimit& l : limits) {
-    csv << l.method->name << ',' << e.magnitude << ',' << e.angle << ',' << l.predicted << ',' << l.measured << ','
+    csv << l.method->name << ',' << l.estimate.magnitude << ',' << l.estimate.angle << ',' << l.predicted << ','
+        << l.measured << ','
         << int(l.capped) << '\n';
     chart.push_back({std::string(l.method->name), l.predicted, l.measured});
   }
@@ -278,6 +285,16 @@ std::string limits_table(const Scene& scene, const std::vector<MethodLimit>& lim
                 "of the start, over %g s (to 0.5%%)\n",
                 e.magnitude, duration);
   table += text;
+  const auto implicit = std::find_if(limits.begin(), limits.end(), [](const MethodLimit& l) {
+    return l.method->kind == MethodKind::linearly_implicit;
+  });
+  if (implicit != limits.end()) {
+    std::snprintf(text, sizeof text,
+                  "implicit methods: predicted from the forces but the springs, which they step explicitly "
+                  "(|lambda| = %.4g /s; the springs' modes bound no step)\n",
+                  implicit->estimate.magnitude);
+    table += text;
+  }
   if (std::any_of(limits.begin(), limits.end(), [](const MethodLimit& l) { return l.broken(); })) {
     table += broken_note(scene);
   }
@@ -287,19 +304,29 @@ std::string limits_table(const Scene& scene, const std::vector<MethodLimit>& lim
   return table;
 }
 
+// The scene's stiffness at its start (rigid bodies: over their rotation too).
+StiffnessEstimate stiffness_of_scene(const Scene& scene) {
+  const ForceModel<double> forces = make_forces<double>(scene);
+  const ParticleSet<double> bodies = make_particles<double>(scene);
+  if (bodies.size() > 0) return estimate_stiffness(bodies, forces, 0, 120, on_calling_thread(), interrupt_request());
+  return estimate_stiffness(make_rigid_bodies<double>(scene), forces, 0, 120, on_calling_thread(), interrupt_request());
+}
+
 // Each method's largest stable step on this scene, predicted from the stiffness estimate at
 // its start and measured over the duration, into step_limits.csv and a chart; returns the
 // table to print.
 std::string step_limits(const Scene& scene, const std::vector<const Method*>& methods, double dt, double duration,
                         const fs::path& dir) {
-  const ForceModel<double> forces = make_forces<double>(scene);
-  const ParticleSet<double> bodies = make_particles<double>(scene);
-  // Rigid bodies: over their rotation too.
-  const StiffnessEstimate e =
-      bodies.size() > 0 ? estimate_stiffness(bodies, forces, 0, 120, on_calling_thread(), interrupt_request())
-                        : estimate_stiffness(make_rigid_bodies<double>(scene), forces, 0, 120, on_calling_thread(),
-                                             interrupt_request());
-  const std::vector<MethodLimit> limits = measure_limits(scene, methods, e, dt, duration);
+  const StiffnessEstimate e = stiffness_of_scene(scene);
+  const bool implicit = std::any_of(methods.begin(), methods.end(),
+                                    [](const Method* m) { return m->kind == MethodKind::linearly_implicit; });
+  StiffnessEstimate explicit_e = e;
+  if (implicit && !scene.springs.empty()) {
+    Scene without = scene;
+    without.springs.clear();
+    explicit_e = stiffness_of_scene(without);
+  }
+  const std::vector<MethodLimit> limits = measure_limits(scene, methods, e, explicit_e, dt, duration);
   write_limits(limits, e, dt, dir);
   return limits_table(scene, limits, e, duration);
 }
@@ -308,10 +335,14 @@ std::string step_limits(const Scene& scene, const std::vector<const Method*>& me
 
 // The runs' force evaluations, before the estimate gives each method's stable step: the
 // energy run at dt, and about 16 bisection runs near the stable step, taken as dt here; the
-// estimate's 137; each energy point's potential sum about one evaluation.
+// estimate's 137 (twice with an implicit method: the forces but the springs too); each energy
+// point's potential sum about one evaluation.
 double planned_evaluations(const std::vector<const Method*>& methods, std::uint64_t steps, bool nbody) {
   double evaluations = 137;
-  for (const Method* m : methods) evaluations += 17 * double(steps) * m->evaluations() + (nbody ? 100 : 0);
+  for (const Method* m : methods) {
+    evaluations += 17 * double(steps) * m->evaluations() + (nbody ? 100 : 0);
+    if (m->kind == MethodKind::linearly_implicit) evaluations += 137;
+  }
   return evaluations;
 }
 
