@@ -11,7 +11,8 @@
 // a NonFiniteError with the bodies put back to the last finite state; or for what happens
 // inside it (user code that throws, a host's enqueue that throws, an event function's NaN,
 // an implicit solve whose sums overflow), with the bodies and the clock as before the step
-// (for an event function under step() and advance(), as before the call: kinema/events.hpp).
+// (for an event function under step() and advance(), as before the call: kinema/events.hpp;
+// under a finiteness guard, as before the call too: the steps before it were not checked).
 
 #include <cstddef>
 #include <cstdint>

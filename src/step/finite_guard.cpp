@@ -118,6 +118,8 @@ void Checkpoint<T>::reserve(const StateArrays<T>& s) {
   for (int a = 0; a < s.count; ++a) {
     if (copy_[a].size() < s.padded) copy_[a] = AlignedArray<T>(s.padded);
   }
+  if (saved_in_.size() < block_count(s.padded)) saved_in_.resize(block_count(s.padded));
+  ++call_;
 }
 
 template <class T>
@@ -125,11 +127,13 @@ void Checkpoint<T>::save(const StateArrays<T>& s, Block b) {
   for (int a = 0; a < s.count; ++a) {
     std::memcpy(copy_[a].data() + b.begin, s.data[a] + b.begin, (b.end - b.begin) * sizeof(T));
   }
+  saved_in_[b.begin / kBlockBodies] = call_;
 }
 
 template <class T>
 void Checkpoint<T>::restore(const Workers& workers, const StateArrays<T>& s) const {
   const auto put_back = [&](Block b) {
+    if (saved_in_[b.begin / kBlockBodies] != call_) return;
     for (int a = 0; a < s.count; ++a) {
       std::memcpy(s.data[a] + b.begin, copy_[a].data() + b.begin, (b.end - b.begin) * sizeof(T));
     }

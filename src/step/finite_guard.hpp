@@ -7,6 +7,7 @@
 #include <limits>
 #include <cstddef>
 #include <optional>
+#include <vector>
 
 #include "kinema/bodies.hpp"
 #include "kinema/error.hpp"
@@ -35,16 +36,19 @@ StateArrays<T> state_arrays(RigidBodySet<T>& bodies);
 template <class T>
 class Checkpoint {
  public:
-  // Grows the copy when the state is larger than any saved before (not thread-safe: call
-  // before the blocks run).
+  // Grows the copy when the state is larger than any saved before, and starts a call: no
+  // block saved yet (not thread-safe: call before the blocks run).
   void reserve(const StateArrays<T>& state);
-  // Blocks may be saved concurrently; restore puts every block back.
+  // Blocks may be saved concurrently; restore puts back every block saved since reserve (a
+  // block a throw kept from starting was neither saved nor changed).
   void save(const StateArrays<T>& state, Block block);
   void restore(const Workers& workers, const StateArrays<T>& state) const;
   std::size_t bytes() const;
 
  private:
   std::array<AlignedArray<T>, StateArrays<T>::kMax> copy_;
+  std::vector<std::uint64_t> saved_in_;  // per block: the call that saved it
+  std::uint64_t call_ = 0;
 };
 
 // Where a guarded call on the fused particle path writes: a second copy of the set's

@@ -167,7 +167,7 @@ void FixedSteps<T>::advance_checked(const Workers& w, Set& b, T h, std::uint64_t
   std::optional<NonFinite> bad;
   try {
     bad = guarded_run(w, b, h, steps, state);
-  } catch (const Stopped&) {
+  } catch (...) {  // a stop, user code, a host's enqueue: the steps before it were not checked
     checkpoint_.restore(w, state);
     core_.clock.steps = start;
     events_.rollback(hits);
@@ -482,8 +482,15 @@ void FixedSteps<T>::run_staged_watched(StepContext<T>& c, std::uint64_t steps, G
     });
     c.t0 = t0;
     staged.step(c);
-    if (clamps) for_each_block(c.workers, b.padded_size(), [&](Block block) { clamp(b, block); });
-    events_.scan_blocks(c.workers, call, before, state, b.padded_size(), t0, double(c.h));
+    const std::size_t hits = events_.hits().size();
+    try {
+      if (clamps) for_each_block(c.workers, b.padded_size(), [&](Block block) { clamp(b, block); });
+      events_.scan_blocks(c.workers, call, before, state, b.padded_size(), t0, double(c.h));
+    } catch (...) {  // a host's enqueue, a user's event function: the step taken back, its hits too
+      for (int a = 0; a < 6; ++a) std::copy(before[a], before[a] + b.padded_size(), state[a]);
+      events_.rollback(hits);
+      throw;
+    }
   });
 }
 

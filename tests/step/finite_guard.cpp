@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 #include <limits>
 
 #include "support.hpp"
@@ -143,6 +144,31 @@ TEMPLATE_TEST_CASE("guard check names a NaN force from a callback at its step", 
     }
     CHECK(test::state_hash(b) == test::state_hash(expected));
   });
+}
+
+TEMPLATE_TEST_CASE("under a guard, user code that throws leaves the set where the call started, NaN steps unkept",
+                   "[guard]", float, double) {
+  using T = TestType;
+  // Body 5's force is NaN in step 2 and the callback throws in step 3: the steps before the
+  // throw were never scanned, so none is kept (kept, the next call would start from NaN).
+  ForceModel<T> f = test::all_local_terms<T>();
+  f.add([](const ParticleBlock<T>& block) {
+    if (block.t > 2.5 * kH) throw std::runtime_error("game code");
+    if (block.t < 0.5 * kH) return;
+    for (std::size_t i = 0; i < block.count; ++i) {
+      if (block.begin + i == 5) block.fx[i] = std::numeric_limits<T>::quiet_NaN();
+    }
+  });
+  for (const FiniteGuard guard : {FiniteGuard::check, FiniteGuard::clamp}) {
+    on_each_job_system(guard, [&](const StepperOptions& o) {
+      ParticleSet<T> b = test::cloud<T>(100);
+      const std::uint64_t before = test::state_hash(b);
+      Stepper<T> stepper(f, euler, o);
+      CHECK_THROWS_WITH(stepper.advance(b, T(kH), 10), "game code");
+      CHECK(test::state_hash(b) == before);
+      CHECK(stepper.time() == 0);
+    });
+  }
 }
 
 TEMPLATE_TEST_CASE("guard check on rigid bodies keeps every array of the last finite state",

@@ -75,25 +75,39 @@ RigidBodySet<double> tumbling(std::size_t n) {
 // advance(set, h, steps) with the enqueue that throws at each position in turn: every
 // throw leaves the set as `completed` clean steps would, and time() counts them; the rest
 // of the steps then give the clean call's bits.
+// Under a guard, the steps before the throw were not checked: none is kept. `events`: watched
+// on the staged path (the stage state and the events' scan in passes of their own).
 template <class Set>
 void check_each_enqueue(const char* path, const Set& initial, const ForceModel<double>& forces,
-                        const Method& method, FiniteGuard guard = FiniteGuard::off) {
+                        const Method& method, FiniteGuard guard = FiniteGuard::off,
+                        const EventOptions<double>& events = {}) {
   INFO(path << (guard == FiniteGuard::check ? ", guard check" : guard == FiniteGuard::clamp ? ", guard clamp" : ""));
   constexpr double h = 0.004;
   constexpr std::uint64_t steps = 3;
   ThrowingJobs jobs;
+  const auto options = [&] {
+    StepperOptions o = every_call_on(jobs, guard);
+    o.force_staged = !events.events.empty();
+    return o;
+  };
   Set clean = initial;
-  Stepper<double>(forces, method, every_call_on(jobs, guard)).advance(clean, h, steps);
+  {
+    Stepper<double> s(forces, method, options());
+    s.set_events(events);
+    s.advance(clean, h, steps);
+  }
   const int enqueues = jobs.calls;
   REQUIRE(enqueues > 0);
   for (int k = 1; k <= enqueues; ++k) {
     INFO("enqueue " << k << " of " << enqueues);
     jobs.calls = 0, jobs.throw_at = k;
     Set b = initial;
-    Stepper<double> s(forces, method, every_call_on(jobs, guard));
+    Stepper<double> s(forces, method, options());
+    s.set_events(events);
     CHECK_THROWS_WITH(s.advance(b, h, steps), "enqueue failed");
     const std::uint64_t completed = s.clock().steps;
     CHECK(completed < steps);
+    if (guard != FiniteGuard::off) CHECK(completed == 0);
     Set expected = initial;
     if (completed > 0) Stepper<double>(forces, method, test::serial_options()).advance(expected, h, completed);
     CHECK(test::state_hash(b) == test::state_hash(expected));
@@ -139,6 +153,9 @@ TEST_CASE("a throwing enqueue leaves particles as before the step, on every path
     check_each_enqueue("staged, springs", cloud, springs, *m, FiniteGuard::check);
     check_each_enqueue("fused", cloud, local, *m, FiniteGuard::check);
     check_each_enqueue("staged, springs", cloud, springs, *m, FiniteGuard::clamp);
+    // The events' own pass after the stages' (a throw there once left the step taken).
+    const EventOptions<double> plane{{{PlaneEvent{{0, 1, 0}, 0}, Crossing::either}}};
+    check_each_enqueue("staged, local terms, an event", cloud, local, *m, FiniteGuard::off, plane);
   }
 }
 
