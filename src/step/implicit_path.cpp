@@ -254,10 +254,14 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
   });
   ++step_stats_.solves;
   if (!std::isfinite(bb)) {
+    // From finite rates and state, a right side that is not finite overflowed T: refused.
+    // Else what was not finite goes on to the state; with no springs M k_v = r is solved.
     const std::size_t n = c.bodies.padded_size();
-    for (int d = 0; d < 3; ++d) {
-      if (!std::all_of(rhs_[d].data(), rhs_[d].data() + n, [](T y) { return std::isfinite(y); })) return not_finite(c, x);
-    }
+    const bool inputs_finite = all_finite(rates_.first_stage().data(), n) && all_finite(rx_, n);
+    const bool right_side_finite = all_finite(rhs_, n);
+    if (inputs_finite && !right_side_finite) overflows();
+    if (!right_side_finite) ++step_stats_.unconverged;
+    if (!right_side_finite || net_.rest.size() == 0) return take_preconditioned(c, x);
     overflows();
   }
   if (use_multigrid_) {
@@ -311,12 +315,12 @@ double ImplicitPath<T>::precondition(const StepContext<T>& c) {
   return multigrid_.apply(c.workers, r, z);
 }
 
-// A right side that is not finite (a force that was not): no iteration could converge, and
-// none is tried. Each body's answer is the preconditioner's, so what is not finite reaches
-// the state, where the finiteness guard (or the caller) sees it.
+// A right side that is not finite (a force or the state that was not): no iteration could
+// converge, and none is tried. Each body's answer is the preconditioner's, so what is not
+// finite reaches the state, where the finiteness guard (or the caller) sees it. (With no
+// springs the preconditioner's answer is the solution.)
 template <class T>
-void ImplicitPath<T>::not_finite(const StepContext<T>& c, Vec3s& x) {
-  ++step_stats_.unconverged;
+void ImplicitPath<T>::take_preconditioned(const StepContext<T>& c, Vec3s& x) {
   for_each_block(c.workers, c.bodies.padded_size(), [&](Block b) {
     for (std::size_t i = b.begin; i < b.end; ++i) {
       for (int d = 0; d < 3; ++d) x[d][i] = z_[d][i];
@@ -327,8 +331,22 @@ void ImplicitPath<T>::not_finite(const StepContext<T>& c, Vec3s& x) {
 template <class T>
 void ImplicitPath<T>::overflows() const {
   throw Error(std::string(method_.name) + ": a linear solve's sums overflow " + type_name<T>() + " or are not finite" +
-              " (the springs' stiffness times the step squared, over the masses, is too large for this precision); "
-              "the step is not taken");
+              " (the springs' stiffness times the step squared, over the masses, is too large for this precision, "
+              "or the state is blowing up); the step is not taken");
+}
+
+template <class T>
+bool ImplicitPath<T>::all_finite(const T* const* v, std::size_t n) {
+  for (int d = 0; d < 3; ++d) {
+    if (!std::all_of(v[d], v[d] + n, [](T y) { return std::isfinite(y); })) return false;
+  }
+  return true;
+}
+
+template <class T>
+bool ImplicitPath<T>::all_finite(const Vec3s& v, std::size_t n) {
+  const T* const p[3] = {v[0].data(), v[1].data(), v[2].data()};
+  return all_finite(p, n);
 }
 
 template class ImplicitPath<float>;

@@ -63,7 +63,9 @@ class ImplicitPath {
   void conjugate_gradients(const StepContext<T>& c, Vec3s& x);
   // z = the multigrid V-cycle of r; returns r . z.
   double precondition(const StepContext<T>& c);
-  void not_finite(const StepContext<T>& c, Vec3s& x);
+  void take_preconditioned(const StepContext<T>& c, Vec3s& x);
+  static bool all_finite(const T* const* v, std::size_t n);  // of three arrays' first n
+  static bool all_finite(const Vec3s& v, std::size_t n);
   // A solve whose right side is finite but whose sums overflow T: refused by name.
   [[noreturn]] void overflows() const;
   // Runs pass(block, sums) over every block, each adding two partial sums; returns their

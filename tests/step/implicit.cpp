@@ -472,6 +472,47 @@ TEST_CASE("a solve whose sums overflow is refused by name, the set and the clock
   }
 }
 
+TEST_CASE("a right side that overflows from a finite state is refused, one from a blow-up is stepped",
+          "[implicit]") {
+  // float, k = 3e38: the first step is finite (25 m/s), the second's gamma h K r_x overflows
+  // float (K r_x about 7.5e39) to an infinite right side; it once went on to -inf and NaN
+  // with no error.
+  for (const Method* m : {&implicit_euler, &ros2}) {
+    INFO(m->name);
+    ParticleSet<float> b;
+    b.add({0, 0, 0}, {0, 0, 0}, 1);
+    b.add({1.5f, 0, 0}, {0, 0, 0}, 1);
+    ForceModel<float> f;
+    f.add(Springs{{{0, 1, 1, 3e38, 0}}});
+    Stepper<float> s(f, *m, test::serial_options());
+    std::uint64_t taken = 0;
+    try {
+      for (; taken < 3; ++taken) s.step(b, 0.01f);
+      FAIL("no overflow");
+    } catch (const Error& e) {
+      CHECK_THAT(e.what(), Catch::Contains("a linear solve's sums overflow float"));
+    }
+    CHECK(all_finite(b));
+    ParticleSet<float> expected;
+    expected.add({0, 0, 0}, {0, 0, 0}, 1);
+    expected.add({1.5f, 0, 0}, {0, 0, 0}, 1);
+    Stepper<float> clean(f, *m, test::serial_options());
+    for (std::uint64_t k = 0; k < taken; ++k) clean.step(expected, 0.01f);
+    CHECK(test::state_hash(b) == test::state_hash(expected));
+    CHECK(s.clock().steps == taken);
+  }
+  // No springs: an anchored spring (a local term) at h omega = 20 blows up as symplectic
+  // Euler does, to values whose squared norm overflows double and then to inf; not refused
+  // as the springs' overflow.
+  ParticleSet<double> a;
+  a.add({1, 0, 0}, {0, 0, 0}, 1);
+  ForceModel<double> anchored;
+  anchored.add(Spring{{0, 0, 0}, 400, 0});
+  Stepper<double> s(anchored, implicit_euler, test::serial_options());
+  CHECK_NOTHROW(s.advance(a, 1.0, 400));
+  CHECK_FALSE(all_finite(a));
+}
+
 namespace {
 
 // The shipped cloth's springs and masses on a 16 x 16 grid: 30 s from flat to hanging.
