@@ -45,12 +45,15 @@ AdaptiveRun simulate_adaptive(const Scene& scene, const Method& method, double t
                               double max_step = std::numeric_limits<double>::infinity(),
                               const StopRequest& stop = {});
 
-// max over bodies of |x - x_ref| + |v - v_ref| (+ the rotation angle between q and q_ref).
+// max over bodies of |x - x_ref| + |v - v_ref| (+ the rotation angle between q and q_ref);
+// infinity where a value is not finite. kinema::Error when the two hold different numbers
+// of bodies.
 double state_error(const BodyStates& states, const BodyStates& reference);
 
 // Closed-form final states when the scene has them: every body under one central
 // attractor on an elliptic orbit (Kepler's equation), or under any mix of gravity, linear
-// drag and one spring (a damped oscillator). nullopt otherwise.
+// drag and one spring (a damped oscillator). nullopt otherwise; kinema::Error for a duration
+// that is not finite or is negative (reference_states too).
 std::optional<BodyStates> analytic_states(const Scene& scene, double duration);
 
 struct Reference {

@@ -1,5 +1,7 @@
 #include "kinema/accuracy.hpp"
 
+#include "core/text.hpp"
+
 #include <algorithm>
 #include <cstdio>
 #include <cmath>
@@ -210,6 +212,13 @@ AdaptiveRun simulate_adaptive(const Scene& scene, const Method& method, double t
 }
 
 double state_error(const BodyStates& a, const BodyStates& b) {
+  if (a.positions.size() != b.positions.size() || a.velocities.size() != b.velocities.size() ||
+      a.orientations.size() != b.orientations.size() || a.velocities.size() != a.positions.size()) {
+    throw Error("state_error: the states hold " + std::to_string(a.positions.size()) + " bodies (" +
+                std::to_string(a.orientations.size()) + " orientations), the reference " +
+                std::to_string(b.positions.size()) + " (" + std::to_string(b.orientations.size()) +
+                "), or positions and velocities differ in number");
+  }
   double worst = 0;
   auto distance = [](const Vec3<double>& p, const Vec3<double>& q) {
     return std::hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]);
@@ -234,6 +243,9 @@ double state_error(const BodyStates& a, const BodyStates& b) {
 }
 
 std::optional<BodyStates> analytic_states(const Scene& scene, double t) {
+  if (!std::isfinite(t) || t < 0) {
+    throw Error("analytic_states: the duration must be finite and >= 0, got " + shortest_text(t));
+  }
   if (!scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid)) return std::nullopt;
   if (scene.nbody || !scene.springs.empty()) return std::nullopt;  // coupled: no closed form
   // Gravity, linear drag and springs make one linear model; a lone central term an orbit.

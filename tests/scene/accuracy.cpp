@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "support.hpp"
@@ -54,6 +55,22 @@ TEST_CASE("the numerical reference estimates its own error", "[accuracy]") {
   CHECK_FALSE(coarse.analytic);
   const double true_error = state_error(coarse.states, fine.states);
   CHECK(coarse.error == Approx(true_error).epsilon(0.2));  // Richardson is close to the truth
+}
+
+TEST_CASE("the accuracy tools refuse states of different sizes and durations that are not finite", "[accuracy][errors]") {
+  // state_error once read past the shorter states (a crash); analytic_states returned NaN
+  // states for a NaN duration and a state at t = -1 for -1.
+  const BodyStates one{{{0, 0, 0}}, {{0, 0, 0}}, {}}, none{};
+  CHECK_THROWS_WITH(state_error(one, none), Catch::Contains("state_error: the states hold 1 bodies (0 orientations), the reference 0"));
+  CHECK_THROWS_AS(state_error(none, one), Error);
+  CHECK(state_error(one, one) == 0);
+  const Scene s = one_body_scene({Spring{{0, 0, 0}, 4, 0.5}}, {1, 0, 0}, {0, 0, 0});
+  for (const double t : {std::nan(""), -1.0, std::numeric_limits<double>::infinity()}) {
+    INFO(t);
+    CHECK_THROWS_WITH(analytic_states(s, t), Catch::Contains("analytic_states: the duration must be finite and >= 0"));
+    CHECK_THROWS_AS(reference_states(s, t, 10), Error);
+  }
+  CHECK(state_error(*analytic_states(s, 0), {{{1, 0, 0}}, {{0, 0, 0}}, {}}) < 1e-15);
 }
 
 namespace {
