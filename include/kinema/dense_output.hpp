@@ -98,6 +98,13 @@ struct DenseSpan {
     const double begin_time = start.origin + double(start.steps) * start.h;
     const bool same_count = now.origin == start.origin && now.h == start.h;
     if (same_count && now.steps < start.steps) throw Error(std::string(who) + "::end: the clock was set back since begin");
+    // Elsewhere the clock ends inside one step of begin's time (a stop event sets it there),
+    // or it was moved (set_time, set_clock): a span across the jump would be drawn wrong.
+    const double span = now.origin + double(now.steps) * now.h - begin_time;
+    if (!same_count && now.origin != begin_time && !(span >= 0 && span <= now.h * (1 + 1e-9))) {
+      throw Error(std::string(who) + "::end: the clock was moved (set_time, set_clock) since begin; begin and end "
+                                     "bracket one step");
+    }
     const bool counted_on = same_count;
     const std::uint64_t since = counted_on ? now.steps - start.steps : now.origin == begin_time ? now.steps : 0;
     if (since > 1) {

@@ -655,6 +655,14 @@ TEST_CASE("dense output refuses an end that does not close one step of the same 
   back.steps -= 2;  // the same origin and size, two steps back
   s.set_clock(back);
   CHECK_THROWS_WITH(dense.end(s, b), "DenseOutput::end: the clock was set back since begin");
+  // A jump forward: one step after set_time(5) once spanned [begin's t, 5 + h].
+  dense.begin(s, b);
+  s.set_time(5);
+  s.step(b, 0.01);
+  CHECK_THROWS_WITH(dense.end(s, b), Catch::Contains("DenseOutput::end: the clock was moved (set_time, set_clock)"));
+  dense.begin(s, b);
+  s.step(b, 0.02);  // a new size moves the origin to begin's time: one step, accepted
+  CHECK_NOTHROW(dense.end(s, b));
   RigidBodySet<double> r;
   r.add({});
   RigidDenseOutput<double> rigid;
