@@ -170,11 +170,12 @@ class Stepper {
   // changed) when the clock's count of steps of this size would pass 2^64 (set_time moves it).
   void advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps);
   // The same, polling `stop` before each block of every pass of coupled terms (one N-body
-  // step takes seconds at 32768 bodies): once it returns true, the step under way is
+  // step takes seconds at 32768 bodies) and of callbacks (on the block path, before each
+  // block takes its steps of the call): once it returns true, the step under way is
   // abandoned, the set and time() as before it (under a guard: as before the call), and the
   // steps completed are returned (a stop event: the steps to it, the last cut at the event);
   // the call's applied forces are kept for the rest. `stop` may
-  // be called from every worker at once. Without coupled terms a step costs a few
+  // be called from every worker at once. With local terms only a step costs a few
   // nanoseconds a body and nothing is polled: World::advance polls between short calls.
   std::uint64_t advance(ParticleSet<T>& io_bodies, T h, std::uint64_t steps, const StopRequest& stop);
   // With an embedded pair (bs3, dopri5): steps from time() to t_end choosing each step's

@@ -512,12 +512,17 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
     std::fill(completed_.begin(), completed_.end(), kNotRun);
   }
   const Clock<T> start = core_.clock;
+  // User code's blocks poll the call's stop before they start: a stop then takes back what
+  // ran ahead, as a throw does.
+  const StopRequest* const stop = stop_;
+  const bool polls = may_throw && stop != nullptr && *stop;
   try {
     for_each_block(w, n, [&](Block block) {
       // A slice takes every step of the call while its stage state stays in the L1 cache.
       // The slices before the one under way took every step: `done` is that slice's count.
       std::uint64_t done = 0;
       auto run = [&] {
+        if (polls && (*stop)()) throw Stopped();
         if (guard) guard->checkpoint.save(guard->state, block);
         for (std::size_t s = block.begin; s < block.end; s += kSliceBodies) {
           const Block slice{s, std::min(s + kSliceBodies, block.end)};
@@ -552,7 +557,10 @@ void FixedSteps<T>::run_blocks(const Workers& w, Set& set, Path& path, std::uint
       first = std::min(first, completed_[i]);
       path.restore(block(i, n));
     }
-    if (first != kNotRun && first > 0) run_blocks(w, set, path, first, guard);
+    if (first != kNotRun && first > 0) {
+      stop_ = nullptr;  // the steps were taken once: taking them again is not stopped
+      run_blocks(w, set, path, first, guard);
+    }
     throw;
   }
   core_.clock.steps += steps;

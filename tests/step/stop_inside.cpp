@@ -109,6 +109,35 @@ TEST_CASE("a step of springs is not polled: it costs microseconds a block", "[st
   CHECK(polls == 0);
 }
 
+TEST_CASE("callbacks' blocks poll the stop before they start: what ran ahead is taken back", "[stop]") {
+  // The block path takes all of a call's steps block by block; it once never polled, so a
+  // slow game callback could not be stopped.
+  ForceModel<double> f = test::all_local_terms<double>();
+  f.add([](ParticleBlock<double> b) {
+    for (std::size_t i = 0; i < b.count; ++i) b.fy[i] += 0.1 * b.px[i];
+  });
+  const ParticleSet<double> initial = test::cloud<double>(kBodies);
+  constexpr double h = 0.004;
+  constexpr std::uint64_t steps = 3;
+  ParticleSet<double> clean = initial;
+  Stepper<double>(f, rk4, test::serial_options()).advance(clean, h, steps);
+  const int polls = polls_of([&](const StopRequest& never) {
+    ParticleSet<double> set = initial;
+    CHECK(Stepper<double>(f, rk4, test::serial_options()).advance(set, h, steps, never) == steps);
+  });
+  CHECK(polls == int(block_count(initial.padded_size())));
+  for (int fire_at = 1; fire_at <= polls; ++fire_at) {
+    INFO("poll " << fire_at << " of " << polls);
+    ParticleSet<double> set = initial;
+    Stepper<double> s(f, rk4, test::serial_options());
+    CHECK(s.advance(set, h, steps, stop_at(fire_at)) == 0);  // the blocks before it ran ahead: put back
+    CHECK(test::state_hash(set) == test::state_hash(initial));
+    CHECK(s.clock().steps == 0);
+    s.advance(set, h, steps);
+    CHECK(test::state_hash(set) == test::state_hash(clean));
+  }
+}
+
 TEST_CASE("a stop inside a coupled step on two threads leaves the set at a step boundary", "[stop][thread]") {
   const ForceModel<double> gravity = gravity_and_local();
   const ParticleSet<double> initial = test::cloud<double>(kBodies);
