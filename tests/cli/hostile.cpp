@@ -240,6 +240,15 @@ std::vector<Case> option_cases() {
       {"", run({"--implicit-iterations", "5"}), 1, "set the linear solves of implicit_euler and ros2; the method here is rk4"},
       {"", run({"--implicit-preconditioner", "jacobi", "--method", "dopri5"}), 1, "the method here is dopri5"},
       {"", run({"--implicit-preconditioner", "automatic"}), 1, "the method here is rk4"},
+      // NaN passed CLI11's range and was refused later as the scene's fault (exit 1).
+      {"", run({"--method", "implicit_euler", "--implicit-tolerance", "nan"}), 2,
+       "--implicit-tolerance: expected a number from 1e-300 to 0.5, got 'nan'"},
+      {"", run({"--method", "implicit_euler", "--implicit-tolerance", "0"}), 2, "expected a number from 1e-300 to 0.5"},
+      {"", run({"--method", "implicit_euler", "--implicit-iterations", "1e3"}), 2,
+       "--implicit-iterations: expected a decimal integer"},
+      // auto once ran its choice with a looser solve than its pilots measured.
+      {"", run({"--method", "auto", "--tolerance", "1e-3", "--implicit-tolerance", "0.4"}), 1,
+       "set the linear solves of a named implicit method; --method auto chooses with the default solves"},
       {"", run({"--isa", "avx2", "--relaxed-fma"}), 1, "--relaxed-fma changes the scalar and SSE2 kernels; --isa avx2 always uses its FMA units"},
       {"", run({"--isa", "scalar", "--relaxed-fma", "--steps", "3"}), 0, ""},  // scalar: in every build
       {"", run({"--every", "0"}), 2, "--every: expected 1 to"},
@@ -318,6 +327,10 @@ std::vector<Case> option_cases() {
       // The default sweep leaves out steps longer than a one-step scene's duration.
       {R"({"steps": 1, "precision": "double", "forces": [{"type": "central", "mu": 1}], )" + P + "}",
        {"chart", "{}", "-q", "--methods", "rk4", "--out", (work_dir() / "one_step_chart").string()}, 0, ""},
+      // No default step within the duration: once "every error is zero or not finite".
+      {R"({"steps": 1, "dt": 1, "precision": "double", "forces": [{"type": "central", "mu": 1}], )" + P + "}",
+       {"chart", "{}", "-q", "--methods", "rk4", "--duration", "0.001"}, 1,
+       "the scene's dt (1 s) times 1/8 .. 16 gives no step within the duration (0.001 s): give --dts or a longer --duration"},
       // What stress would not do with a scene is refused, not skipped.
       {R"({"steps": 10, "events": [{"type": "plane", "normal": [0, 1, 0], "offset": 0, "action": "stop"}], )" + P + "}",
        {"stress", "-q", "--scene", "{}"}, 1, "stress watches no events: kinema run takes a scene's \"events\""},

@@ -146,6 +146,14 @@ std::vector<double> step_sizes(const ChartOptions& o, const Scene& full, double 
     for (int k = -3; k <= 4; ++k) {
       if (full.dt * std::ldexp(1.0, k) <= duration) dts.push_back(full.dt * std::ldexp(1.0, k));
     }
+    if (dts.empty()) {  // once a chart of no runs, said to be of errors zero or not finite
+      char text[200];
+      std::snprintf(text, sizeof text,
+                    "the scene's dt (%g s) times 1/8 .. 16 gives no step within the duration (%g s): give --dts "
+                    "or a longer --duration",
+                    full.dt, duration);
+      throw Error(text);
+    }
   }
   std::sort(dts.begin(), dts.end());
   dts.erase(std::unique(dts.begin(), dts.end(), [&](double a, double b) {

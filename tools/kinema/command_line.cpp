@@ -61,6 +61,27 @@ const CLI::Validator positive_finite(
     },
     "NUMBER > 0");
 
+// A finite number in [least, most], handed on exactly as positive_finite does (CLI11's
+// Range lets NaN through and prints its bounds to six decimals: 1e-300 as 0.000000).
+CLI::Validator number_in(double least, double most) {
+  char range[64];
+  std::snprintf(range, sizeof range, "%g to %g", least, most);
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        double value = 0;
+        const char* end = text.data() + text.size();
+        const auto [stop, error] = std::from_chars(text.data(), end, value);
+        if (text.empty() || stop != end || error != std::errc() || !(value >= least && value <= most)) {
+          return std::string("expected a number from ") + range + ", got '" + printable(text) + "'";
+        }
+        char exact[40];
+        std::snprintf(exact, sizeof exact, "%a", value);
+        text = exact;
+        return {};
+      },
+      std::string("NUMBER in [") + range + "]");
+}
+
 const CLI::Validator not_empty(
     [](std::string& text) -> std::string { return text.empty() ? "expected a path, got ''" : ""; },
     "PATH");
@@ -120,10 +141,10 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
   run->add_option("--implicit-tolerance", o.implicit_tolerance,
                   "Implicit methods: each linear solve stops at this residual relative to its right side "
                   "(default 1e-5 in float, 1e-10 in double)")
-      ->check(CLI::Range(1e-300, 0.5));
+      ->transform(number_in(1e-300, 0.5));
   run->add_option("--implicit-iterations", o.implicit_iterations,
                   "Implicit methods: the most conjugate-gradient iterations a solve takes (default 1000)")
-      ->check(CLI::Range(1, 1 << 30));
+      ->transform(decimal(1, 1 << 30));
   run->add_option("--implicit-preconditioner", o.implicit_preconditioner,
                   "Implicit methods: automatic (multigrid for spring networks of 1024 bodies or more, "
                   "else Jacobi), jacobi or multigrid")

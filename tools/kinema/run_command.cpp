@@ -37,10 +37,19 @@ constexpr double kBodyStepsPerChunk = double(1 << 26);
 
 // Options that would do nothing with the run's method are refused, not ignored.
 void check_method_options(const RunOptions& o, const std::string& method) {
-  if (method == "auto") return;
+  const bool solves_set = o.implicit_tolerance || o.implicit_iterations || o.implicit_preconditioner;
+  if (method == "auto") {
+    // auto's pilots measure each candidate with its default solves: a looser solve would
+    // break the tolerance the choice was made for.
+    if (solves_set) {
+      throw Error("--implicit-tolerance, --implicit-iterations and --implicit-preconditioner set the linear solves of "
+                  "a named implicit method; --method auto chooses with the default solves");
+    }
+    return;
+  }
   if (o.tolerance) throw Error("--tolerance bounds the error of --method auto's choice; the method here is " + method);
   const bool implicit = method_by_name(method).kind == MethodKind::linearly_implicit;
-  if (!implicit && (o.implicit_tolerance || o.implicit_iterations || o.implicit_preconditioner)) {
+  if (!implicit && solves_set) {
     throw Error("--implicit-tolerance, --implicit-iterations and --implicit-preconditioner set the linear solves of "
                 "implicit_euler and ros2; the method here is " + method);
   }
