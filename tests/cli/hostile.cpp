@@ -327,6 +327,12 @@ std::vector<Case> option_cases() {
       // The default sweep leaves out steps longer than a one-step scene's duration.
       {R"({"steps": 1, "precision": "double", "forces": [{"type": "central", "mu": 1}], )" + P + "}",
        {"chart", "{}", "-q", "--methods", "rk4", "--out", (work_dir() / "one_step_chart").string()}, 0, ""},
+      // The scene's own method is kinema run's: its refusal with events once stopped a chart.
+      {R"({"steps": 4, "dt": 0.01, "method": "implicit_euler", "precision": "double",
+           "forces": [{"type": "spring", "anchor": [0, 0, 0], "k": 4}],
+           "events": [{"type": "plane", "normal": [0, 1, 0], "offset": -1}], )" + P + "}",
+       {"chart", "{}", "-q", "--methods", "rk4", "--dts", "0.01", "--out", (work_dir() / "implicit_scene_chart").string()},
+       0, ""},
       // No default step within the duration: once "every error is zero or not finite".
       {R"({"steps": 1, "dt": 1, "precision": "double", "forces": [{"type": "central", "mu": 1}], )" + P + "}",
        {"chart", "{}", "-q", "--methods", "rk4", "--duration", "0.001"}, 1,
