@@ -33,6 +33,15 @@ class NonFiniteError : public Error {
   std::string field;   // its first such field: "px" .. "vz", rigid bodies also "qw" .. "lz"
 };
 
+// Thrown by an implicit method's step whose linear solve overflows the precision (its sums,
+// or its right side from a finite state): the springs' stiffness times the step squared over
+// the masses too large for T, or a state blowing up. The bodies and the clock hold the state
+// before that step. The charts count it as a blow-up, as a state that is not finite.
+class SolveOverflowError : public Error {
+ public:
+  using Error::Error;
+};
+
 // Thrown by a long analysis (simulate, reference_states, choose_method, estimate_stiffness)
 // when the stop request it was given returned true: it has no result to give. Not an Error:
 // nothing was wrong with the input.

@@ -330,7 +330,7 @@ void ImplicitPath<T>::take_preconditioned(const StepContext<T>& c, Vec3s& x) {
 
 template <class T>
 void ImplicitPath<T>::overflows() const {
-  throw Error(std::string(method_.name) + ": a linear solve's sums overflow " + type_name<T>() + " or are not finite" +
+  throw SolveOverflowError(std::string(method_.name) + ": a linear solve's sums overflow " + type_name<T>() + " or are not finite" +
               " (the springs' stiffness times the step squared, over the masses, is too large for this precision, "
               "or the state is blowing up); the step is not taken");
 }

@@ -189,7 +189,13 @@ void measure_against_reference(Sweep& s) {
 Point measure(const Sweep& s, const Method& m, double dt) {
   const std::uint64_t steps = step_count(s.duration, dt);
   const double h = s.duration / double(steps);
-  const double error = state_error(simulate(s.scene, m, steps, s.duration, interrupt_request()), s.ref.states);
+  double error = 0;
+  try {
+    error = state_error(simulate(s.scene, m, steps, s.duration, interrupt_request()), s.ref.states);
+  } catch (const SolveOverflowError&) {  // an implicit method's blow-up: as a state not finite
+    const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+    return {&m, h, steps, inf, nan, nan, double(steps) * m.evaluations() * double(s.scene.particles.size())};
+  }
   const Timed t = with_precision(
       s.scene.precision, [&]<class T>() { return timed<T>(s.scene, m, steps, s.duration, s.repeat); });
   const std::size_t bodies = s.scene.particles.size() + s.scene.rigid_bodies.size();
@@ -202,10 +208,13 @@ Point measure(const Sweep& s, const Method& m, double dt) {
 bool plottable(const Point& p) { return std::isfinite(p.error) && p.error > 0; }
 
 void write_csv_row(std::ofstream& csv, const Point& p, const Reference& ref) {
+  // A run an implicit solve's overflow ended was not timed: an empty cell.
+  char cost[32] = "";
+  if (std::isfinite(p.seconds_per_simulated_second)) std::snprintf(cost, sizeof cost, "%.6g", p.seconds_per_simulated_second);
   char line[512];
-  std::snprintf(line, sizeof line, "%s,%d,%.17g,%llu,%.17g,%.6g,%.17g,%.6g,%s\n",
+  std::snprintf(line, sizeof line, "%s,%d,%.17g,%llu,%.17g,%s,%.17g,%.6g,%s\n",
                 std::string(p.method->name).c_str(), p.method->order, p.dt,
-                static_cast<unsigned long long>(p.steps), p.error, p.seconds_per_simulated_second,
+                static_cast<unsigned long long>(p.steps), p.error, cost,
                 p.evaluations, ref.error, ref.analytic ? "true" : "false");
   csv << line;
 }

@@ -129,7 +129,11 @@ std::size_t record(const Scene& scene, const Method& m, double dt, std::uint64_t
     max_z = std::max(max_z, double(std::abs(x[2])));
     const std::uint64_t n = std::min(every, steps - std::min(steps, k));
     if (n == 0) break;
-    world.advance(T(dt), n, interrupt_request());
+    try {
+      world.advance(T(dt), n, interrupt_request());
+    } catch (const SolveOverflowError&) {
+      break;  // an implicit method's blow-up: its curve ends, as one that is not finite leaves the chart
+    }
     stop_if_interrupted();  // the steps it did not take
   }
   return plotted;
@@ -162,7 +166,11 @@ template <class T>
 bool holds(const Scene& scene, const Method& m, double h, double duration) {
   World<T> world(scene, m, on_calling_thread());
   const double e0 = world.total_energy();
-  world.advance(T(h), step_count(duration, h), interrupt_request());
+  try {
+    world.advance(T(h), step_count(duration, h), interrupt_request());
+  } catch (const SolveOverflowError&) {
+    return false;  // an implicit method's blow-up
+  }
   stop_if_interrupted();  // the steps it did not take
   return world.finite() && std::abs(world.total_energy() - e0) <= std::max(std::abs(e0), 1e-300);
 }
