@@ -60,6 +60,7 @@ void pin(const Node& n, std::vector<BodySpec>& bodies, std::size_t first, std::s
     const Node at = n.element(k);
     const std::uint64_t i = at.count(true);
     if (i >= count) at.fail("expected an index below " + std::to_string(count) + " (the generator's bodies)");
+    if (bodies[first + i].kinematic) at.fail("body " + std::to_string(i) + " is pinned twice");  // a typo for another
     bodies[first + i].kinematic = true;
   }
 }

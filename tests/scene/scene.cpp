@@ -210,6 +210,8 @@ TEST_CASE("coupled term errors name the JSON path", "[scene][springs][errors]") 
        "scene: forces[0].grid: expected at most 2^20 bodies (rows x columns)"},
       {two + R"({"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1, "pinned": [3]}}]})",
        "scene: forces[0].chain.pinned[0]: expected an index below 3"},
+      {two + R"({"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1, "pinned": [0, 0]}}]})",
+       "scene: forces[0].chain.pinned[1]: body 0 is pinned twice"},
       {two + R"({"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1, "direction": [0, 0, 0]}}]})",
        "scene: forces[0].chain.direction: expected a nonzero direction"},
       {two + R"({"type": "nbody", "G": -1}]})", "scene: forces[0].G: expected a number >= 0"},
