@@ -70,9 +70,16 @@ void see_worst(const Results& results, const FrameRow& r, Summary& summary) {
   const auto one_mean = frame_step(results, r, "threads:1", "mean");
   const auto measured_mean = frame_step(results, r, "default", "mean");
   if (one_mean && measured_mean) summary.by_mean.see(one_mean->median / measured_mean->median, r);
+  // With gaps the peer has a row of its own: each paired against its own row's one thread.
+  if (r.n < 16384) return;
+  if (r.gap > 0) {
+    const auto peer = speed(results, r, "parallel_for"), measured = speed(results, r, "default");
+    if (peer && measured) summary.against_peer.see(*measured / *peer, r);
+    return;
+  }
   const auto peer = frame_step(results, r, "parallel_for", "median");
   const auto measured = frame_step(results, r, "default", "median");
-  if (r.n >= 16384 && peer) summary.against_peer.see(peer->median / measured->median, r);
+  if (peer && measured) summary.against_peer.see(peer->median / measured->median, r);
 }
 
 void print_frame_loop_row(const Results& results, const FrameRow& r, Noise& noise, Summary& summary) {
@@ -122,7 +129,8 @@ void print_frame_loop_notes(const Summary& s) {
               "is a row of its own; with gaps kinema's variants take turns in runs of 8 frames in one row, and "
               "parallel_for with 1 thread in another (in one row, the two oneTBB users starved each other).\n"
               "worst default against 1 thread: %s; by mean step (every frame, pre-empted ones and retries "
-              "of the other worker count too): %s; worst default against parallel_for at N >= 16384: %s\n",
+              "of the other worker count too): %s; worst default against parallel_for at N >= 16384 (with gaps: "
+              "their speeds against their own rows' 1 thread): %s\n",
               s.by_median.text().c_str(), s.by_mean.text().c_str(), s.against_peer.text().c_str());
   if (!s.same_seen()) return;
   std::printf("the run's noise: at N = 1024 every variant runs the same code on the calling thread (one block), and "

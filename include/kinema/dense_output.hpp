@@ -79,10 +79,10 @@ inline std::array<double, 3> dense_velocity(const StepEnds& e, double theta) {
 
 namespace detail {
 
-// What end() refuses of the begin() it closes: none, another number of bodies, or more than
-// one step of one size since (the interpolant spans one step; a stop event may end it
-// early). Steps of several sizes between (advance_to's, or a call stopped at an event after
-// several steps) are not seen.
+// What end() refuses of the begin() it closes: none, another number of bodies, more than one
+// step of one size since (the interpolant spans one step; a stop event may end it early), or
+// a clock that ends more than its last step past begin's time (moved by set_time or
+// set_clock, or several steps of advance_to or before a stop event).
 struct DenseSpan {
   StepperClock start;
   std::size_t bodies = 0;
@@ -98,12 +98,13 @@ struct DenseSpan {
     const double begin_time = start.origin + double(start.steps) * start.h;
     const bool same_count = now.origin == start.origin && now.h == start.h;
     if (same_count && now.steps < start.steps) throw Error(std::string(who) + "::end: the clock was set back since begin");
-    // Elsewhere the clock ends inside one step of begin's time (a stop event sets it there),
-    // or it was moved (set_time, set_clock): a span across the jump would be drawn wrong.
+    // Elsewhere the clock ends within its last step of begin's time (a stop event or
+    // advance_to's last step sets it there; h in T: float's rounding allowed), or the span is
+    // not one step and would be drawn wrong.
     const double span = now.origin + double(now.steps) * now.h - begin_time;
-    if (!same_count && now.origin != begin_time && !(span >= 0 && span <= now.h * (1 + 1e-9))) {
-      throw Error(std::string(who) + "::end: the clock was moved (set_time, set_clock) since begin; begin and end "
-                                     "bracket one step");
+    if (!same_count && now.origin != begin_time && !(span >= 0 && span <= now.h * (1 + 1e-6))) {
+      throw Error(std::string(who) + "::end: the clock ends more than one step past begin (set_time or set_clock "
+                                     "moved it, or several steps were taken); begin and end bracket one step");
     }
     const bool counted_on = same_count;
     const std::uint64_t since = counted_on ? now.steps - start.steps : now.origin == begin_time ? now.steps : 0;

@@ -36,7 +36,8 @@ class NonFiniteError : public Error {
 // Thrown by an implicit method's step whose linear solve overflows the precision (its sums,
 // or its right side from a finite state): the springs' stiffness times the step squared over
 // the masses too large for T, or a state blowing up. The bodies and the clock hold the state
-// before that step. The charts count it as a blow-up, as a state that is not finite.
+// before that step (under a finiteness guard, before the call). The charts count it as a
+// blow-up, as a state that is not finite.
 class SolveOverflowError : public Error {
  public:
   using Error::Error;

@@ -12,7 +12,9 @@
 // inside it (user code that throws, a host's enqueue that throws, an event function's NaN,
 // an implicit solve whose sums overflow), with the bodies and the clock as before the step
 // (for an event function under step() and advance(), as before the call: kinema/events.hpp;
-// under a finiteness guard, as before the call too: the steps before it were not checked).
+// under a finiteness guard, as before the call too: the steps before it were not checked;
+// but where the guard checks one step at a time, searching for the step that made a value
+// not finite or watching stop events, as after the last step it checked).
 
 #include <cstddef>
 #include <cstdint>

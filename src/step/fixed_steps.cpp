@@ -162,14 +162,14 @@ void FixedSteps<T>::advance_checked(const Workers& w, Set& b, T h, std::uint64_t
   }
   const StateArrays<T> state = state_arrays(b);
   checkpoint_.reserve(state);
-  const std::uint64_t start = core_.clock.steps;
+  const Clock<T> start = core_.clock;  // whole: a new step size moves its origin (Clock::use)
   const std::size_t hits = events_.hits().size();
   std::optional<NonFinite> bad;
   try {
     bad = guarded_run(w, b, h, steps, state);
   } catch (...) {  // a stop, user code, a host's enqueue: the steps before it were not checked
     checkpoint_.restore(w, state);
-    core_.clock.steps = start;
+    core_.clock = start;
     events_.rollback(hits);
     throw;
   }

@@ -28,7 +28,8 @@ class FixedSteps {
   // `stop` (may be null) is polled inside the steps of coupled terms (StepContext::stop):
   // once it says stop, kinema::Stopped is thrown, the set and the clock at the last step
   // completed. Under a guard, whatever a call throws (a stop, user code, a host's enqueue)
-  // leaves them where the call started: its steps were not checked.
+  // leaves them where the call started: its steps were not checked (where the guard checks
+  // one step at a time, its NaN search and stop events, where the last checked step left them).
   // (Instantiated for ParticleSet<T> and RigidBodySet<T>.)
   template <class Set>
   void advance(const Workers& workers, Set& bodies, T h, std::uint64_t steps, const StopRequest* stop = nullptr);

@@ -255,13 +255,15 @@ void ImplicitPath<T>::conjugate_gradients(const StepContext<T>& c, Vec3s& x) {
   ++step_stats_.solves;
   if (!std::isfinite(bb)) {
     // From finite rates and state, a right side that is not finite overflowed T: refused.
-    // Else what was not finite goes on to the state; with no springs M k_v = r is solved.
+    // Else what was not finite goes on to the state; with no springs M k_v = r is solved
+    // (what overflows there is the explicit forces' blow-up, as under an explicit method).
     const std::size_t n = c.bodies.padded_size();
+    const bool springs = net_.rest.size() > 0;
     const bool inputs_finite = all_finite(rates_.first_stage().data(), n) && all_finite(rx_, n);
     const bool right_side_finite = all_finite(rhs_, n);
-    if (inputs_finite && !right_side_finite) overflows();
+    if (springs && inputs_finite && !right_side_finite) overflows();
     if (!right_side_finite) ++step_stats_.unconverged;
-    if (!right_side_finite || net_.rest.size() == 0) return take_preconditioned(c, x);
+    if (!right_side_finite || !springs) return take_preconditioned(c, x);
     overflows();
   }
   if (use_multigrid_) {

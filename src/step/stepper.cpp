@@ -54,14 +54,16 @@ struct Stepper<T>::Impl {
     }
     fixed.check_step_count(h, steps);
     continuation.active = false;
-    const std::uint64_t start = core.clock.steps;
+    const Clock<T> start = core.clock;
     try {
       workers.run(std::uint64_t(kind_of(bodies)), bodies.size(), steps, [&](const Workers& w) {
         fixed.advance(w, bodies, h, steps, &stop);
         return double(bodies.size()) * double(steps);
       });
     } catch (const Stopped&) {
-      return core.clock.steps - start;
+      // Counted from the call's start: a new step size moved the origin there (Clock::use).
+      const bool same_count = core.clock.origin == start.origin && core.clock.h == start.h;
+      return same_count ? core.clock.steps - start.steps : core.clock.steps;
     }
     if (steps > 0) forces_used(bodies);
     return fixed.events().stop_time() ? fixed.steps_to_stop() : steps;

@@ -676,7 +676,7 @@ TEST_CASE("stability: a table of predicted and measured steps, and where an orbi
   const std::string pair = "stability " + scene("stiff_pair.json") + " --duration 0.02 --out " + out.string();
   const Result all = kinema_cli(pair);
   REQUIRE(all.code == 0);
-  CHECK(all.out.find("implicit_euler and ros2 (springs implicit, unbounded predicted step) are drawn when named in "
+  CHECK(all.out.find("implicit_euler and ros2 (springs implicit, predicted from the other forces) are drawn when named in "
                      "--methods") != std::string::npos);
   CHECK(csv_rows(out / "step_limits.csv").size() == 9);
   const Result named = kinema_cli(pair + " --methods rk4,implicit_euler");

@@ -167,6 +167,17 @@ TEMPLATE_TEST_CASE("under a guard, user code that throws leaves the set where th
       CHECK_THROWS_WITH(stepper.advance(b, T(kH), 10), "game code");
       CHECK(test::state_hash(b) == before);
       CHECK(stepper.time() == 0);
+      // After steps of another size: the clock as before the call, its origin and size too.
+      stepper.set_time(0);
+      stepper.advance(b, T(kH / 8), 1);
+      const std::uint64_t after_one = test::state_hash(b);
+      const StepperClock clock = stepper.clock();
+      CHECK_THROWS_WITH(stepper.advance(b, T(kH), 10), "game code");
+      CHECK(test::state_hash(b) == after_one);
+      CHECK(stepper.time() == double(T(kH / 8)));
+      CHECK(stepper.clock().origin == clock.origin);
+      CHECK(stepper.clock().steps == clock.steps);
+      CHECK(stepper.clock().h == clock.h);
     });
   }
 }

@@ -135,6 +135,9 @@ TEST_CASE("callbacks' blocks poll the stop before they start: what ran ahead is 
     CHECK(s.clock().steps == 0);
     s.advance(set, h, steps);
     CHECK(test::state_hash(set) == test::state_hash(clean));
+    // A call of a new step size counts from its own start (its count once wrapped past 2^64).
+    CHECK(s.advance(set, 2 * h, steps, stop_at(fire_at)) == 0);
+    CHECK(s.time() == Approx(double(steps) * h).epsilon(1e-15));
   }
 }
 

@@ -59,7 +59,8 @@ Scene load_checked(const std::string& path, std::optional<Precision> precision) 
   // The charts take their methods from --methods (or all): a scene naming an implicit method
   // that its events or rigid bodies refuse is still charted, as kinema run --method would.
   const bool implicit = scene.method != "auto" && method_by_name(scene.method).kind == MethodKind::linearly_implicit;
-  if (implicit) scene.method = "rk4";
+  const bool refuses = !scene.events.empty() || !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
+  if (implicit && refuses) scene.method = "rk4";
   try {
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {

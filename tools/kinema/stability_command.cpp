@@ -405,7 +405,7 @@ int stability_scene(const StabilityOptions& o) {
     std::fputs(springs.c_str(), stdout);
     std::fputs(steps_line.c_str(), stdout);
     if (o.methods.empty() && takes_implicit_methods(full)) {
-      std::puts("implicit_euler and ros2 (springs implicit, unbounded predicted step) are drawn when named in "
+      std::puts("implicit_euler and ros2 (springs implicit, predicted from the other forces) are drawn when named in "
                 "--methods;\n  their measured limit bisects many solves, minutes on a large scene");
     }
   }
