@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "core/text.hpp"
+#include "forces/force_terms.hpp"
 #include "kinema/error.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/stepper.hpp"
@@ -59,6 +60,7 @@ std::string shown(const Vec3<double>& v) {
 template <class T>
 void check_listed_bodies(const Scene& scene) {
   const std::string type = type_name<T>();
+  const Vec3<double> gravity = sum_terms(scene.forces).gravity;
   auto mass_fails = [](double mass) {
     const T inverse = T(1) / T(mass);
     return !(std::isfinite(inverse) && inverse > 0);
@@ -82,6 +84,18 @@ void check_listed_bodies(const Scene& scene) {
     }
     if (!holds<T>(b.velocity)) throw Error(printable(path + ".velocity: " + shown(b.velocity) + " overflows " + type));
     if (!holds<T>(b.force)) throw Error(printable(path + ".force: " + shown(b.force) + " overflows " + type));
+    // The accelerations they give, as g: one that T cannot hold is refused, not stepped to inf.
+    if (b.kinematic) continue;
+    const Vec3<double> pushed{b.force[0] / b.mass, b.force[1] / b.mass, b.force[2] / b.mass};
+    if (!holds<T>(pushed)) {
+      throw Error(printable(path + ".force: " + shown(b.force) + " over the mass gives an acceleration that overflows " +
+                            type));
+    }
+    const double factor = b.gravity_factor.value_or(1);
+    if (!holds<T>(Vec3<double>{gravity[0] * factor, gravity[1] * factor, gravity[2] * factor})) {
+      throw Error(printable(path + ".gravity_factor: " + shortest_text(factor) + " times the gravity " +
+                            shown(gravity) + " overflows " + type));
+    }
   }
   for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
     if (mass_fails(scene.rigid_bodies[i].mass)) fail_mass("rigid_bodies[" + std::to_string(i) + "]", scene.rigid_bodies[i].mass);

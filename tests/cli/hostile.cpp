@@ -113,6 +113,12 @@ std::vector<Case> scene_cases() {
       {R"({"particles": [{"position": [1e39,0,0]}]})", run_args(), 1, "particles[0].position: (1e+39, 0, 0) overflows float"},
       {R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0], "velocity": [0,-4e38,0]}]})", run_args(), 1,
        "particles[1].velocity: (0, -4e+38, 0) overflows float"},
+      // Accelerations float cannot hold: once stepped to inf (exit 3, "try a smaller dt").
+      {R"({"precision": "float", "particles": [{"position": [1,0,0], "mass": 0.001, "force": [3e38,0,0]}]})", run_args(), 1,
+       "particles[0].force: (3e+38, 0, 0) over the mass gives an acceleration that overflows float"},
+      {R"({"precision": "float", "forces": [{"type": "gravity", "g": [0,-9.81,0]}],
+          "particles": [{"position": [1,0,0], "gravity_factor": 1e38}]})", run_args(), 1,
+       "particles[0].gravity_factor: 1e+38 times the gravity (0, -9.81, 0) overflows float"},
       // Paths as written: across springs terms, and for the bodies a generator made.
       {R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0]}, {"position": [2,0,0]}],
           "forces": [{"type": "springs", "pairs": [[0,1,1,1,0],[1,2,1,1,0]]}, {"type": "springs", "pairs": [[1,0,1,1,0]]}]})",
