@@ -42,44 +42,39 @@ CLI::Validator decimal(std::uint64_t least, std::uint64_t most) {
       "INT in [" + range + "]");
 }
 
-// A finite number > 0 in decimal notation (CLI11's PositiveNumber lets inf through and
-// prints its range with 309 digits). It is handed on as an exact hexadecimal float: CLI11
-// 2.1 converts through long double, which would round some decimal texts twice.
-const CLI::Validator positive_finite(
-    [](std::string& text) -> std::string {
-      double value = 0;
-      const char* end = text.data() + text.size();
-      const auto [stop, error] = std::from_chars(text.data(), end, value);
-      if (text.empty() || stop != end || error != std::errc() || !std::isfinite(value) ||
-          !(value > 0)) {
-        return "expected a finite number > 0, got '" + printable(text) + "'";
-      }
-      char exact[40];
-      std::snprintf(exact, sizeof exact, "%a", value);
-      text = exact;
-      return {};
-    },
-    "NUMBER > 0");
-
-// A finite number in [least, most], handed on exactly as positive_finite does (CLI11's
-// Range lets NaN through and prints its bounds to six decimals: 1e-300 as 0.000000).
-CLI::Validator number_in(double least, double most) {
-  char range[64];
-  std::snprintf(range, sizeof range, "%g to %g", least, most);
+// A decimal number that `accepts`, handed on as an exact hexadecimal float: CLI11 2.1
+// converts through long double, which would round some decimal texts twice. `expected` says
+// what it takes ("expected <expected>, got '...'").
+template <class Accepts>
+CLI::Validator exact_number(Accepts accepts, const std::string& expected, const std::string& shown) {
   return CLI::Validator(
       [=](std::string& text) -> std::string {
         double value = 0;
         const char* end = text.data() + text.size();
         const auto [stop, error] = std::from_chars(text.data(), end, value);
-        if (text.empty() || stop != end || error != std::errc() || !(value >= least && value <= most)) {
-          return std::string("expected a number from ") + range + ", got '" + printable(text) + "'";
+        if (text.empty() || stop != end || error != std::errc() || !accepts(value)) {
+          return "expected " + expected + ", got '" + printable(text) + "'";
         }
         char exact[40];
         std::snprintf(exact, sizeof exact, "%a", value);
         text = exact;
         return {};
       },
-      std::string("NUMBER in [") + range + "]");
+      shown);
+}
+
+// A finite number > 0 (CLI11's PositiveNumber lets inf through and prints its range with 309
+// digits).
+const CLI::Validator positive_finite = exact_number(
+    [](double x) { return std::isfinite(x) && x > 0; }, "a finite number > 0", "NUMBER > 0");
+
+// A number in [least, most] (CLI11's Range lets NaN through and prints its bounds to six
+// decimals: 1e-300 as 0.000000).
+CLI::Validator number_in(double least, double most) {
+  char range[64];
+  std::snprintf(range, sizeof range, "%g to %g", least, most);
+  return exact_number([=](double x) { return x >= least && x <= most; }, std::string("a number from ") + range,
+                      std::string("NUMBER in [") + range + "]");
 }
 
 const CLI::Validator not_empty(
