@@ -342,6 +342,23 @@ TEST_CASE("run --method auto reports its choice and meets the tolerance", "[cli]
         std::string::npos);
 }
 
+TEST_CASE("run: a scene's tolerance with another method is refused, or noted when --method names it",
+          "[cli][auto]") {
+  fs::path file = write("tolerance_scene.json", R"({"method": "rk4", "tolerance": 1e-6, "steps": 2, "particles": [{"position": [1, 0, 0]}]})");
+  const Result own = kinema_cli("run " + file.string() + " -q");
+  CHECK(own.code == 1);
+  CHECK(own.err.find("tolerance: bounds the error of method auto's choice; the scene's method is rk4") !=
+        std::string::npos);
+  // An auto scene run at a named method keeps its tolerance for auto runs.
+  file = write("tolerance_scene.json", R"({"method": "auto", "tolerance": 1e-6, "steps": 2, "particles": [{"position": [1, 0, 0]}]})");
+  const Result named = kinema_cli("run " + file.string() + " --method euler");
+  CHECK(named.code == 0);
+  CHECK(named.err.find("kinema: note: the scene's tolerance bounds method auto's choice; unused with --method euler") !=
+        std::string::npos);
+  CHECK(kinema_cli("run " + file.string() + " --method euler -q").err.empty());
+  CHECK(kinema_cli("run " + file.string() + " -q").code == 0);
+}
+
 namespace {
 
 // The value a printed summary shows for `key` (the text after the key, unit included).

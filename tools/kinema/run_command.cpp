@@ -71,6 +71,20 @@ void check_relaxed_fma(const RunOptions& o) {
   }
 }
 
+// A scene's "tolerance" bounds method auto's choice. With another method named in the scene
+// it would do nothing: refused, as --tolerance is. With another method from --method (a run
+// of an auto scene at a chosen method) it is kept for auto runs of the scene: a note says so.
+void check_scene_tolerance(const RunOptions& o, const Scene& scene) {
+  if (!scene.tolerance || scene.method == "auto") return;
+  if (!o.method) {
+    throw Error("tolerance: bounds the error of method auto's choice; the scene's method is " + scene.method);
+  }
+  if (!o.quiet) {
+    std::fprintf(stderr, "kinema: note: the scene's tolerance bounds method auto's choice; unused with --method %s\n",
+                 scene.method.c_str());
+  }
+}
+
 }  // namespace
 
 // Whether a trajectory path is a file of its own in a folder, or none yet: not a device, a
@@ -112,6 +126,7 @@ Scene scene_with_overrides(const RunOptions& o) {
     if (scene.method == "auto" && !scene.tolerance) {
       throw Error("method auto needs a tolerance (the scene's \"tolerance\" or --tolerance)");
     }
+    check_scene_tolerance(o, scene);
     if ((scene.rtol || scene.atol) && (scene.method == "auto" || method_by_name(scene.method).embedded_order == 0)) {
       throw Error("rtol and atol control the steps of a method with an embedded pair (bs3, dopri5), not " +
                   scene.method);
