@@ -425,7 +425,13 @@ struct AdaptivePick {
 std::optional<AdaptivePick> adaptive_pick(const Scene& scene, const Method& m, double duration, double tolerance,
                                           double max_step, double budget, double& spent) {
   const double bodies = charged_bodies(scene);
+  // Steps no longer than max_step: a run's fewest, known before it starts. A stable step far
+  // under the duration (a stiff scene) would otherwise spend past the search's bound in one run.
+  // (Each step makes at least stages - 1 evaluations: the first may be the last one's.)
+  const double fewest_evaluations = std::ceil(duration / max_step) * double(m.evaluations() - 1);
+  if (fewest_evaluations > budget) return std::nullopt;
   const auto run = [&](double tau) {
+    if (spent + fewest_evaluations / m.tableau.stages * bodies > kSearchBodySteps) throw SearchSpent{};
     AdaptiveRun r = simulate_adaptive(scene, m, tau, duration, max_step);
     spent += double(r.evaluations) / m.tableau.stages * bodies;
     if (spent > kSearchBodySteps) throw SearchSpent{};
@@ -538,6 +544,7 @@ class MethodSearch {
         }
       }
     }
+    flush_too_stiff(order.size());
     if (implicit_left) note("the implicit methods not tried (no explicit method met the tolerance to check them against)");
     return true;
   }
@@ -551,6 +558,7 @@ class MethodSearch {
   }
 
   MethodChoice result() {
+    flush_too_stiff(0);
     if (choice_.method == nullptr) refuse();
     choice_.evaluations = best_cost_;
     if (!choice_.step_tolerance) choice_.dt = duration_ / double(choice_.steps);
@@ -568,6 +576,25 @@ class MethodSearch {
 
  private:
   void note(const std::string& text) { reason_ += (reason_.empty() ? "" : ", ") + text; }
+  // Methods whose largest stable step alone takes more pilot steps than the search allows:
+  // one note for all of them, the first one's step named (a scene stiff for one is for all).
+  void note_too_stiff(const Method& m, double stable, double steps) {
+    if (too_stiff_.empty()) {
+      char text[128];
+      std::snprintf(text, sizeof text, " (%s: %.2g of %.2g s)", std::string(m.name).c_str(), steps, stable);
+      too_stiff_step_ = text;
+    }
+    too_stiff_.push_back(std::string(m.name));
+  }
+  // `tried`: how many methods the search tried; all of them too stiff are named as such.
+  void flush_too_stiff(std::size_t tried) {
+    if (too_stiff_.empty()) return;
+    const bool all = too_stiff_.size() == tried, one = all || too_stiff_.size() == 1;
+    std::string names = all ? "every explicit method" : too_stiff_.front();
+    for (std::size_t i = 1; !all && i < too_stiff_.size(); ++i) names += ", " + too_stiff_[i];
+    note(names + (one ? " needs" : " need") + " over 2^22 steps to stay stable" + too_stiff_step_);
+    too_stiff_.clear();
+  }
 
   // The largest stable step of m on the scene: an implicit method's on the scene without its
   // springs (the forces it steps explicitly: ImplicitMode::explicit_forces).
@@ -588,7 +615,12 @@ class MethodSearch {
       note(std::string(m.name) + " unstable here");
       return true;
     }
-    const std::uint64_t least = std::isfinite(stable) ? std::uint64_t(std::ceil(duration_ / stable)) : 1;
+    const double fewest = std::isfinite(stable) ? std::ceil(duration_ / stable) : 1;
+    if (fewest > double(kMostPilotSteps)) {
+      note_too_stiff(m, stable, fewest);
+      return true;
+    }
+    const auto least = std::uint64_t(fewest);
     // An implicit method's pilots may take a quarter of the budget left: a scene where its
     // estimates never settle must not cost the explicit methods still to come their turn.
     const bool implicit = m.kind == MethodKind::linearly_implicit;
@@ -728,6 +760,8 @@ class MethodSearch {
   MethodChoice choice_;
   double best_cost_ = std::numeric_limits<double>::infinity(), spent_ = 0;
   std::string reason_;
+  std::vector<std::string> too_stiff_;  // note_too_stiff's methods
+  std::string too_stiff_step_;
   bool unsettled_ = false;  // a method's estimates did not settle while none met the tolerance
 };
 

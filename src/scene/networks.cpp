@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 namespace kinema {
@@ -234,6 +235,29 @@ void check_repeats_across(const Scene& scene, std::span<const Node> terms) {
   }
 }
 
+// The listed position of body i of the kind the springs join, or null for a generated one.
+const Vec3<double>* listed_position(const Scene& scene, bool rigid, std::uint32_t i) {
+  if (rigid) return i < scene.rigid_bodies.size() ? &scene.rigid_bodies[i].position : nullptr;
+  return i < scene.particles.size() ? &scene.particles[i].position : nullptr;
+}
+
+// A stretched spring whose ends start at one point pushes them along no direction: its force
+// jumps there from zero to k rest (and the stiffness estimate, from finite differences, with it).
+void check_coincident_ends(const Scene& scene, bool rigid, const Node& pairs_node, const Springs& springs) {
+  for (std::size_t k = 0; k < springs.pairs.size(); ++k) {
+    const SpringPair& p = springs.pairs[k];
+    const Vec3<double>* a = listed_position(scene, rigid, p.i);
+    const Vec3<double>* b = listed_position(scene, rigid, p.j);
+    if (!a || !b || *a != *b || !(p.rest > 0 && p.k > 0)) continue;
+    char text[224];
+    std::snprintf(text, sizeof text,
+                  "bodies %u and %u both start at (%g, %g, %g) with rest length %g: the spring has no direction "
+                  "to push them apart along (place them apart, or give rest 0)",
+                  p.i, p.j, (*a)[0], (*a)[1], (*a)[2], p.rest);
+    pairs_node.element(k).fail(text);
+  }
+}
+
 }  // namespace
 
 std::size_t particle_count(const Scene& scene) {
@@ -263,6 +287,7 @@ void check_coupled(const Scene& scene, std::span<const Node> terms, std::span<co
       terms[t].child("pairs").element(k).fail("joins body " + std::to_string(last) + ", but the scene has " +
                                               std::to_string(bodies) + kind);
     }
+    check_coincident_ends(scene, rigid, terms[t].child("pairs"), scene.springs[t]);
   }
   check_repeats_across(scene, terms);
   const std::size_t rigids = rigid_count(scene);

@@ -123,6 +123,13 @@ std::vector<Case> scene_cases() {
       {R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0]}, {"position": [2,0,0]}],
           "forces": [{"type": "springs", "pairs": [[0,1,1,1,0],[1,2,1,1,0]]}, {"type": "springs", "pairs": [[1,0,1,1,0]]}]})",
        run_args(), 1, "forces[1].pairs[0]: repeats forces[0].pairs[0] (bodies 0 and 1)"},
+      // A stretched spring between two bodies at one point has no direction: refused, not
+      // left to a stiffness estimate that sees its jump as a mode of 1e8 /s.
+      {R"({"particles": [{"position": [0,0,0]}, {"position": [0,0,0]}, {"position": [1,0,0]}],
+          "forces": [{"type": "springs", "pairs": [[1,2,1,10,0.5],[0,1,1,10,0.5]]}]})", run_args(), 1,
+       "forces[0].pairs[1]: bodies 0 and 1 both start at (0, 0, 0) with rest length 1: the spring has no direction"},
+      {R"({"particles": [{"position": [0,0,0]}, {"position": [0,0,0]}], "steps": 2,
+          "forces": [{"type": "springs", "pairs": [[0,1,0,10,0.5]]}]})", run_args(), 0, ""},
       {R"({"forces": [{"type": "springs", "chain": {"count": 3, "spacing": 1, "k": 1}}, {"type": "springs", "pairs": [[2,1,1,1,0]]}]})",
        run_args(), 1, "forces[1].pairs[0]: repeats forces[0].chain (its spring 1) (bodies 1 and 2)"},
       {R"({"forces": [{"type": "springs", "chain": {"count": 4, "spacing": 1, "k": 1, "mass": 1e-50}}]})", run_args(), 1,
@@ -141,6 +148,11 @@ std::vector<Case> scene_cases() {
       {with_body(R"("method": "rk5")"), run_args(), 1, "unknown method 'rk5'"},
       {with_body(R"("method": "auto")"), run_args(), 1, "needs a tolerance"},
       {with_body(R"("method": "auto", "tolerance": 0)"), run_args(), 1, "tolerance: expected a number > 0"},
+      // A stable step far under the run's length rules the methods out before any pilot runs
+      // (error control's too: its steps cannot pass it), at once, not after minutes of pilots.
+      {R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0]}], "dt": 0.01, "steps": 100,
+          "forces": [{"type": "springs", "pairs": [[0,1,1,1e14,0]]}], "method": "auto", "tolerance": 1e-6})",
+       run_args(), 1, "every explicit method needs over 2^22 steps to stay stable (rk6: 8.3e+06 of 1.2e-07 s)"},
       // Generation: refused from the text, before a single body is built.
       {R"({"generate": {"count": -3, "position_min": [0,0,0], "position_max": [1,1,1]}})", run_args(), 1, "generate.count: expected an integer >= 0"},
       {R"({"generate": {"count": 4294967297, "position_min": [0,0,0], "position_max": [1,1,1]}})", run_args(), 1, "expected at most 2^32 bodies"},
