@@ -62,9 +62,14 @@ class CheckpointWriter {
   void set_user_data(std::vector<std::byte> data) { user_ = std::move(data); }
 
   std::size_t size() const;  // bytes, trailer included
-  // The CRC-32C the checkpoint ends with, computed without writing it: equal values for equal
-  // bits of every record (and user data).
+  // The CRC-32C the checkpoint ends with, computed without writing it. Each header carries a
+  // checksum of its own, so this one does not depend on what a header holds (a record's clock,
+  // method and options): compare states with digest().
   std::uint32_t crc() const;
+  // A CRC-32C of what the checkpoint holds, its checksums left out: every record's header (the
+  // kind, precision, clock, method and options) and arrays, and the user data. Equal bits,
+  // equal values; a record of another clock or state, another value (but for 2^-32 chances).
+  std::uint32_t digest() const;
   std::vector<std::byte> bytes() const;
   void save(const std::filesystem::path& path) const;  // as a WholeFile ("checkpoint")
 

@@ -222,7 +222,10 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   if (forces.active()) flags |= kForces, Codec::applied(forces, arrays);
   if (torques != nullptr && torques->active()) flags |= kTorques, Codec::applied(*torques, arrays);
   Codec::parameters(Codec::parameters(bodies), kind, flags, arrays);
-  const AdaptiveContinuation& cont = StepperAccess<T>::continuation(stepper);
+  // A call that ended leaves its fields behind, unread: a record holds them only while one
+  // goes on, so that equal states make equal records.
+  const AdaptiveContinuation& live = StepperAccess<T>::continuation(stepper);
+  const AdaptiveContinuation cont = live.active ? live : AdaptiveContinuation{};
   if (cont.active && cont.kept_scale > 0) {
     flags |= kKeptStage;
     for (const T* a : StepperAccess<T>::staged(stepper)->first_stage()) arrays.push_back(a);
@@ -327,6 +330,15 @@ std::uint32_t CheckpointWriter::emit(Sink& sink) const {
 std::uint32_t CheckpointWriter::crc() const {
   auto nowhere = [](std::span<const std::byte>) {};
   return emit(nowhere);
+}
+
+std::uint32_t CheckpointWriter::digest() const {
+  std::uint32_t c = 0;
+  for (const Record& r : records_) {
+    c = crc32c(std::span<const std::byte>(r.header).first(rec::crc), c);
+    for (const auto& a : r.arrays) c = crc32c(a, c);
+  }
+  return crc32c(user_, c);
 }
 
 std::vector<std::byte> CheckpointWriter::bytes() const {

@@ -191,6 +191,22 @@ TEST_CASE("stress --resume: the built-in scene's groups, drifts and report go on
   }
 }
 
+TEST_CASE("state_crc32c tells runs apart by their clocks where the bodies end alike", "[cli][checkpoint]") {
+  // A body at rest on an anchor at its own position: only the clock moves.
+  const fs::path scene = write("still.json", R"({"precision": "double", "particles": [{"position": [0, 0, 0]}],
+      "forces": [{"type": "spring", "k": 1}]})");
+  const auto crc_after = [&](const std::string& steps, const std::string& dt) {
+    const fs::path summary = work_dir() / "still_summary.json";
+    REQUIRE(run_kinema({"run", scene.string(), "-q", "--steps", steps, "--dt", dt, "--summary", summary.string()}).code == 0);
+    return summary_of(summary)["state_crc32c"].get<std::string>();
+  };
+  const std::string ten = crc_after("10", "0.01");
+  CHECK(crc_after("10", "0.01") == ten);
+  CHECK(crc_after("20", "0.01") != ten);
+  CHECK(crc_after("10", "0.02") != ten);
+  CHECK(crc_after("0", "0.01") != ten);
+}
+
 TEST_CASE("a summary on every exit: --strict, error control giving up, a failed write", "[cli][checkpoint]") {
   const fs::path dir = work_dir(), summary = dir / "s.json";
   const auto failed = [&](const std::vector<std::string>& args, const std::string& error) {

@@ -233,6 +233,8 @@ TEST_CASE("a call stopped early on a clock below zero goes on from a checkpoint 
   CHECK_FALSE(r.advance_to(resumed, -9.5, tol).stopped);
   CHECK(test::state_hash(resumed) == test::state_hash(straight));
   CHECK(r.time() == a.time());
+  // Checkpoints of both ends are the same bytes: the finished call leaves nothing of its own.
+  CHECK(bits(resumed, r) == bits(straight, a));
 }
 
 TEST_CASE("a call stopped early keeps its stable-step cap and the forces applied for it", "[checkpoint][adaptive]") {
@@ -341,6 +343,33 @@ std::string refusal(std::vector<std::byte> data) {
 }
 
 }  // namespace
+
+TEST_CASE("a checkpoint's digest tells clocks and states apart; its trailing checksum cannot", "[checkpoint]") {
+  // A body at rest on an anchor at its own position: its state never changes, only the clock.
+  ForceModel<double> forces;
+  forces.add(Spring{{1, 2, 3}, 5, 0});
+  ParticleSet<double> still;
+  still.add({1, 2, 3}, {0, 0, 0}, 1);
+  Stepper<double> stepper(forces, rk4, test::serial_options());
+  const auto write = [&](const std::vector<std::byte>& user = {}) {
+    CheckpointWriter w;
+    w.add(still, stepper);
+    w.set_user_data(user);
+    return w;
+  };
+  const CheckpointWriter start = write();
+  stepper.advance(still, 0.01, 10);
+  const CheckpointWriter later = write();
+  REQUIRE(later.bytes() != start.bytes());  // the clock's fields differ
+  // Each header ends with its own CRC-32C, so the running CRC after it is the same constant
+  // whatever the header holds: the trailer sees the arrays and user data only.
+  CHECK(later.crc() == start.crc());
+  CHECK(later.digest() != start.digest());
+  CHECK(write().digest() == later.digest());
+  CHECK(write({std::byte{1}}).digest() != later.digest());
+  still.apply_force(0, {1, 0, 0});  // the arrays
+  CHECK(write().digest() != later.digest());
+}
 
 TEST_CASE("a damaged checkpoint is refused with one line at every length and every byte", "[checkpoint]") {
   const Saved saved = small_checkpoint();

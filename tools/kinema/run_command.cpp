@@ -782,8 +782,8 @@ void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const Ste
   }
 }
 
-// Whether the run did all it was asked, and from where it resumed. state_crc32c is the CRC-32C a
-// checkpoint of the final state would end with: equal values, equal bits (bodies and clocks).
+// Whether the run did all it was asked, and from where it resumed. state_crc32c is the digest of
+// a checkpoint of the final state: equal values, equal bits (bodies and clocks).
 template <class T>
 void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, const Scene& scene, const RunOptions& o,
                       const Stepped& s) {
@@ -798,7 +798,7 @@ void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, co
   if (!o.checkpoint.path.empty()) summary["checkpoints_written"] = s.checkpoints;
   CheckpointWriter state;
   world.save(state);
-  summary["state_crc32c"] = crc_text(state.crc());
+  summary["state_crc32c"] = crc_text(state.digest());
 }
 
 // The unit of every field that has one and does not name it.

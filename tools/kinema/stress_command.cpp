@@ -438,12 +438,12 @@ Json intervals_report(const std::vector<Interval>& intervals) {
   return j;
 }
 
-// The CRC-32C a checkpoint of every group would end with: equal values, equal bits.
+// The digest of a checkpoint of every group: equal values, equal bits (states and clocks).
 template <class T>
 std::string state_crc(const std::vector<StressGroup<T>>& groups) {
   CheckpointWriter state;
   for (const auto& g : groups) g.save(state);
-  return crc_text(state.crc());
+  return crc_text(state.digest());
 }
 
 template <class T>
