@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <tuple>
 
 #include "core/text.hpp"
 #include "kernels/reductions.hpp"
@@ -220,17 +221,27 @@ class AdaptiveRun {
     const ParticleSet<T>& b = bodies_;
     const T* x[3] = {b.px(), b.py(), b.pz()};
     const T* v[3] = {b.vx(), b.vy(), b.vz()};
-    const double rtol = tol_.rtol, atol = tol_.atol;
-    double y2 = 0, f2 = 0;
-    for (int d = 0; d < 3; ++d) {
-      const std::size_t n = b.size();
-      y2 += scaled_squares(x[d], x[d], 1, rtol, atol, n) + scaled_squares(v[d], v[d], 1, rtol, atol, n);
-      f2 += scaled_squares(v[d], x[d], 1, rtol, atol, n) +
-            scaled_squares(acc[d], v[d], 1 / double(c.accel_scale), rtol, atol, n);
+    const auto squares = [&](double rtol, double atol) {
+      double y2 = 0, f2 = 0;
+      for (int d = 0; d < 3; ++d) {
+        const std::size_t n = b.size();
+        y2 += scaled_squares(x[d], x[d], 1, rtol, atol, n) + scaled_squares(v[d], v[d], 1, rtol, atol, n);
+        f2 += scaled_squares(v[d], x[d], 1, rtol, atol, n) +
+              scaled_squares(acc[d], v[d], 1 / double(c.accel_scale), rtol, atol, n);
+      }
+      return std::pair{y2, f2};
+    };
+    auto [y2, f2] = squares(tol_.rtol, tol_.atol);
+    // Weights 1 / atol past 1e154 (a component at zero under a tiny atol) square to inf: the
+    // norms then come from weights 2^-600 of theirs, the thresholds scaled alike.
+    double weight = 1;
+    if (!std::isfinite(y2) || !std::isfinite(f2)) {
+      weight = 0x1p-600;
+      std::tie(y2, f2) = squares(tol_.rtol / weight, tol_.atol / weight);
     }
     const double components = 6.0 * double(std::max<std::size_t>(b.size(), 1));
     const double d0 = std::sqrt(y2 / components), d1 = std::sqrt(f2 / components);  // RMS, as the norm
-    const double h = d0 < 1e-5 || d1 < 1e-5 ? 1e-6 : 0.01 * d0 / d1;
+    const double h = d0 < 1e-5 * weight || d1 < 1e-5 * weight ? 1e-6 : 0.01 * d0 / d1;
     return std::min(h, span);
   }
 

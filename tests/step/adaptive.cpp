@@ -210,6 +210,24 @@ TEST_CASE("advance_to refuses methods without a pair, bad tolerances and times i
   CHECK(s.advance_to(b, 1, {}).accepted == 0);  // already there
 }
 
+TEST_CASE("a tiny atol on a component at zero sizes the first step as larger ones do", "[adaptive]") {
+  // The orbit's z components are 0: weights 1 / atol past 1e154 once squared to inf, and the
+  // first step came out 0 ("the step size underflows at t = 0").
+  const auto run = [](double atol) {
+    ParticleSet<double> b = at_periapsis();
+    Stepper<double> s(attractor(), dopri5, test::serial_options());
+    const AdaptiveStats stats = s.advance_to(b, kPeriod, {1e-8, atol});
+    CHECK(s.time() == kPeriod);
+    return std::pair{stats.accepted, error_after_one_period(b)};
+  };
+  const auto [steps, error] = run(1e-30);
+  for (const double atol : {1e-160, 1e-300, 4.9e-324}) {
+    const auto [tiny_steps, tiny_error] = run(atol);  // (155 steps against 175 here)
+    CHECK(double(tiny_steps) == Approx(double(steps)).epsilon(0.2));
+    CHECK(tiny_error == Approx(error).epsilon(0.05));
+  }
+}
+
 TEST_CASE("limit_to_stable_step keeps the driver's steps within the method's stability limit", "[adaptive][stability]") {
   // Heavy drag (rate 1000) on a slow spring (omega 1): once the drag's transient has decayed,
   // accuracy alone would allow long steps, which the drag's eigenvalue makes unstable; the
