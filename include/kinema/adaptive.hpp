@@ -31,7 +31,10 @@ struct AdaptiveStats {
   // The call returned before t_end because its stop request said so. The next advance_to call
   // with the same t_end and tolerances goes on exactly where it stopped (the controller's state
   // and the first-same-as-last stage are kept, in the stepper and in a checkpoint of it): the
-  // bits are those of one call that never stopped. Any other call drops what was kept.
+  // bits are those of one call that never stopped. Any other call drops what was kept, and so
+  // does a set changed in between (positions, velocities, masses, applied forces, per-body
+  // parameters: the kept stage would be another state's); what callbacks read is the caller's
+  // to keep as it was.
   bool stopped = false;
 };
 

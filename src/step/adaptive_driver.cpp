@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <span>
 #include <string>
 #include <tuple>
 
 #include "core/text.hpp"
 #include "kernels/reductions.hpp"
 #include "kinema/error.hpp"
+#include "kinema/files.hpp"
 #include "step/finite_guard.hpp"
 #include "step/step_controller.hpp"
 
@@ -63,6 +65,11 @@ std::string underflow_message(double t, const std::string& type) {
   return "advance_to: the step size underflows at t = " + shortest_text(t) + "; the tolerances cannot be met in " + type;
 }
 
+template <class T>
+std::uint32_t crc_of_array(const T* a, std::size_t n, std::uint32_t crc) {
+  return a == nullptr ? crc : crc32c(std::as_bytes(std::span<const T>(a, n)), crc);
+}
+
 void count_accepted(AdaptiveStats& stats, double size) {
   ++stats.accepted;
   stats.smallest_step = stats.accepted == 1 ? size : std::min(stats.smallest_step, size);
@@ -80,7 +87,7 @@ class AdaptiveRun {
     staged_.reserve(bodies_.padded_size());
     interrupt_ = stops.interrupt;
     double t = core_.clock.time();
-    const bool continues = continuation.continues(t_end, tol_, bodies_.size()) && continuation.max_step == max_step;
+    const bool continues = continuation.continues(t_end, tol_, bodies_) && continuation.max_step == max_step;
     continuation.active = false;
     if (t_end == t) return stats_;
     const Method& method = core_.method;
@@ -145,7 +152,7 @@ class AdaptiveRun {
   void keep_for_next_call(double t_end, double max_step, double h, const StepController& controller,
                           AdaptiveContinuation& continuation) {
     continuation = {true, t_end, tol_.rtol, tol_.atol, max_step, h, controller.state(), double(kept_scale_),
-                    bodies_.size()};
+                    bodies_.size(), stage_inputs_digest(bodies_)};
     stats_.stopped = true;
   }
 
@@ -260,6 +267,18 @@ class AdaptiveRun {
 }  // namespace
 
 template <class T>
+std::uint32_t stage_inputs_digest(const ParticleSet<T>& b) {
+  const std::size_t n = b.size();
+  std::uint32_t crc = 0;
+  for (const T* a : {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz(), b.inv_mass()}) crc = crc_of_array(a, n, crc);
+  for (int d = 0; d < 3; ++d) crc = crc_of_array(b.applied_force_data(d), n, crc);
+  for (int k = 0; k < BodyParameters<T>::kKinds; ++k) {
+    crc = crc_of_array(b.parameters().data(BodyParameter(k)), n, crc);
+  }
+  return crc;
+}
+
+template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, ParticleSet<T>& bodies,
                                  double t_end, const Tolerances& tolerances, double max_step,
                                  AdaptiveContinuation& continuation, const CallStops& stops,
@@ -323,6 +342,8 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
   return stats;
 }
 
+template std::uint32_t stage_inputs_digest(const ParticleSet<float>&);
+template std::uint32_t stage_inputs_digest(const ParticleSet<double>&);
 template AdaptiveStats advance_adaptively(StepperCore<float>&, const Workers&, RigidBodySet<float>&, double,
                                           const Tolerances&, const AdaptiveEvents<float>&);
 template AdaptiveStats advance_adaptively(StepperCore<double>&, const Workers&, RigidBodySet<double>&, double,

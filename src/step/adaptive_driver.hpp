@@ -3,6 +3,9 @@
 // each accepted or taken back by its error norm, their sizes chosen by a PI controller
 // (step_controller.hpp).
 
+#include <cstdint>
+#include <optional>
+
 #include "kinema/adaptive.hpp"
 #include "kinema/bodies.hpp"
 #include "parallel/blocks.hpp"
@@ -15,6 +18,11 @@ namespace kinema {
 // What a call stopped early leaves for the next one to the same end: the size to try, the
 // controller's state, and whether stage 0's accelerations are kept in the staged path (with
 // the acceleration scale they carry; 0: none).
+// What stage 0's accelerations depend on in a set: a CRC-32C of its positions, velocities,
+// inverse masses, applied forces and per-body parameters.
+template <class T>
+std::uint32_t stage_inputs_digest(const ParticleSet<T>& bodies);
+
 struct AdaptiveContinuation {
   bool active = false;
   double t_end = 0, rtol = 0, atol = 0, max_step = 0;
@@ -22,10 +30,16 @@ struct AdaptiveContinuation {
   StepController::State controller;
   double kept_scale = 0;
   std::size_t bodies = 0;
+  // stage_inputs_digest of the set where the call stopped; none for a continuation restored
+  // from a checkpoint, which brings its set with it.
+  std::optional<std::uint32_t> inputs;
 
-  // Whether a call to `end` with `t` on `count` bodies goes on from here.
-  bool continues(double end, const Tolerances& t, std::size_t count) const {
-    return active && end == t_end && t.rtol == rtol && t.atol == atol && count == bodies;
+  // Whether a call to `end` with `t` on `set` goes on from here: not after the set was
+  // changed in between (its kept accelerations would be another state's).
+  template <class T>
+  bool continues(double end, const Tolerances& t, const ParticleSet<T>& set) const {
+    return active && end == t_end && t.rtol == rtol && t.atol == atol && set.size() == bodies &&
+           (!inputs || *inputs == stage_inputs_digest(set));
   }
 };
 

@@ -680,6 +680,8 @@ void CheckpointReader::restore(std::size_t k, ParticleSet<T>& io_bodies, Stepper
   ParticleSet<T> restored = particles(k, io_stepper);
   restore_stepper(k, io_stepper);  // throws before the set changes
   io_bodies = std::move(restored);
+  AdaptiveContinuation& cont = StepperAccess<T>::continuation(io_stepper);
+  if (cont.active) cont.inputs = stage_inputs_digest(io_bodies);  // its set as the record holds it
 }
 
 template <class T>

@@ -91,7 +91,7 @@ struct Stepper<T>::Impl {
     core.reach(bodies);
     // A call that goes on from one stopped early keeps its cap (the bodies have moved since)
     // and was checked when it began.
-    const bool continues = continuation.continues(t_end, tolerances, bodies.size());
+    const bool continues = continuation.continues(t_end, tolerances, bodies);
     if (!continues) check_tolerance_floor(bodies, tolerances);
     AdaptiveStats stats;
     double max_step = continuation.max_step;

@@ -3,11 +3,14 @@
 // steps on every thread count and ISA, rejected steps that leave nothing behind.
 #include <catch2/catch.hpp>
 
+#include <functional>
+
 #include <array>
 #include <random>
 #include <stdexcept>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <numbers>
 #include <vector>
 
@@ -226,6 +229,46 @@ TEST_CASE("a tiny atol on a component at zero sizes the first step as larger one
     CHECK(double(tiny_steps) == Approx(double(steps)).epsilon(0.2));
     CHECK(tiny_error == Approx(error).epsilon(0.05));
   }
+}
+
+TEST_CASE("a stopped call whose set changed before it goes on starts afresh", "[adaptive]") {
+  // A spring to the origin: x(t) = x0 cos(t - t0) + v0 sin(t - t0). The stopped call keeps
+  // stage 0's accelerations; a body moved (or pushed) in between must not take them.
+  ForceModel<double> f;
+  f.add(Spring{{0, 0, 0}, 1, 0});
+  const Tolerances tol{1e-6, 1e-6};
+  const auto always = [] { return true; };  // a stop after every accepted step
+  const auto stopped_thrice = [&](Stepper<double>& s) {
+    ParticleSet<double> b;
+    b.add({1, 0, 0}, {0, 0, 0}, 1);
+    for (int k = 0; k < 3; ++k) REQUIRE(s.advance_to(b, 10, tol, always).stopped);
+    return b;
+  };
+  const std::vector<std::function<void(ParticleSet<double>&)>> edits{
+      [](ParticleSet<double>& b) { b.set_position(0, {-3, 0, 0}); },
+      [](ParticleSet<double>& b) { b.vy()[0] = 2; },  // through the arrays
+      [](ParticleSet<double>& b) { b.apply_force(0, {0, 0, 1}); },
+      [](ParticleSet<double>& b) { b.set_mass(0, 2); },
+      [](ParticleSet<double>& b) { b.set_linear_damping(0, 0.5); }};
+  for (const auto& edit : edits) {
+    Stepper<double> resumed(f, dopri5, test::serial_options()), other(f, dopri5, test::serial_options());
+    ParticleSet<double> a = stopped_thrice(resumed), b = stopped_thrice(other);
+    edit(a), edit(b);
+    Stepper<double> fresh(f, dopri5, test::serial_options());  // the same clock and set, nothing kept
+    fresh.set_time(resumed.time());
+    resumed.advance_to(a, 10, tol, always);
+    fresh.advance_to(b, 10, tol, always);
+    CHECK(resumed.time() == fresh.time());
+    CHECK(test::state_hash(a) == test::state_hash(b));
+  }
+  // Unchanged, it goes on: the step after a stop is the one the straight call takes.
+  Stepper<double> straight(f, dopri5, test::serial_options()), stopping(f, dopri5, test::serial_options());
+  ParticleSet<double> a = stopped_thrice(stopping), b;
+  b.add({1, 0, 0}, {0, 0, 0}, 1);
+  for (int k = 0; k < 4; ++k) stopping.advance_to(a, 10, tol, always);
+  straight.advance_to(b, 10, tol, [&, k = 0]() mutable { return ++k == 7; });
+  CHECK(stopping.time() == straight.time());
+  CHECK(test::state_hash(a) == test::state_hash(b));
 }
 
 TEST_CASE("limit_to_stable_step keeps the driver's steps within the method's stability limit", "[adaptive][stability]") {
