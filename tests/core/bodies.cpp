@@ -83,6 +83,29 @@ TEST_CASE("bulk add and one-by-one add build the same set", "[bodies]") {
   CHECK(copy.px() != bulk.px());
 }
 
+TEST_CASE("an orientation of any finite size is normalized: only zero is refused", "[bodies][rigid]") {
+  RigidBodySet<double> set;
+  const double tiny = 1e-200, huge = 1e300;
+  // Squares past double's range: (1e300)^2 is inf and (1e-200)^2 is 0.
+  for (const Quat<double>& q : {Quat<double>{huge, 0, 0, huge}, Quat<double>{tiny, tiny, 0, 0},
+                                Quat<double>{0, 3 * huge, 4 * huge, 0}}) {
+    const std::size_t i = set.add({.orientation = q});
+    const Quat<double> added = set.orientation(i);
+    set.set_orientation(i, {1, 0, 0, 0});
+    set.set_orientation(i, q);
+    CHECK(set.orientation(i) == added);
+    double norm = 0;
+    for (double c : added) norm += c * c;
+    CHECK(norm == Approx(1).epsilon(1e-15));
+    for (int k = 0; k < 4; ++k) CHECK((added[k] == 0) == (q[k] == 0));
+  }
+  CHECK(set.orientation(2)[1] == Approx(0.6));  // (0, 3, 4, 0) / 5
+  CHECK(set.orientation(0)[0] == Approx(std::sqrt(0.5)));
+  CHECK_THROWS_WITH(set.add({.orientation = {0, 0, 0, 0}}), Catch::Contains("orientation quaternion is zero"));
+  CHECK_THROWS_WITH(set.set_orientation(0, {0, 0, 0, 0}), Catch::Contains("orientation quaternion is zero"));
+  CHECK(set.size() == 3);
+}
+
 TEST_CASE("bad bodies are refused with the body and field named", "[bodies][errors]") {
   ParticleSet<float> set;
   set.add({0, 0, 0}, {0, 0, 0}, 1);

@@ -180,6 +180,26 @@ TEST_CASE("applied forces and rigid callbacks allocate nothing in steps", "[allo
   }
 }
 
+TEST_CASE("applying forces and torques and impulses allocates nothing once the arrays are there", "[allocation]") {
+  // A game applies them every frame: the per-frame calls must not allocate.
+  ParticleSet<float> particles = test::cloud<float>(64);
+  RigidBodySet<double> rigid;
+  for (int i = 0; i < 64; ++i) rigid.add({{double(i), 0, 0}, {}, {1, 0, 0, 0}, {}, 1, {1, 2, 3}});
+  particles.apply_force(0, {1, 0, 0}), rigid.apply_force(0, {1, 0, 0}), rigid.apply_torque(0, {0, 1, 0});
+  const long before = g_allocations.load();
+  for (std::size_t i = 0; i < 64; ++i) {
+    particles.apply_force(i, {1, 2, 3});
+    particles.apply_impulse(i, {0, 0.1f, 0});
+    rigid.apply_force(i, {1, 2, 3});
+    rigid.apply_torque(i, {0, 0, 1});
+    rigid.apply_force_at(i, {0, 1, 0}, {double(i) + 1, 0, 0});
+    rigid.apply_impulse(i, {0.1, 0, 0});
+    rigid.apply_impulse_at(i, {0, 0.1, 0}, {double(i), 1, 0});
+    rigid.apply_angular_impulse(i, {0, 0, 0.1});
+  }
+  CHECK(g_allocations.load() - before == 0);
+}
+
 TEST_CASE("rigid bodies on springs allocate nothing in steps or error-controlled steps", "[allocation]") {
   for (bool tbb : {false, true}) {
     TbbJobSystem jobs(2);
