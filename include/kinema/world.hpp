@@ -33,8 +33,9 @@ class World {
   // `stop` returned true. The bits are those of one call.
   std::uint64_t advance(T h, std::uint64_t steps, const StopRequest& stop);
   // Watches the scene's events (Scene::events) from the next advance on, on the main
-  // stepper's bodies (a scene with events has one kind); a world watches none until asked
-  // (the analyses that build worlds from a scene step it to fixed times).
+  // stepper's bodies (a scene with events has one kind: kinema::Error for a world of both);
+  // a world watches none until asked (the analyses that build worlds from a scene step it to
+  // fixed times).
   void watch_events();
   // The events found by the last advance call, in order, and whether
   // one of them stopped it (the world then at its time; the steps returned count the cut one).

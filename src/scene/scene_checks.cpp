@@ -15,6 +15,7 @@
 #include "kinema/error.hpp"
 #include "kinema/methods.hpp"
 #include "kinema/stepper.hpp"
+#include "scene/networks.hpp"
 #include "step/step_checks.hpp"
 
 namespace kinema {
@@ -238,6 +239,9 @@ void check_scene(const Scene& scene) {
     throw Error("the scene needs about " + size_text(need.total()) + " to run (" + size_text(need.state) + " for its bodies, " +
                 size_text(need.springs) + " for its springs, " + size_text(need.scratch) +
                 " for the stiffness estimate and the stages), more than the " + size_text(have) + " this process may use");
+  }
+  if (!scene.events.empty() && mixed_bodies(scene)) {
+    throw Error("events: events watch bodies of one kind; the scene has particles and rigid bodies");
   }
   const ForceModel<T> forces = make_forces<T>(scene);
   // Lowering the forces to T checks their sums; auto picks its own dt later.

@@ -18,6 +18,11 @@ World<T>::World(const Scene& scene, const Method& method, StepperOptions options
 
 template <class T>
 void World<T>::watch_events() {
+  // One stepper watches: the other set's crossings would go unseen, and a stop would end one
+  // set's call and not the other's.
+  if (particles.size() > 0 && rigid.size() > 0 && !scene_events_.empty()) {
+    throw Error("World::watch_events: events watch bodies of one kind; this world has particles and rigid bodies");
+  }
   Scene events;
   events.events = scene_events_;
   (rigid_only() ? rigid_stepper_ : particle_stepper_).set_events(make_events<T>(events));

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 #include <string>
 #include <utility>
@@ -69,27 +70,56 @@ void check_adaptive(const Method& method, double t_end, const Tolerances& tol, d
   }
 }
 
+namespace {
+
+template <class T>
+double largest_of(std::initializer_list<const T*> arrays, std::size_t n) {
+  double largest = 0;
+  for (const T* a : arrays) {
+    for (std::size_t i = 0; i < n; ++i) largest = std::max(largest, double(std::abs(a[i])));
+  }
+  return largest;
+}
+
+// Refuses tolerances under a sixteenth of an ulp of `scale`, which `what` names.
+template <class T>
+void check_floor(const Tolerances& tol, double scale, const char* what) {
+  const double floor = double(std::numeric_limits<T>::epsilon()) / 16 * scale;
+  if (tol.atol + tol.rtol * scale >= floor) return;
+  throw Error("advance_to: rtol " + shortest_text(tol.rtol) + " and atol " + shortest_text(tol.atol) +
+              " are far below the round-off of one step in " + type_name<T>() + " on these bodies (under " +
+              shortest_text(floor, 2) + ", a sixteenth of an ulp of their largest " + what + "): no step can meet them");
+}
+
+}  // namespace
+
 // The floor sits well under the round-off: error estimates may be met below it (auto's float
 // pilots run at rtol 1e-7), but not at a sixteenth of an ulp, where the step only shrinks
 // (rtol 1e-24 in double took 215 million steps, 1e-30 never ended).
 template <class T>
 void check_tolerance_floor(const ParticleSet<T>& bodies, const Tolerances& tol) {
-  const double ulp = double(std::numeric_limits<T>::epsilon());
-  if (tol.rtol >= ulp / 16) return;  // above the floor at any scale
-  double largest_x = 0, largest_v = 0;
-  for (std::size_t i = 0; i < bodies.size(); ++i) {
-    for (const T* a : {bodies.px(), bodies.py(), bodies.pz()}) largest_x = std::max(largest_x, double(std::abs(a[i])));
-    for (const T* a : {bodies.vx(), bodies.vy(), bodies.vz()}) largest_v = std::max(largest_v, double(std::abs(a[i])));
-  }
-  const double scale = largest_x + largest_v, floor = ulp / 16 * scale;
-  if (tol.atol + tol.rtol * scale >= floor) return;
-  throw Error("advance_to: rtol " + shortest_text(tol.rtol) + " and atol " + shortest_text(tol.atol) +
-              " are far below the round-off of one step in " + type_name<T>() + " on these bodies (under " +
-              shortest_text(floor, 2) + ", a sixteenth of an ulp of their largest |x| + |v|): no step can meet them");
+  if (tol.rtol >= double(std::numeric_limits<T>::epsilon()) / 16) return;  // above the floor at any scale
+  const std::size_t n = bodies.size();
+  const double scale = largest_of({bodies.px(), bodies.py(), bodies.pz()}, n) +
+                       largest_of({bodies.vx(), bodies.vy(), bodies.vz()}, n);
+  check_floor<T>(tol, scale, "|x| + |v|");
+}
+
+// The error norm holds the orientations and angular momenta too: a body at rest at the
+// origin still turns, its quaternion's components up to 1.
+template <class T>
+void check_tolerance_floor(const RigidBodySet<T>& bodies, const Tolerances& tol) {
+  if (tol.rtol >= double(std::numeric_limits<T>::epsilon()) / 16) return;
+  check_tolerance_floor(bodies.centers(), tol);
+  const std::size_t n = bodies.size();
+  const double scale = largest_of({bodies.q(0), bodies.q(1), bodies.q(2), bodies.q(3)}, n) +
+                       largest_of({bodies.l(0), bodies.l(1), bodies.l(2)}, n);
+  check_floor<T>(tol, scale, "|q| + |L|");
 }
 
 #define KINEMA_STEP_CHECKS(T)                                                                                   \
   template void check_tolerance_floor(const ParticleSet<T>&, const Tolerances&);                               \
+  template void check_tolerance_floor(const RigidBodySet<T>&, const Tolerances&);                              \
   template void check_step_positive(T);                                                                         \
   template void check_reach(const CoupledForces<T>&, const ParticleSet<T>&);                                    \
   template void check_stepper_options<T>(const StepperOptions&);

@@ -43,5 +43,8 @@ void check_adaptive(const Method& method, double t_end, const Tolerances& tolera
 // sixteenth of an ulp of Y, the bodies' largest |position| + |velocity| component.
 template <class T>
 void check_tolerance_floor(const ParticleSet<T>& bodies, const Tolerances& tolerances);
+// The same on the centres, then on the orientations and angular momenta.
+template <class T>
+void check_tolerance_floor(const RigidBodySet<T>& bodies, const Tolerances& tolerances);
 
 }  // namespace kinema

@@ -117,7 +117,7 @@ struct Stepper<T>::Impl {
     if (tolerances.limit_to_stable_step) throw Error("advance_to: limit_to_stable_step takes particles only");
     const AdaptiveEvents<T> events = adaptive_events(bodies);
     const OrderedHits<T> ordered{fixed.events()};
-    check_tolerance_floor(bodies.centers(), tolerances);
+    check_tolerance_floor(bodies, tolerances);
     continuation.active = false;
     AdaptiveStats stats;
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {

@@ -148,6 +148,15 @@ std::vector<Case> scene_cases() {
       {with_body(R"("method": "rk5")"), run_args(), 1, "unknown method 'rk5'"},
       {with_body(R"("method": "auto")"), run_args(), 1, "needs a tolerance"},
       {with_body(R"("method": "auto", "tolerance": 0)"), run_args(), 1, "tolerance: expected a number > 0"},
+      // A stop ends kinema run's run; the charts run the whole duration: refused, not charted apart.
+      {R"({"particles": [{"position": [0, 1, 0]}], "forces": [{"type": "gravity", "g": [0, -9.81, 0]}],
+          "events": [{"type": "plane", "action": "stop", "direction": "down"}]})", {"chart", "{}", "-q", "--methods", "rk4", "--dts", "0.01", "--out", (work_dir() / "stop_chart").string()},
+       1, "events[0] stops kinema run at its crossing; chart and stability run the whole duration and watch no events"},
+      {R"({"particles": [{"position": [0, 1, 0]}], "forces": [{"type": "gravity", "g": [0, -9.81, 0]}],
+          "events": [{"type": "plane", "action": "stop", "direction": "down"}]})", {"stability", "{}", "-q", "--methods", "rk4"}, 1, "events[0] stops kinema run at its crossing"},
+      {R"({"particles": [{"position": [0, 1, 0]}], "forces": [{"type": "gravity", "g": [0, -9.81, 0]}],
+          "events": [{"type": "plane", "action": "stop", "direction": "down"}]})", run_args({"--out", (work_dir() / "events.csv").string()}), 1,
+       "/events.csv, the file --out names: one would overwrite the other"},
       // A stable step far under the run's length rules the methods out before any pilot runs
       // (error control's too: its steps cannot pass it), at once, not after minutes of pilots.
       {R"({"particles": [{"position": [0,0,0]}, {"position": [1,0,0]}], "dt": 0.01, "steps": 100,
@@ -316,6 +325,9 @@ std::vector<Case> option_cases() {
       {"", {"stability", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
       {"", {"stability", scene, "--dt", "nan"}, 2, "--dt: expected a finite number > 0"},
       {"", {"stability", scene, "-q", "--dt", "100"}, 1, "is longer than the duration"},
+      // The bisection's product lo hi underflowed to 0: "a step of 0 s ... takes more than 2^32 steps".
+      {"", {"stability", std::string(KINEMA_SCENES) + "/kepler_circular.json", "-q", "--methods", "rk4", "--dt", "1e-200",
+            "--duration", "1e-199", "--out", (work_dir() / "tiny_stability").string()}, 0, ""},
       // Hours of work, refused before the first run (SIGINT would end them, but nothing more).
       {"", {"chart", cluster, "-q", "--out", (work_dir() / "refused_chart").string()}, 1,
        "plummer_cluster.json: the chart would take about 3.2e+13 body-evaluations (3.79e+06 force evaluations of "

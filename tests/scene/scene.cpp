@@ -251,6 +251,20 @@ TEST_CASE("the implicit methods take scenes of particles with springs, without r
   CHECK_FALSE(takes_implicit_methods(watched));
 }
 
+TEST_CASE("a scene made in code with both body kinds and events is refused as a file of them is", "[scene][events]") {
+  Scene both = parse_scene(R"({"particles": [{"position": [0, 1, 0]}], "rigid_bodies": [{"position": [0, 1, 0]}],
+      "forces": [{"type": "gravity", "g": [0, -9.81, 0]}]})");
+  both.events.push_back(EventSpec{PlaneEvent{{0, 1, 0}, 0}});
+  CHECK_THROWS_WITH(check_scene<float>(both), "events: events watch bodies of one kind; the scene has particles and rigid bodies");
+  World<float> world(both, rk4);
+  CHECK_THROWS_WITH(world.watch_events(), Catch::Contains("this world has particles and rigid bodies"));
+  both.particles.clear();  // one kind: watched, the rigid body's crossing found
+  World<float> rigid(both, rk4);
+  rigid.watch_events();
+  rigid.advance(0.01f, 100);
+  CHECK(rigid.event_hits().size() == 1);
+}
+
 TEST_CASE("a dynamic body at an attractor's centre is refused where it is listed", "[scene][errors]") {
   const std::string central = R"("forces": [{"type": "central", "center": [0, 1, 0], "mu": 2}]})";
   CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [1,0,0]}, {"position": [0,1,0]}], )" + central),

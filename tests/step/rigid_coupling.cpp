@@ -341,6 +341,18 @@ TEST_CASE("dopri5 with error control flips a torque-free body at the analytic ti
   CHECK(coarse / fine > 30);
 }
 
+TEST_CASE("rigid error control refuses tolerances under the round-off of a turning body at rest", "[rigid][adaptive][errors]") {
+  // Its centre at the origin, at rest: the centres' |x| + |v| is 0, but the norm holds q (up
+  // to 1) and L. rtol 1e-18 once crawled on at 1e-17 s a step, with no stop to end the call.
+  RigidBodySet<double> b;
+  b.add({.angular_momentum = {0, 0, 2}, .inertia = {1, 2, 3}});
+  Stepper<double> s(ForceModel<double>{}, dopri5, test::serial_options());
+  CHECK_THROWS_WITH(s.advance_to(b, 1e-3, {1e-18, 0}),
+                    Catch::Contains("a sixteenth of an ulp of their largest |q| + |L|): no step can meet them"));
+  CHECK(s.time() == 0);
+  CHECK(s.advance_to(b, 1e-3, {1e-12, 0}).accepted > 0);
+}
+
 TEST_CASE("error control on coupled rigid bodies reaches a fine fixed-step solution", "[rigid][adaptive][springs]") {
   const ForceModel<double> f = joined_pair(0.3);
   RigidBodySet<double> adaptive = tumbling_pair(), fine = tumbling_pair();

@@ -61,6 +61,12 @@ Scene load_checked(const std::string& path, std::optional<Precision> precision) 
   const bool implicit = scene.method != "auto" && method_by_name(scene.method).kind == MethodKind::linearly_implicit;
   const bool refuses = !scene.events.empty() || !scene.rigid_bodies.empty() || (scene.generate && scene.generate->rigid);
   if (implicit && refuses) scene.method = "rk4";
+  // They run the whole duration: a stop would end kinema run's run elsewhere.
+  for (std::size_t e = 0; e < scene.events.size(); ++e) {
+    if (scene.events[e].action != EventAction::stop) continue;
+    throw Error(path + ": events[" + std::to_string(e) + "] stops kinema run at its crossing; chart and stability run "
+                "the whole duration and watch no events (make it \"record\" to chart the run to its end)");
+  }
   try {
     with_precision(scene.precision, [&]<class T>() { check_scene<T>(scene); });
   } catch (const Error& e) {

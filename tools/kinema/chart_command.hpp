@@ -40,7 +40,8 @@ int stability_scene(const StabilityOptions& options);
 
 // Shared by both commands.
 // The scene file in the precision asked for (default its own), with check_scene run in it
-// (before any body is built).
+// (before any body is built); a scene with a stop event is refused (they run its whole
+// duration and watch no events).
 Scene load_checked(const std::string& path, std::optional<Precision> precision = std::nullopt);
 // Creates the output folder (and its parents); an Error naming it when that fails.
 void make_output_folder(const std::filesystem::path& dir);

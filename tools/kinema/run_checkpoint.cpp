@@ -78,6 +78,13 @@ void check_distinct(const std::vector<NamedPath>& inputs, const std::vector<Name
   }
 }
 
+void check_apart(const std::string& what, const std::string& path, const std::vector<NamedPath>& named) {
+  for (const NamedPath& other : named) {
+    if (other.path.empty() || !same_file(path, other.path)) continue;
+    throw Error(what + " " + printable(path) + ", the file " + other.option + ": one would overwrite the other");
+  }
+}
+
 std::uint64_t exact(double value) { return std::bit_cast<std::uint64_t>(value); }
 double exact(std::uint64_t bits) { return std::bit_cast<double>(bits); }
 

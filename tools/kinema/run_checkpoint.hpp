@@ -53,6 +53,9 @@ struct NamedPath {
 // scene, the --resume file): one would clobber the other. Empty paths are not given. (A
 // --resume file may also be the --checkpoint: the run reads it before it writes the next.)
 void check_distinct(const std::vector<NamedPath>& inputs, const std::vector<NamedPath>& outputs);
+// kinema::Error when a file the run makes by itself (`what`, at `path`) is one of `named`:
+// "<what> <path>, the file <option>: one would overwrite the other" (option: "--out names").
+void check_apart(const std::string& what, const std::string& path, const std::vector<NamedPath>& named);
 
 // Whether a checkpoint is due: every `every` seconds from construction or the last save().
 class CheckpointTimer {

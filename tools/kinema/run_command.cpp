@@ -471,9 +471,10 @@ void check_events(const Scene& scene, const RunOptions& o) {
                 printable(o.trajectory_path) + " is no file in a folder (a device, a pipe or a standard stream)");
   }
   if (!o.trajectory_path.empty()) {
-    check_distinct({{"the scene", o.scene_path}, {"--out", o.trajectory_path}, {"--summary", o.summary_path},
-                    {"--checkpoint", o.checkpoint.path}, {"--resume", o.checkpoint.resume_path}},
-                   {{"events.csv", events_path(o).string()}});
+    check_apart(o.scene_path + ": its events go to", events_path(o).string(),
+                {{"the scene is read from", o.scene_path}, {"--out names", o.trajectory_path},
+                 {"--summary names", o.summary_path}, {"--checkpoint names", o.checkpoint.path},
+                 {"--resume names", o.checkpoint.resume_path}});
   }
 }
 

@@ -195,7 +195,9 @@ MeasuredStep measured_step(const Scene& scene, const Method& m, double guess, do
   if (ok(hi)) return {std::numeric_limits<double>::infinity(), false};
   while (hi / lo > 1.005) {
     stop_if_interrupted();
-    const double mid = std::sqrt(lo * hi);
+    // The geometric mean; from the square roots where the product leaves double's range.
+    const double product = lo * hi;
+    const double mid = product > 0 && std::isfinite(product) ? std::sqrt(product) : std::sqrt(lo) * std::sqrt(hi);
     (ok(mid) ? lo : hi) = mid;
   }
   return {lo, hi >= duration};
