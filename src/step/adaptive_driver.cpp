@@ -1,6 +1,7 @@
 #include "step/adaptive_driver.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <span>
 #include <string>
@@ -68,6 +69,24 @@ std::string underflow_message(double t, const std::string& type) {
 template <class T>
 std::uint32_t crc_of_array(const T* a, std::size_t n, std::uint32_t crc) {
   return a == nullptr ? crc : crc32c(std::as_bytes(std::span<const T>(a, n)), crc);
+}
+
+// The first step of a call (Hairer's): 0.01 |y| / |f(y)| in the error's weighted RMS norm, from
+// squares(rtol, atol), the sums of squares of the weighted y and f(y) over `components`
+// values; 1e-6 where either is tiny; at most span.
+template <class Squares>
+double starting_step(const Squares& squares, double components, const Tolerances& tol, double span) {
+  auto [y2, f2] = squares(tol.rtol, tol.atol);
+  // Weights 1 / atol past 1e154 (a component at zero under a tiny atol) square to inf: the
+  // norms then come from weights 2^-600 of theirs, the thresholds scaled alike.
+  double weight = 1;
+  if (!std::isfinite(y2) || !std::isfinite(f2)) {
+    weight = 0x1p-600;
+    std::tie(y2, f2) = squares(tol.rtol / weight, tol.atol / weight);
+  }
+  const double d0 = std::sqrt(y2 / components), d1 = std::sqrt(f2 / components);
+  const double h = d0 < 1e-5 * weight || d1 < 1e-5 * weight ? 1e-6 : 0.01 * d0 / d1;
+  return std::min(h, span);
 }
 
 void count_accepted(AdaptiveStats& stats, double size) {
@@ -238,18 +257,7 @@ class AdaptiveRun {
       }
       return std::pair{y2, f2};
     };
-    auto [y2, f2] = squares(tol_.rtol, tol_.atol);
-    // Weights 1 / atol past 1e154 (a component at zero under a tiny atol) square to inf: the
-    // norms then come from weights 2^-600 of theirs, the thresholds scaled alike.
-    double weight = 1;
-    if (!std::isfinite(y2) || !std::isfinite(f2)) {
-      weight = 0x1p-600;
-      std::tie(y2, f2) = squares(tol_.rtol / weight, tol_.atol / weight);
-    }
-    const double components = 6.0 * double(std::max<std::size_t>(b.size(), 1));
-    const double d0 = std::sqrt(y2 / components), d1 = std::sqrt(f2 / components);  // RMS, as the norm
-    const double h = d0 < 1e-5 * weight || d1 < 1e-5 * weight ? 1e-6 : 0.01 * d0 / d1;
-    return std::min(h, span);
+    return starting_step(squares, 6.0 * double(std::max<std::size_t>(b.size(), 1)), tol_, span);
   }
 
   StepperCore<T>& core_;
@@ -305,6 +313,29 @@ bool rigid_stops_at_event(StepperCore<T>& core, const Workers& workers, RigidBod
 
 }  // namespace
 
+// The rigid first step as the particles' (starting_step), the rates from the probe path's stage
+// 0 (the bodies untouched), over the 13 components of every body.
+template <class T>
+double rigid_first_step(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies, double t,
+                        double span, const Tolerances& tol) {
+  RigidBlockPath<T>& probe = core.rigid_probe();
+  probe.reserve(bodies.padded_size());
+  probe.evaluate_rates({bodies, T(1), core.options.renormalize_quaternions}, workers, t);
+  const ParticleSet<T>& c = bodies.centers();
+  const std::array<const T*, 13> y{c.px(), c.py(), c.pz(), c.vx(), c.vy(), c.vz(),
+                                   bodies.q(0), bodies.q(1), bodies.q(2), bodies.q(3),
+                                   bodies.l(0), bodies.l(1), bodies.l(2)};
+  const auto squares = [&](double rtol, double atol) {
+    double y2 = 0, f2 = 0;
+    for (int c = 0; c < 13; ++c) {
+      y2 += scaled_squares(y[c], y[c], 1, rtol, atol, bodies.size());
+      f2 += scaled_squares(probe.rate_of(c), y[c], 1, rtol, atol, bodies.size());
+    }
+    return std::pair{y2, f2};
+  };
+  return starting_step(squares, 13.0 * double(std::max<std::size_t>(bodies.size(), 1)), tol, span);
+}
+
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
                                  double t_end, const Tolerances& tol, const AdaptiveEvents<T>& events) {
@@ -315,7 +346,8 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
   StepController controller(std::min(method.order, method.embedded_order));
   AdaptiveStats stats;
   double t = core.clock.time();
-  double h = tol.initial_step > 0 ? tol.initial_step : 0.01 * (t_end - t);
+  if (t_end == t) return stats;
+  double h = tol.initial_step > 0 ? tol.initial_step : rigid_first_step(core, workers, bodies, t, t_end - t, tol);
   while (t < t_end) {
     const auto [size, last] = next_attempt<T>(t, t_end, h, tol.max_step);
     if (underflows(t, size)) throw Error(underflow_message(t, type_name<T>()));

@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 
@@ -351,6 +352,29 @@ TEST_CASE("rigid error control refuses tolerances under the round-off of a turni
                     Catch::Contains("a sixteenth of an ulp of their largest |q| + |L|): no step can meet them"));
   CHECK(s.time() == 0);
   CHECK(s.advance_to(b, 1e-3, {1e-12, 0}).accepted > 0);
+}
+
+TEST_CASE("rigid error control to a far end starts from the estimate and stops at the floor", "[rigid][adaptive][events]") {
+  // "Until the event": its first step once was 0.01 (t_end - t), accepted whole for a body in
+  // free fall (its error estimate 0), the crossing placed within a 1e28 s step.
+  const auto landing = []<class T>(T, double t_end) {
+    ForceModel<T> f;
+    f.add(Gravity{});
+    RigidBodySet<T> b;
+    b.add({.position = {0, 10, 0}});
+    Stepper<T> s(f, dopri5, test::serial_options());
+    EventOptions<T> floor;
+    floor.events.push_back({PlaneEvent{{0, 1, 0}, 0}, Crossing::down, EventAction::stop});
+    s.set_events(floor);
+    s.advance_to(b, t_end, {1e-6, 1e-6});
+    REQUIRE(s.stopped_at_event());
+    return s.event_hits().at(0).time;
+  };
+  const double exact = std::sqrt(20 / 9.81);
+  for (const double t_end : {1e3, 1e30, std::numeric_limits<double>::max()}) {
+    CHECK(landing(0.0, t_end) == Approx(exact).epsilon(1e-9));
+  }
+  CHECK(landing(0.0f, 1e30) == Approx(exact).epsilon(1e-5));  // a float clock: inf, then 1e38, were refused
 }
 
 TEST_CASE("error control on coupled rigid bodies reaches a fine fixed-step solution", "[rigid][adaptive][springs]") {
