@@ -30,7 +30,8 @@ void World<T>::watch_events() {
 
 template <class T>
 void World<T>::advance(T h, std::uint64_t steps) {
-  if (particles.size() > 0) particle_stepper_.advance(particles, h, steps);
+  // An empty world's clock goes on too (as under advance_to): on its main stepper, the particles'.
+  if (particles.size() > 0 || rigid.size() == 0) particle_stepper_.advance(particles, h, steps);
   if (rigid.size() > 0) rigid_stepper_.advance(rigid, h, steps);
   event_hits_ = main_stepper().event_hits();
 }
@@ -50,7 +51,8 @@ std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& sto
       continue;
     }
     // A coupled step can outlast a call's budget: the particles poll inside it too.
-    const std::uint64_t taken = particles.size() > 0 ? particle_stepper_.advance(particles, h, n, stop) : n;
+    const bool own_clock = particles.size() > 0 || rigid.size() == 0;  // an empty world's too
+    const std::uint64_t taken = own_clock ? particle_stepper_.advance(particles, h, n, stop) : n;
     const auto& hits = particle_stepper_.event_hits();
     event_hits_.insert(event_hits_.end(), hits.begin(), hits.end());
     if (rigid.size() > 0) advance_rigid(h, taken, taken < n);

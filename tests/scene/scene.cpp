@@ -265,6 +265,18 @@ TEST_CASE("a scene made in code with both body kinds and events is refused as a 
   CHECK(rigid.event_hits().size() == 1);
 }
 
+TEST_CASE("an empty world's clock goes on under every advance", "[scene]") {
+  World<double> world(Scene{}, rk4);  // a level with no bodies yet
+  world.advance(0.01, 10);
+  CHECK(world.time() == Approx(0.1));
+  CHECK(world.advance(0.01, 10, [] { return false; }) == 10);
+  CHECK(world.time() == Approx(0.2));
+  World<double> adaptive(Scene{}, dopri5);
+  adaptive.advance(0.01, 10);
+  adaptive.advance_to(0.5, {1e-6, 1e-6});
+  CHECK(adaptive.time() == 0.5);
+}
+
 TEST_CASE("a dynamic body at an attractor's centre is refused where it is listed", "[scene][errors]") {
   const std::string central = R"("forces": [{"type": "central", "center": [0, 1, 0], "mu": 2}]})";
   CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [1,0,0]}, {"position": [0,1,0]}], )" + central),
