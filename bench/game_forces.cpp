@@ -2,7 +2,8 @@
 // linear drag, a spring) as built-in terms; the same with a force applied to every body; with
 // a gravity factor and damping rate per body (and angular damping for rigid bodies); with
 // gravity moved into a one-line callback (the block path), as g times the view's mass and as
-// g over its inverse mass (a division per body and stage); with a coupled term that adds
+// g over its inverse mass (a division per body and stage); gravity built in beside a callback
+// that adds nothing (what the block path costs by itself); with a coupled term that adds
 // nothing (the staged path); and rigid bodies plain, with applied forces and torques, and
 // with their angular drag in a one-line callback (the rigid block path), and both in chains
 // of 64 joined by springs (spring pairs between particles, body springs between points of
@@ -20,7 +21,7 @@ namespace {
 
 constexpr std::uint64_t kSteps = 20;
 
-enum class Variant { fused, applied, parameters, callback, callback_divide, staged, springs };
+enum class Variant { fused, applied, parameters, callback, callback_divide, callback_empty, staged, springs };
 
 // Chains of 64: body i joined to i + 1 within its chain.
 constexpr std::size_t kChain = 64;
@@ -33,6 +34,7 @@ const char* variant_name(Variant v) {
     case Variant::parameters: return "parameters";
     case Variant::callback: return "callback";
     case Variant::callback_divide: return "callback-divide";
+    case Variant::callback_empty: return "callback-empty";
     case Variant::staged: return "staged";
     case Variant::springs: return "springs";
   }
@@ -75,6 +77,7 @@ ForceModel<T> variant_forces(Variant v, std::size_t n) {
       for (std::size_t i = 0; i < b.count; ++i) b.fy[i] += T(kGravity) / b.inv_mass[i];
     });
   }
+  if (v == Variant::callback_empty) f.add([](ParticleBlock<T>) {});  // the block path's own cost
   if (v == Variant::staged) f.add(std::make_shared<const NoCoupling<T>>());
   if (v == Variant::springs) {
     Springs chains;
@@ -164,7 +167,7 @@ void rigid_forces(benchmark::State& state, Variant v) {
 void register_all() {
   const std::string isa(isa_name(best_isa()));
   for (Variant v : {Variant::fused, Variant::applied, Variant::parameters, Variant::callback, Variant::callback_divide,
-                    Variant::staged, Variant::springs}) {
+                    Variant::callback_empty, Variant::staged, Variant::springs}) {
     const std::string name = std::string("game/") + variant_name(v) + "/rk4/float/" + isa;
     benchmark::RegisterBenchmark(name.c_str(), particle_forces<float>, v)
         ->Arg(100000)->UseRealTime()->Unit(benchmark::kMicrosecond);

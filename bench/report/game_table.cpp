@@ -47,6 +47,7 @@ void print_game_table(const Results& results, Noise& noise) {
       {"parameters", "a gravity factor and damping on every body", "fused", 60},
       {"callback", "gravity in a one-line callback (block path)", "fused", 52},
       {"callback-divide", "the same, g / inv_mass instead of g * mass", "fused", 52},
+      {"callback-empty", "built-in gravity, a callback adding nothing", "fused", 52},
       {"staged", "a coupled term that adds nothing (staged)", "fused", 52},
       {"springs", "chains of 64 joined by spring pairs (staged)", "fused", 52},
       {"rigid-fused", "rigid bodies, angular drag built in", "rigid-fused", 120},
