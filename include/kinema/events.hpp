@@ -27,7 +27,8 @@
 //   dropped. Steps with a stop event run one pass per step over the whole set. The next call
 //   goes on from there: a crossing reported at the stop's time (the stop's own, another
 //   body's or another event's) is not reported again where a body's state, rounded to T, lies
-//   just short of it.
+//   just short of it, the body starting from the state the stop left it in (a body that
+//   ParticleSet::remove moved into its index is another body: its crossings are its own).
 
 #include <cstddef>
 #include <functional>

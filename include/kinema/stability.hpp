@@ -37,7 +37,9 @@ using AccelerationFn = std::function<void(const ParticleSet<T>& bodies, T* const
 // first scaled by a rough |lambda| from 8 power steps, so that J is close to normal. Costs
 // `iterations` + 17 calls of `accelerations`, in T, and up to 21 vectors of 6 doubles per body
 // (fewer past 512 MiB). For a force model, estimate_stiffness(bodies, forces, ...) in
-// kinema/stepper.hpp does this with a stepper's accelerations.
+// kinema/stepper.hpp does this with a stepper's accelerations. Where the rates about the
+// state are not finite (a force that overflows, a state of inf or NaN) the magnitude is inf
+// or NaN, which the functions below refuse or answer for, never as a state without modes.
 template <class T>
 StiffnessEstimate estimate_stiffness(const ParticleSet<T>& bodies,
                                      const std::type_identity_t<AccelerationFn<T>>& accelerations,
@@ -67,7 +69,7 @@ enum class ImplicitMode { in_jacobian, explicit_forces };
 
 // The largest h > 0 up to which every step is stable for the estimate's mode (0: none, as
 // for Euler on an undamped oscillation; infinity when the estimate's magnitude is 0, or for
-// an implicit method's in_jacobian mode).
+// an implicit method's in_jacobian mode). kinema::Error for a magnitude that is NaN.
 double largest_stable_step(const Method& method, const StiffnessEstimate& estimate,
                            ImplicitMode mode = ImplicitMode::in_jacobian);
 

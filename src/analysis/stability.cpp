@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <limits>
 #include <numbers>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -375,6 +376,7 @@ StiffnessEstimate dominant_mode(D& f, int iterations) {
   }
   e.evaluations = f.evaluations;
   e.magnitude = std::abs(dominant);
+
   // A mode that grows (Re lambda > 0: a body falling away from a saddle, or an oscillation
   // whose finite differences lean that way) is judged as its decaying mirror: no step keeps
   // a growing mode bounded, and a method's stability is about the ones that should be.
@@ -420,9 +422,15 @@ std::pair<double, double> unit_mode_of(StiffnessEstimate e) {
   return mode_of(e);
 }
 
+// A magnitude that is NaN would pass for 0 (no mode: every step stable).
+void check_magnitude(const StiffnessEstimate& e, const char* who) {
+  if (std::isnan(e.magnitude)) throw Error(std::string(who) + ": the estimate's magnitude is NaN");
+}
+
 }  // namespace
 
 double largest_stable_step(const Method& method, const StiffnessEstimate& e, ImplicitMode mode) {
+  check_magnitude(e, "largest_stable_step");
   if (!(e.magnitude > 0)) return std::numeric_limits<double>::infinity();
   const bool in_j = mode == ImplicitMode::in_jacobian;
   if (rate_squared_overflows(e)) {
@@ -434,6 +442,7 @@ double largest_stable_step(const Method& method, const StiffnessEstimate& e, Imp
 }
 
 double growth_per_step(const Method& method, const StiffnessEstimate& e, double h, ImplicitMode mode) {
+  check_magnitude(e, "growth_per_step");
   if (!(e.magnitude > 0)) return 1;
   const bool in_j = mode == ImplicitMode::in_jacobian;
   double growth = 0;

@@ -449,7 +449,7 @@ void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& 
         if (given && std::isnan(at.value)) check_given(e, &at.value, 1, body, t0 + f * h);
         return at;
       }, tolerance_ / h);
-  if (found_at_settle(body, e, t0, theta)) return;
+  if (found_at_settle(body, e, t0, theta, ends)) return;
   EventHit<T> hit{t0 + theta * h, body, e, narrow<T>(dense_position(ends, theta)),
                   narrow<T>(dense_velocity(ends, theta))};
   std::lock_guard lock(mutex_);
@@ -459,22 +459,31 @@ void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& 
 }
 
 template <class T>
-void EventWatch<T>::remember_settled(const Stop& stop, double h) {
+void EventWatch<T>::remember_settled(const Stop& stop, double h, const T* const* state) {
   settled_ = stop;
   settled_hits_.clear();
   const double window = std::sqrt(std::numeric_limits<T>::epsilon()) * h;
   for (const EventHit<T>& hit : hits_) {
-    if (hit.time <= stop.time && hit.time >= stop.time - window) settled_hits_.emplace_back(hit.body, hit.event);
+    if (hit.time > stop.time || hit.time < stop.time - window) continue;
+    SettledHit s{hit.body, hit.event, {}};
+    for (int a = 0; a < 6; ++a) s.state[a] = state[a][hit.body];
+    settled_hits_.push_back(s);
   }
   std::sort(settled_hits_.begin(), settled_hits_.end());
 }
 
 // A crossing a stop left the set at, found again at the next call's start where the body's
-// state in T lies a rounding short of it: the same crossing, reported already, not a new one.
+// state in T lies a rounding short of it: the same crossing, reported already, not a new one,
+// if the body starts the step where it was settled.
 template <class T>
-bool EventWatch<T>::found_at_settle(std::size_t body, int e, double t0, double theta) const {
+bool EventWatch<T>::found_at_settle(std::size_t body, int e, double t0, double theta, const StepEnds& ends) const {
   if (!settled_ || settled_->time != t0 || theta > std::sqrt(std::numeric_limits<T>::epsilon())) return false;
-  return std::binary_search(settled_hits_.begin(), settled_hits_.end(), std::pair<std::size_t, int>(body, e));
+  const auto at = std::lower_bound(settled_hits_.begin(), settled_hits_.end(), SettledHit{body, e, {}});
+  if (at == settled_hits_.end() || at->body != body || at->event != e) return false;
+  for (int d = 0; d < 3; ++d) {
+    if (double(at->state[d]) != ends.x0[d] || double(at->state[3 + d]) != ends.v0[d]) return false;
+  }
+  return true;
 }
 
 template <class T>
@@ -526,7 +535,7 @@ void EventWatch<T>::settle(const Workers& workers, ParticleSet<T>& b, const Even
       }
     }
   });
-  remember_settled(stop, h);  // last: a settle that throws leaves the one before
+  remember_settled(stop, h, state);  // last: a settle that throws leaves the one before
 }
 
 // The rates at the step's end, then at its start (the set put back there for the probe), then
@@ -566,7 +575,7 @@ void EventWatch<T>::settle(const Workers& workers, RigidBodySet<T>& b, RigidBloc
       for (int c = 0; c < 13; ++c) state[c][i] = T(y[c]);
     }
   });
-  remember_settled(stop, h);  // last: a settle that throws leaves the one before
+  remember_settled(stop, h, state);  // last: a settle that throws leaves the one before
 }
 
 template <class T>

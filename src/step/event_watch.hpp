@@ -18,6 +18,8 @@
 
 namespace kinema {
 
+struct StepEnds;  // kinema/dense_output.hpp
+
 template <class T>
 class RigidBlockPath;
 
@@ -110,9 +112,10 @@ class EventWatch {
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
                          double h, std::uint32_t* found) const;
   void locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0, double h);
-  // settle's record of the stop and of the (body, event) hits at its time.
-  void remember_settled(const Stop& stop, double h);
-  bool found_at_settle(std::size_t body, int e, double t0, double theta) const;
+  // settle's record of the stop and of the (body, event) hits at its time, with the state
+  // each body was settled at (`state`: its six position and velocity arrays).
+  void remember_settled(const Stop& stop, double h, const T* const* state);
+  bool found_at_settle(std::size_t body, int e, double t0, double theta, const StepEnds& ends) const;
 
   std::vector<Event<T>> events_;
   std::vector<kernels::EventScanJob<T>> jobs_;  // the built-in events' sign tests
@@ -123,7 +126,15 @@ class EventWatch {
   std::vector<EventHit<T>> hits_;
   std::optional<Stop> stop_;
   std::optional<Stop> settled_;  // the stop the set was last left at
-  std::vector<std::pair<std::size_t, int>> settled_hits_;  // (body, event) reported at its time, sorted
+  // A hit reported at the stop's time: its body and event, and the body's state as settled
+  // (a body another moved into its place since, remove(), is not that body).
+  struct SettledHit {
+    std::size_t body;
+    int event;
+    std::array<T, 6> state;
+    bool operator<(const SettledHit& o) const { return body != o.body ? body < o.body : event < o.event; }
+  };
+  std::vector<SettledHit> settled_hits_;  // sorted by body, then event
   AlignedArray<T> acc_[6];  // settle: the accelerations at both ends
   std::array<AlignedArray<T>, 13> end_state_, end_rates_;  // a rigid settle: the step's end
 };

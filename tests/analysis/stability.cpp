@@ -201,6 +201,33 @@ TEST_CASE("the stiffness estimate of an undamped spring is its angular frequency
   CHECK(estimate_stiffness(bf, ff).magnitude == Approx(omega).epsilon(0.01));  // in float too
 }
 
+TEST_CASE("a stiffness estimate that is not finite never reads as a state without modes", "[stability][errors]") {
+  // A NaN magnitude once read as 0: every step stable, no growth.
+  ForceModel<float> f;
+  f.add(Spring{{0, 0, 0}, 100, 0});
+  ParticleSet<float> overflowing;  // its spring force, 100 x 1e37, overflows float
+  overflowing.add({1, 0, 0}, {0, 0, 0}, 1);
+  overflowing.add({1e37f, 0, 0}, {0, 0, 0}, 1);
+  ParticleSet<float> gone_bad;
+  gone_bad.add({1, 0, 0}, {0, 0, 0}, 1);
+  gone_bad.add({0, 0, 0}, {0, 0, 0}, 1);
+  gone_bad.px()[1] = std::numeric_limits<float>::quiet_NaN();  // through the arrays
+  for (const ParticleSet<float>* set : {&overflowing, &gone_bad}) {
+    const StiffnessEstimate e = estimate_stiffness(*set, f);
+    CHECK_FALSE(std::isfinite(e.magnitude));
+    if (std::isnan(e.magnitude)) {
+      CHECK_THROWS_WITH(largest_stable_step(rk4, e), "largest_stable_step: the estimate's magnitude is NaN");
+    } else {
+      CHECK(largest_stable_step(rk4, e) == 0);  // an infinitely fast mode: no step holds it
+    }
+  }
+  const StiffnessEstimate nan{std::numeric_limits<double>::quiet_NaN(), 1, 0};
+  CHECK_THROWS_WITH(largest_stable_step(rk4, nan), "largest_stable_step: the estimate's magnitude is NaN");
+  CHECK_THROWS_WITH(growth_per_step(euler, nan, 1), "growth_per_step: the estimate's magnitude is NaN");
+  overflowing.px()[1] = 1;  // finite again: an oscillation at omega = 10, rk4 stable to 2 sqrt(2) / 10
+  CHECK(largest_stable_step(rk4, estimate_stiffness(overflowing, f)) == Approx(0.2828).epsilon(0.01));
+}
+
 TEST_CASE("predicted stable steps match bisected blow-ups within 2%", "[prediction]") {
   // An undamped oscillator (omega = 20): imaginary-axis limits.
   ForceModel<double> spring;

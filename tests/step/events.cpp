@@ -700,6 +700,31 @@ TEST_CASE("calls that stop again and again make progress: a crossing a stop sett
   CHECK(stops > 10);
 }
 
+TEST_CASE("a body moved into a stopped body's place keeps its own crossing", "[events]") {
+  // Two bodies land 2 us apart; the first stops the call and the game removes it: the last
+  // body moves into its index. Its crossing, in the next step's first sqrt(eps) h, is its own.
+  ForceModel<float> f;
+  f.add(Gravity{{0, -10, 0}});
+  for (const bool despawn : {false, true}) {
+    INFO("despawn " << despawn);
+    Stepper<float> s(f, rk4, test::serial_options());
+    s.set_events({{{PlaneEvent{{0, 1, 0}, 0}, Crossing::down, EventAction::stop}}});
+    ParticleSet<float> p;
+    p.add({0, 5.0f, 0}, {0, 0, 0}, 1);     // lands at t = 1
+    p.add({1, 5.00002f, 0}, {0, 0, 0}, 1);  // about 2e-6 s later
+    std::vector<EventHit<float>> hits;
+    for (int k = 0; k < 120; ++k) {
+      s.step(p, 1.0f / 60);
+      hits.insert(hits.end(), s.event_hits().begin(), s.event_hits().end());
+      if (despawn && hits.size() == 1 && p.size() == 2) p.remove(0);
+    }
+    REQUIRE(hits.size() == 2);
+    CHECK(hits[1].time > hits[0].time);
+    CHECK(hits[1].position[0] == 1);  // the second body's own landing
+    CHECK(hits[1].time - hits[0].time < 1e-5);
+  }
+}
+
 TEST_CASE("after a stop, no crossing reported at its time is found again: other bodies, other events",
           "[events]") {
   // Three bodies on one path, a record and a stop event on one plane: every one of the six
