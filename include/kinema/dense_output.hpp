@@ -16,6 +16,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <initializer_list>
+#include <limits>
 #include <string>
 
 #include "kinema/bodies.hpp"
@@ -117,12 +118,23 @@ struct DenseSpan {
 
 }  // namespace detail
 
+// The fraction of the step [t0, t1] at t, which may lie up to 4 ulps of the ends' magnitude
+// outside it (an event hit's time, t0 + theta h, can round past the clock's end of the step):
+// kinema::Error beyond that, or before end() (`who` names the caller).
+inline double step_fraction(double t, double t0, double t1, bool ended, const char* who) {
+  const double slack = 4 * std::numeric_limits<double>::epsilon() * std::max(std::abs(t0), std::abs(t1));
+  if (!ended || !(t >= t0 - slack && t <= t1 + slack)) {
+    throw Error(std::string(who) + ": t must lie inside the last step, after end()");
+  }
+  return t1 > t0 ? std::clamp((t - t0) / (t1 - t0), 0.0, 1.0) : 1;
+}
+
 // The state of every body of a set at any time inside a step, for a caller that wants it
 // (drawing between steps at the step's own accuracy, sampling at exact times):
 //   dense.begin(stepper, bodies);   // before the step: x, v and the accelerations there
 //   stepper.step(bodies, h);
 //   dense.end(stepper, bodies);     // after it
-//   dense.state_at(t, x, v);        // any t in [t0, t0 + h]
+//   dense.state_at(t, x, v);        // any t in [t0, t0 + h] (to 4 ulps: a hit's time)
 // Each begin and end evaluates the model once (Stepper::accelerations) and copies the state;
 // after a dopri5 step, end also takes the step's five inner stages again (five more
 // evaluations, on a copy of the set) for dopri5's own interpolant. A set that asks nothing
@@ -174,10 +186,7 @@ class DenseOutput {
       }
     }
   }
-  double fraction(double t) const {
-    if (!ended_ || !(t >= t0_ && t <= t1_)) throw Error("DenseOutput: t must lie inside the last step, after end()");
-    return t1_ > t0_ ? (t - t0_) / (t1_ - t0_) : 1;
-  }
+  double fraction(double t) const { return step_fraction(t, t0_, t1_, ended_, "DenseOutput"); }
 
  private:
   struct End {
@@ -276,10 +285,7 @@ class RigidDenseOutput {
   // Every body at time t: x, v, L into three arrays each, q into four (w x y z), the set's
   // size each.
   void state_at(double t, T* const x[3], T* const v[3], T* const q[4], T* const l[3]) const {
-    if (!ended_ || !(t >= t0_ && t <= t1_)) {
-      throw Error("RigidDenseOutput: t must lie inside the last step, after end()");
-    }
-    const double theta = t1_ > t0_ ? (t - t0_) / (t1_ - t0_) : 1, h = t1_ - t0_;
+    const double theta = step_fraction(t, t0_, t1_, ended_, "RigidDenseOutput"), h = t1_ - t0_;
     const HermiteWeights w = HermiteWeights::at(theta);
     T* const out[kComponents] = {x[0], x[1], x[2], v[0], v[1], v[2], q[0], q[1], q[2], q[3], l[0], l[1], l[2]};
     for (std::size_t i = 0; i < size_; ++i) {

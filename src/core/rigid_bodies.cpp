@@ -20,15 +20,15 @@ void check_finite(const std::array<T, N>& v, std::size_t body, const char* field
   }
 }
 
-// q over its norm, formed in double. Where the squares leave double's range (components past
-// 1e154 or under 1e-154, in double sets), the components are first scaled by a power of two
-// (exactly); elsewhere the direct form (and its bits).
+// q over its norm, formed in double. Where the sum of squares leaves double's normal range
+// (components past 1e154 or under 1e-154, in double sets), the components are first scaled
+// by a power of two (exactly); elsewhere the direct form (and its bits).
 template <class T>
 Quat<T> unit_quaternion(const Quat<T>& q, std::size_t body) {
   std::array<double, 4> c{double(q[0]), double(q[1]), double(q[2]), double(q[3])};
   double squares = 0;
   for (double x : c) squares += x * x;
-  if (!(squares > 0 && std::isfinite(squares))) {
+  if (!(squares >= std::numeric_limits<double>::min() && std::isfinite(squares))) {  // subnormal squares lose digits
     double largest = 0;
     for (double x : c) largest = std::max(largest, std::abs(x));
     if (!(largest > 0)) fail(body, "orientation quaternion is zero");

@@ -617,7 +617,10 @@ class MethodSearch {
     }
     const double fewest = std::isfinite(stable) ? std::ceil(duration_ / stable) : 1;
     if (fewest > double(kMostPilotSteps)) {
-      note_too_stiff(m, stable, fewest);
+      if (m.kind != MethodKind::linearly_implicit) return note_too_stiff(m, stable, fewest), true;
+      char text[128];  // the explicit ones' note counts them alone
+      std::snprintf(text, sizeof text, " needs over 2^22 steps to stay stable (%.2g of %.2g s)", fewest, stable);
+      note(std::string(m.name) + text);
       return true;
     }
     const auto least = std::uint64_t(fewest);

@@ -241,14 +241,21 @@ const Vec3<double>* listed_position(const Scene& scene, bool rigid, std::uint32_
   return i < scene.particles.size() ? &scene.particles[i].position : nullptr;
 }
 
-// A stretched spring whose ends start at one point pushes them along no direction: its force
-// jumps there from zero to k rest (and the stiffness estimate, from finite differences, with it).
+// Whether two positions are one point in the scene's precision.
+bool same_point(const Vec3<double>& a, const Vec3<double>& b, Precision precision) {
+  if (precision != Precision::single) return a == b;
+  return float(a[0]) == float(b[0]) && float(a[1]) == float(b[1]) && float(a[2]) == float(b[2]);
+}
+
+// A spring of positive rest length whose ends start at one point pushes them apart along no
+// direction: its force jumps there from zero to k rest (and the stiffness estimate, from
+// finite differences, with it).
 void check_coincident_ends(const Scene& scene, bool rigid, const Node& pairs_node, const Springs& springs) {
   for (std::size_t k = 0; k < springs.pairs.size(); ++k) {
     const SpringPair& p = springs.pairs[k];
     const Vec3<double>* a = listed_position(scene, rigid, p.i);
     const Vec3<double>* b = listed_position(scene, rigid, p.j);
-    if (!a || !b || *a != *b || !(p.rest > 0 && p.k > 0)) continue;
+    if (!a || !b || !same_point(*a, *b, scene.precision) || !(p.rest > 0 && p.k > 0)) continue;
     char text[224];
     std::snprintf(text, sizeof text,
                   "bodies %u and %u both start at (%g, %g, %g) with rest length %g: the spring has no direction "

@@ -4,6 +4,8 @@
 
 #include "kinema/diagnostics.hpp"
 #include "kinema/error.hpp"
+#include "step/adaptive_driver.hpp"
+#include "step/stepper_access.hpp"
 
 namespace kinema {
 
@@ -147,6 +149,10 @@ void World<T>::restore(const CheckpointReader& in) {
   }
   particles = std::move(p);
   rigid = std::move(r);
+  // The particles' continuation goes on with the set the record holds: an edit after this is
+  // seen as a change (Stepper::advance_to starts afresh).
+  AdaptiveContinuation& cont = StepperAccess<T>::continuation(particle_stepper_);
+  if (cont.active) cont.inputs = stage_inputs_digest(particles);
 }
 
 template class World<float>;

@@ -106,7 +106,7 @@ class AdaptiveRun {
     staged_.reserve(bodies_.padded_size());
     interrupt_ = stops.interrupt;
     double t = core_.clock.time();
-    const bool continues = continuation.continues(t_end, tol_, bodies_) && continuation.max_step == max_step;
+    const bool continues = continuation.active && continuation.max_step == max_step;  // checked by the stepper
     continuation.active = false;
     if (t_end == t) return stats_;
     const Method& method = core_.method;
@@ -347,7 +347,8 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, R
   AdaptiveStats stats;
   double t = core.clock.time();
   if (t_end == t) return stats;
-  double h = tol.initial_step > 0 ? tol.initial_step : rigid_first_step(core, workers, bodies, t, t_end - t, tol);
+  double h = tol.initial_step;
+  if (!(h > 0)) h = rigid_first_step(core, workers, bodies, t, t_end - t, tol), ++stats.evaluations;
   while (t < t_end) {
     const auto [size, last] = next_attempt<T>(t, t_end, h, tol.max_step);
     if (underflows(t, size)) throw Error(underflow_message(t, type_name<T>()));

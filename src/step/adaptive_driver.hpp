@@ -15,14 +15,14 @@
 
 namespace kinema {
 
-// What a call stopped early leaves for the next one to the same end: the size to try, the
-// controller's state, and whether stage 0's accelerations are kept in the staged path (with
-// the acceleration scale they carry; 0: none).
 // What stage 0's accelerations depend on in a set: a CRC-32C of its positions, velocities,
 // inverse masses, applied forces and per-body parameters.
 template <class T>
 std::uint32_t stage_inputs_digest(const ParticleSet<T>& bodies);
 
+// What a call stopped early leaves for the next one to the same end: the size to try, the
+// controller's state, and whether stage 0's accelerations are kept in the staged path (with
+// the acceleration scale they carry; 0: none).
 struct AdaptiveContinuation {
   bool active = false;
   double t_end = 0, rtol = 0, atol = 0, max_step = 0;
@@ -30,8 +30,9 @@ struct AdaptiveContinuation {
   StepController::State controller;
   double kept_scale = 0;
   std::size_t bodies = 0;
-  // stage_inputs_digest of the set where the call stopped; none for a continuation restored
-  // from a checkpoint, which brings its set with it.
+  // stage_inputs_digest of the set where the call stopped (or that a checkpoint restored with
+  // it); none where a record's continuation was restored without its set
+  // (CheckpointReader::restore_stepper alone), whose caller restores that set.
   std::optional<std::uint32_t> inputs;
 
   // Whether a call to `end` with `t` on `set` goes on from here: not after the set was
@@ -65,7 +66,8 @@ struct AdaptiveEvents {
 // Steps the bodies from the core's clock to t_end on `workers`, no step longer than
 // `max_step`; the last step lands on t_end, unless `stops` say to stop sooner: then
 // `continuation` keeps what the next call to t_end goes on from (and a call that continues
-// it takes it). Each accepted step is scanned for `events`; a stop event ends the call with
+// it takes it: Stepper::advance_to has checked that it goes on, or made it inactive). Each
+// accepted step is scanned for `events`; a stop event ends the call with
 // the set and the clock at it. The request must have passed check_adaptive. Throws
 // kinema::Error when the step size underflows.
 template <class T>
@@ -76,8 +78,8 @@ AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, P
 
 // Rigid bodies on the rigid path: the same steps, sizes and last step, the error over x, v, q
 // and L (RigidBlockPath::attempt); every stage evaluated (no first stage reused), no stop
-// requests; `events` as above, on the centres. An initial_step of 0 starts at a hundredth of
-// the span.
+// requests; `events` as above, on the centres. An initial_step of 0 starts at the estimate
+// 0.01 |y| / |f(y)| over the 13 components, as the particles' over their 6.
 template <class T>
 AdaptiveStats advance_adaptively(StepperCore<T>& core, const Workers& workers, RigidBodySet<T>& bodies,
                                  double t_end, const Tolerances& tolerances, const AdaptiveEvents<T>& events = {});

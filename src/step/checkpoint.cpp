@@ -8,6 +8,7 @@
 #include <limits>
 #include <string>
 #include <string_view>
+#include <type_traits>
 #include <utility>
 
 #include "kinema/diagnostics.hpp"
@@ -223,9 +224,14 @@ CheckpointWriter::Record make_record(const Set& bodies, const Stepper<T>& steppe
   if (torques != nullptr && torques->active()) flags |= kTorques, Codec::applied(*torques, arrays);
   Codec::parameters(Codec::parameters(bodies), kind, flags, arrays);
   // A call that ended leaves its fields behind, unread: a record holds them only while one
-  // goes on, so that equal states make equal records.
+  // goes on, so that equal states make equal records. One the set has changed since (as
+  // Stepper::advance_to would judge it) would not go on: neither does the record's.
   const AdaptiveContinuation& live = StepperAccess<T>::continuation(stepper);
-  const AdaptiveContinuation cont = live.active ? live : AdaptiveContinuation{};
+  bool goes_on = live.active;
+  if constexpr (std::is_same_v<Set, ParticleSet<T>>) {
+    goes_on = goes_on && (!live.inputs || *live.inputs == stage_inputs_digest(bodies));
+  }
+  const AdaptiveContinuation cont = goes_on ? live : AdaptiveContinuation{};
   if (cont.active && cont.kept_scale > 0) {
     flags |= kKeptStage;
     for (const T* a : StepperAccess<T>::staged(stepper)->first_stage()) arrays.push_back(a);

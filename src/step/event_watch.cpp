@@ -466,7 +466,7 @@ void EventWatch<T>::remember_settled(const Stop& stop, double h, const T* const*
   for (const EventHit<T>& hit : hits_) {
     if (hit.time > stop.time || hit.time < stop.time - window) continue;
     SettledHit s{hit.body, hit.event, {}};
-    for (int a = 0; a < 6; ++a) s.state[a] = state[a][hit.body];
+    for (int d = 0; d < 3; ++d) s.position[d] = state[d][hit.body];
     settled_hits_.push_back(s);
   }
   std::sort(settled_hits_.begin(), settled_hits_.end());
@@ -474,14 +474,14 @@ void EventWatch<T>::remember_settled(const Stop& stop, double h, const T* const*
 
 // A crossing a stop left the set at, found again at the next call's start where the body's
 // state in T lies a rounding short of it: the same crossing, reported already, not a new one,
-// if the body starts the step where it was settled.
+// if the body starts the step where it was settled (a velocity changed since still meets it).
 template <class T>
 bool EventWatch<T>::found_at_settle(std::size_t body, int e, double t0, double theta, const StepEnds& ends) const {
   if (!settled_ || settled_->time != t0 || theta > std::sqrt(std::numeric_limits<T>::epsilon())) return false;
   const auto at = std::lower_bound(settled_hits_.begin(), settled_hits_.end(), SettledHit{body, e, {}});
   if (at == settled_hits_.end() || at->body != body || at->event != e) return false;
   for (int d = 0; d < 3; ++d) {
-    if (double(at->state[d]) != ends.x0[d] || double(at->state[3 + d]) != ends.v0[d]) return false;
+    if (double(at->position[d]) != ends.x0[d]) return false;
   }
   return true;
 }

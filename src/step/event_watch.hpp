@@ -112,8 +112,8 @@ class EventWatch {
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
                          double h, std::uint32_t* found) const;
   void locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0, double h);
-  // settle's record of the stop and of the (body, event) hits at its time, with the state
-  // each body was settled at (`state`: its six position and velocity arrays).
+  // settle's record of the stop and of the (body, event) hits at its time, with the position
+  // each body was settled at (`state`: its position arrays, then its velocity arrays).
   void remember_settled(const Stop& stop, double h, const T* const* state);
   bool found_at_settle(std::size_t body, int e, double t0, double theta, const StepEnds& ends) const;
 
@@ -126,12 +126,12 @@ class EventWatch {
   std::vector<EventHit<T>> hits_;
   std::optional<Stop> stop_;
   std::optional<Stop> settled_;  // the stop the set was last left at
-  // A hit reported at the stop's time: its body and event, and the body's state as settled
-  // (a body another moved into its place since, remove(), is not that body).
+  // A hit reported at the stop's time: its body and event, and the body's position as
+  // settled (a body moved into its index since, by remove(), is not that body).
   struct SettledHit {
     std::size_t body;
     int event;
-    std::array<T, 6> state;
+    std::array<T, 3> position;
     bool operator<(const SettledHit& o) const { return body != o.body ? body < o.body : event < o.event; }
   };
   std::vector<SettledHit> settled_hits_;  // sorted by body, then event

@@ -103,6 +103,7 @@ struct Stepper<T>::Impl {
         return stats;
       }
     }
+    if (!continues) continuation.active = false;  // the driver goes on from an active one
     workers.run(std::uint64_t(StepperCall::adaptive), bodies.size(), 2, [&](const Workers& w) {
       stats = advance_adaptively(core, w, bodies, t_end, tolerances, max_step, continuation, stops, events);
       return double(bodies.size()) * double(stats.evaluations);

@@ -88,7 +88,8 @@ TEST_CASE("an orientation of any finite size is normalized: only zero is refused
   const double tiny = 1e-200, huge = 1e300;
   // Squares past double's range: (1e300)^2 is inf and (1e-200)^2 is 0.
   for (const Quat<double>& q : {Quat<double>{huge, 0, 0, huge}, Quat<double>{tiny, tiny, 0, 0},
-                                Quat<double>{0, 3 * huge, 4 * huge, 0}}) {
+                                Quat<double>{0, 3 * huge, 4 * huge, 0}, Quat<double>{1e-160, 0, 0, 0},
+                                Quat<double>{2e-162, 2e-162, 0, 0}}) {  // the last two: subnormal squares
     const std::size_t i = set.add({.orientation = q});
     const Quat<double> added = set.orientation(i);
     set.set_orientation(i, {1, 0, 0, 0});
@@ -103,7 +104,7 @@ TEST_CASE("an orientation of any finite size is normalized: only zero is refused
   CHECK(set.orientation(0)[0] == Approx(std::sqrt(0.5)));
   CHECK_THROWS_WITH(set.add({.orientation = {0, 0, 0, 0}}), Catch::Contains("orientation quaternion is zero"));
   CHECK_THROWS_WITH(set.set_orientation(0, {0, 0, 0, 0}), Catch::Contains("orientation quaternion is zero"));
-  CHECK(set.size() == 3);
+  CHECK(set.size() == 5);
 }
 
 TEST_CASE("bad bodies are refused with the body and field named", "[bodies][errors]") {

@@ -237,6 +237,51 @@ TEST_CASE("a call stopped early on a clock below zero goes on from a checkpoint 
   CHECK(bits(resumed, r) == bits(straight, a));
 }
 
+TEST_CASE("a stopped call's set edited before or after a checkpoint starts afresh once restored", "[checkpoint][adaptive]") {
+  // Spring to the origin; the call stops after each step. A fresh stepper at the same clock
+  // and set, with nothing kept, is what the edited set must get.
+  ForceModel<double> f;
+  f.add(Spring{{0, 0, 0}, 1, 0});
+  const Tolerances tol{1e-6, 1e-6};
+  const auto always = [] { return true; };
+  const auto stopped = [&](Stepper<double>& s) {
+    ParticleSet<double> b;
+    b.add({1, 0, 0}, {0, 0, 0}, 1);
+    for (int k = 0; k < 3; ++k) REQUIRE(s.advance_to(b, 10, tol, always).stopped);
+    return b;
+  };
+  const auto fresh_step = [&](const ParticleSet<double>& edited, double t) {
+    ParticleSet<double> b = edited;
+    Stepper<double> fresh(f, dopri5, test::serial_options());
+    fresh.set_time(t);
+    fresh.advance_to(b, 10, tol, always);
+    return test::state_hash(b);
+  };
+  // Edited, then saved: the record holds no continuation.
+  Stepper<double> s(f, dopri5, test::serial_options());
+  ParticleSet<double> a = stopped(s);
+  a.set_position(0, {-3, 0, 0});
+  ParticleSet<double> resumed;
+  Stepper<double> r(f, dopri5, test::serial_options());
+  CheckpointReader(bits(a, s)).restore(0, resumed, r);
+  r.advance_to(resumed, 10, tol, always);
+  CHECK(test::state_hash(resumed) == fresh_step(a, s.time()));
+  // Saved, restored into a world, then edited there.
+  Scene scene;
+  scene.particles.push_back(BodySpec{{1, 0, 0}});
+  scene.forces.push_back(Spring{{0, 0, 0}, 1, 0});
+  World<double> world(scene, dopri5, test::serial_options()), again(scene, dopri5, test::serial_options());
+  for (int k = 0; k < 3; ++k) REQUIRE(world.advance_to(10, tol, always).stopped);
+  CheckpointWriter out;
+  world.save(out);
+  again.restore(CheckpointReader(out.bytes()));
+  again.particles.set_velocity(0, {0, 2, 0});
+  const double t = again.time();
+  const ParticleSet<double> edited = again.particles;
+  again.advance_to(10, tol, always);
+  CHECK(test::state_hash(again.particles) == fresh_step(edited, t));
+}
+
 TEST_CASE("a call stopped early keeps its stable-step cap and the forces applied for it", "[checkpoint][adaptive]") {
   // The cap comes from the bodies at the call's start and the forces last to the call's end:
   // a call that goes on must not take either from the bodies as they are when it resumes.

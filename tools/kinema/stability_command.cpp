@@ -197,7 +197,8 @@ MeasuredStep measured_step(const Scene& scene, const Method& m, double guess, do
     stop_if_interrupted();
     // The geometric mean; from the square roots where the product leaves double's range.
     const double product = lo * hi;
-    const double mid = product > 0 && std::isfinite(product) ? std::sqrt(product) : std::sqrt(lo) * std::sqrt(hi);
+    const double mid = product >= std::numeric_limits<double>::min() && std::isfinite(product) ? std::sqrt(product)
+                                                                                               : std::sqrt(lo) * std::sqrt(hi);
     (ok(mid) ? lo : hi) = mid;
   }
   return {lo, hi >= duration};
