@@ -3,7 +3,7 @@
 // and with four (the floor, a distance, a speed and a user function); and dopri5 (the staged
 // path) without events and with the floor, on fixed steps and under advance_to. The heights spread
 // over 0.5 .. 500 m, so a few bodies in a thousand cross per step; the set is put back
-// every 4 simulated seconds. Same bodies, same run, 1 thread at the best ISA. Rigid bodies
+// every 4 simulated seconds. far-plane: a plane no body reaches (the kernel's test alone). Same bodies, same run, 1 thread at the best ISA. Rigid bodies
 // (rigid-float, rigid-double) fall the same way, turning, on the fused rigid kernel: off and
 // floor.
 #include <benchmark/benchmark.h>
@@ -31,12 +31,16 @@ const ParticleSet<T>& falling_bodies(std::size_t n) {
   });
 }
 
-enum class Watch { none, floor, four };
+enum class Watch { none, floor, far, four };
 
 template <class T>
 EventOptions<T> watched(Watch w) {
   EventOptions<T> o;
   if (w == Watch::none) return o;
+  if (w == Watch::far) {  // a plane no body reaches: the kernel's test alone, nothing to locate
+    o.events.push_back({PlaneEvent{{0, 1, 0}, -1e6}, Crossing::down});
+    return o;
+  }
   o.events.push_back({PlaneEvent{{0, 1, 0}, 0}, Crossing::down});
   if (w == Watch::floor) return o;
   o.events.push_back({DistanceEvent{{150, 250, 100}, 20}, Crossing::either});
@@ -154,6 +158,7 @@ void register_all() {
   };
   add("off", Watch::none, rk4);
   add("floor", Watch::floor, rk4);
+  add("far-plane", Watch::far, rk4);
   add("four", Watch::four, rk4);
   add("dopri5-off", Watch::none, dopri5);
   add("dopri5-floor", Watch::floor, dopri5);

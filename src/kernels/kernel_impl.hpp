@@ -331,6 +331,15 @@ KINEMA_INLINE bool near_plane(const StateSource<value_t<V>>& in, const V& along0
   return any_lane(lane_min(above, below) >= V(0));
 }
 
+// Lists batch i with the probe; returns where its start state goes: packed, the k-th listed
+// batch at k batches from `before` (lines reused every step, so they stay in cache).
+template <class V>
+KINEMA_INLINE std::size_t listed(EventProbe<value_t<V>>& probe, std::size_t i) {
+  const std::size_t k = probe.found++;
+  probe.batches[k] = std::uint32_t(i);
+  return k * Lane<V>::width;
+}
+
 // After a batch's store: the state it started from (x0, v0), where the job asks for it (a
 // branch the batches all take the same way); with a probe, only where a body may have crossed
 // an event on its way to (x1, v1). along0: along_before's value.
@@ -338,14 +347,15 @@ template <class V>
 KINEMA_INLINE void keep_before(const StateSource<value_t<V>>& in, std::size_t i, const Vec<V>& x0, const Vec<V>& v0,
                                const Vec<V>& x1, const Vec<V>& v1, const V& along0) {
   if (in.before == nullptr) return;
+  std::size_t at = i;
   if (in.axis_in != nullptr) {
     if (!near_plane<V>(in, along0, load<V>(in.axis_out + i))) return;  // a superset of event_scan's exact test
-    in.probe->batches[in.probe->found++] = std::uint32_t(i);
+    at = listed<V>(*in.probe, i);
   } else if (in.probe != nullptr) {
     if (!probe_crossed(*in.probe, x0.c, v0.c, x1.c, v1.c)) return;
-    in.probe->batches[in.probe->found++] = std::uint32_t(i);
+    at = listed<V>(*in.probe, i);
   }
-  for (int d = 0; d < 3; ++d) store(in.before[d] + i, x0.c[d]), store(in.before[3 + d] + i, v0.c[d]);
+  for (int d = 0; d < 3; ++d) store(in.before[d] + at, x0.c[d]), store(in.before[3 + d] + at, v0.c[d]);
 }
 
 // Asks for the state 1 KiB ahead, once per cache line, and for the source where it is not
@@ -514,6 +524,16 @@ void stage(const StageJob<value_t<V>>& job, std::size_t begin, std::size_t end) 
       store3(job.v.out, i, vs);
     }
     store3(job.acc, i, accel<Quadratic, Central>(f, body, p, xs, vs));
+  }
+}
+
+template <bool Quadratic, bool Central, class V>
+void end_accelerations(const EndsJob<value_t<V>>& job) {
+  const Forces<V> f(*job.forces, value_t<V>(1));
+  const auto body = body_terms_at<Applied::if_present>(f, load<V>(job.inv_mass), job.per_body, 0);
+  for (int e = 0; e < 2; ++e) {
+    const Vec<V> x = load3<V>(job.x[e], 0), v = load3<V>(job.v[e], 0);
+    store3(job.acc[e], 0, accel<Quadratic, Central>(f, body, linear_part(body, anchored(f, x)), x, v));
   }
 }
 

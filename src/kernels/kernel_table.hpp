@@ -35,6 +35,10 @@ KernelTable<value_t<V>> make_table(Isa isa) {
   t.stage[0][1] = &stage<false, true, V>;
   t.stage[1][0] = &stage<true, false, V>;
   t.stage[1][1] = &stage<true, true, V>;
+  t.end_accelerations[0][0] = &end_accelerations<false, false, V>;
+  t.end_accelerations[0][1] = &end_accelerations<false, true, V>;
+  t.end_accelerations[1][0] = &end_accelerations<true, false, V>;
+  t.end_accelerations[1][1] = &end_accelerations<true, true, V>;
   t.combine = &combine<V>;
   t.add_forces = &add_forces<V>;
   t.nbody = &nbody<V>;

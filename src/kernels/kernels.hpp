@@ -171,8 +171,9 @@ struct FusedJob {
   // events' test reads both ends of the step from there and the set). Null: nowhere.
   T* const* before = nullptr;
   // With `before`: the events' sign test, run on both ends of each batch's step in registers;
-  // only the batches where a body may have crossed store their start state. Null: every
-  // batch stores it.
+  // only the batches where a body may have crossed store their start state, packed: the k-th
+  // batch listed (EventProbe::batches) at k * width from `before`. Null: every batch stores
+  // it at its own place.
   EventProbe<T>* probe = nullptr;
 };
 template <class T>
@@ -289,6 +290,21 @@ struct StageJob {
 };
 template <class T>
 using StageFn = void (*)(const StageJob<T>& job, std::size_t begin, std::size_t end);
+
+// The local accelerations of one SIMD group at both ends of a step (an event's crossing):
+// acc[e] at (x[e], v[e]), e = 0 the start, 1 the end, every array from the group's first body.
+// The same operations as StageJob's at accel_scale 1 with no combinations, so the same bits.
+template <class T>
+struct EndsJob {
+  const LocalForces<T>* forces;
+  const T* x[2][3];
+  const T* v[2][3];
+  const T* inv_mass;
+  PerBody<T> per_body;
+  T* acc[2][3];
+};
+template <class T>
+using EndsFn = void (*)(const EndsJob<T>& job);
 
 template <class T>
 struct CombineJob {
@@ -425,6 +441,7 @@ struct KernelTable {
   FusedFn<T> fused[kBuiltinCount][2][kFusedVariants];
   RigidFn<T> rigid[kBuiltinCount][2][2];
   StageFn<T> stage[2][2];
+  EndsFn<T> end_accelerations[2][2];  // [quadratic drag][central terms]
   CombineFn<T> combine;
   AddForcesFn<T> add_forces;
   NBodyFn<T> nbody;

@@ -233,13 +233,25 @@ void EventWatch<T>::finish(std::optional<double> until) {
 
 template <class T>
 void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
-  if (slice.first >= call.size || (slice.batches != nullptr && slice.batch_count == 0)) return;
+  if (slice.batches != nullptr) return scan_listed(call, slice, t0, h);
+  if (slice.first >= call.size) return;
   const std::size_t real = std::min(slice.count, call.size - slice.first);
   // A slice is at most a block (the kernels' own test) and every body of it may cross.
   std::uint32_t found[std::max(kBlockBodies, kEventSliceBodies<T>)];
   for (std::size_t e = 0; e < events_.size(); ++e) {
     const std::size_t n = candidates(int(e), call, slice, real, t0, h, found);
     for (std::size_t k = 0; k < n && found[k] < real; ++k) locate(int(e), call, slice, found[k], t0, h);
+  }
+}
+
+// Each batch the kernel's probe listed as a slice of its own, its start packed in `before`.
+template <class T>
+void EventWatch<T>::scan_listed(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
+  const std::size_t width = call.table->width;
+  for (std::size_t k = 0; k < slice.batch_count; ++k) {
+    SliceEnds<T> batch{{}, {}, slice.first + slice.batches[k], width};
+    for (int a = 0; a < 6; ++a) batch.before[a] = slice.before[a] + k * width, batch.after[a] = slice.after[a] + slice.batches[k];
+    scan(call, batch, t0, h);
   }
 }
 
@@ -257,34 +269,24 @@ void EventWatch<T>::scan_blocks(const Workers& workers, const EventCall<T>& call
 
 namespace {
 
-// The built-in event's test over the slice's bodies from `from`, `count` of them.
+// The built-in event's test over the slice's bodies.
 template <class T>
-std::size_t scan_range(const kernels::KernelTable<T>& table, kernels::EventScanJob<T> job, const SliceEnds<T>& slice,
-                       std::size_t from, std::size_t count, std::uint32_t* found) {
-  for (int a = 0; a < 6; ++a) job.before[a] = slice.before[a] + from, job.after[a] = slice.after[a] + from;
-  const std::size_t n = table.event_scan[int(job.value)](job, count, found);
-  for (std::size_t k = 0; k < n; ++k) found[k] += std::uint32_t(from);
-  return n;
+std::size_t scan_slice(const kernels::KernelTable<T>& table, kernels::EventScanJob<T> job, const SliceEnds<T>& slice,
+                       std::uint32_t* found) {
+  for (int a = 0; a < 6; ++a) job.before[a] = slice.before[a], job.after[a] = slice.after[a];
+  return table.event_scan[int(job.value)](job, slice.count, found);
 }
 
 }  // namespace
 
 // The bodies of the slice whose value changed sign as the event asks: the kernel's test for
-// the built-in values (over the batches the fused kernel's probe listed, if it ran one), the
-// user's function at both ends otherwise.
+// the built-in values, the user's function at both ends otherwise.
 template <class T>
 std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real,
                                       double t0, double h, std::uint32_t* found) const {
   const kernels::EventScanJob<T>& test = jobs_[e];
   const auto* fn = std::get_if<EventFunction<T>>(&events_[e].kind);
-  if (fn == nullptr && slice.batches == nullptr) return scan_range(*call.table, test, slice, 0, slice.count, found);
-  if (fn == nullptr) {
-    std::size_t n = 0;
-    for (std::size_t k = 0; k < slice.batch_count; ++k) {
-      n += scan_range(*call.table, test, slice, slice.batches[k], call.table->width, found + n);
-    }
-    return n;
-  }
+  if (fn == nullptr) return scan_slice(*call.table, test, slice, found);
   const auto view = [&](const T* const s[6], double t) {
     return EventBlock<T>{slice.first, real, t, s[0], s[1], s[2], s[3], s[4], s[5]};
   };
@@ -321,6 +323,21 @@ void group_accelerations(const EventCall<T>& call, const T* const state[6], std:
   job.per_body = call.per_body.from(body0);
   job.forces = call.forces;
   call.table->stage[call.forces.has_quadratic()][call.forces.has_central()](job, 0, call.table->width);
+}
+
+// The accelerations of that group at both ends of the step, as group_accelerations gives them.
+template <class T>
+void end_accelerations(const EventCall<T>& call, const T* const before[6], const T* const after[6], std::size_t body0,
+                       T (&a0)[3][kMaxWidth], T (&a1)[3][kMaxWidth]) {
+  kernels::EndsJob<T> job;
+  job.forces = &call.forces;
+  for (int d = 0; d < 3; ++d) {
+    job.x[0][d] = before[d], job.v[0][d] = before[3 + d], job.acc[0][d] = a0[d];
+    job.x[1][d] = after[d], job.v[1][d] = after[3 + d], job.acc[1][d] = a1[d];
+  }
+  job.inv_mass = call.inv_mass + body0;
+  job.per_body = call.per_body.from(body0);
+  call.table->end_accelerations[call.forces.has_quadratic()][call.forces.has_central()](job);
 }
 
 // dopri5's own term h sum_j d_j k_j for every lane of a SIMD group: its five inner stages
@@ -364,8 +381,7 @@ StepEnds ends_of(const EventCall<T>& call, const SliceEnds<T>& slice, std::size_
   const T* after[6];
   for (int a = 0; a < 6; ++a) before[a] = slice.before[a] + group, after[a] = slice.after[a] + group;
   alignas(64) T a0[3][kMaxWidth], a1[3][kMaxWidth];
-  group_accelerations(call, before, body0, a0);
-  group_accelerations(call, after, body0, a1);
+  end_accelerations(call, before, after, body0, a0, a1);
   StepEnds e;
   e.h = h;
   for (int d = 0; d < 3; ++d) {
@@ -418,7 +434,10 @@ Sample sample(const Event<T>& event, const Track& track, const StepEnds& ends, s
               double theta) {
   if (const auto* plane = std::get_if<PlaneEvent>(&event.kind)) {
     double value = 0, slope = 0;
-    for (int d = 0; d < 3; ++d) value += plane->normal[d] * track.x[d].at(theta), slope += plane->normal[d] * track.x[d].slope(theta);
+    for (int d = 0; d < 3; ++d) {
+      if (plane->normal[d] == 0) continue;  // adds a zero: the same sum, a third of the work on an axis
+      value += plane->normal[d] * track.x[d].at(theta), slope += plane->normal[d] * track.x[d].slope(theta);
+    }
     return {value - plane->offset, slope};
   }
   if (const auto* distance = std::get_if<DistanceEvent>(&event.kind)) {

@@ -48,7 +48,8 @@ struct SliceEnds {
   std::size_t first;   // the slice's first body
   std::size_t count;   // bodies, padding included (a multiple of the SIMD width)
   // The batches (offsets of their first bodies) the fused kernel's probe found a crossing
-  // in; `before` holds those batches only. Null: every batch, all of `before`.
+  // in; `before` holds those batches only, packed (the k-th at k * width). Null: every batch,
+  // all of `before`.
   const std::uint32_t* batches = nullptr;
   std::size_t batch_count = 0;
 };
@@ -109,6 +110,7 @@ class EventWatch {
               const T* const before[13], const Stop& stop, double t0, double h);
 
  private:
+  void scan_listed(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h);
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
                          double h, std::uint32_t* found) const;
   void locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0, double h);

@@ -356,8 +356,9 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
 // when an event stops (a settle reads where every body started). The test then reads both
 // ends of the step while the slice is in cache. Where every event is a built-in one and
 // nothing changes the state after the kernel, the kernel runs their sign test itself and
-// writes the start (to previous_) only of the batches where a body crossed: a slice is then
-// a whole block, as without events.
+// writes the start only of the batches where a body may have crossed, packed from its block's
+// place in previous_ (lines that stay in cache): a slice is then a whole block, as without
+// events.
 template <class T>
 void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
                                 const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard) {
