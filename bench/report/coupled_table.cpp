@@ -54,7 +54,7 @@ void print_implicit_cloth(const Results& results, Noise& noise, const std::strin
   std::printf("%s, float, 1 thread, seconds per simulated second: velocity Verlet at its stable step %.3f (%s steps "
               "a frame)",
               title, verlet->median, results.value(run("velocity_verlet"), "steps_per_frame", "%.0f").c_str());
-  for (const std::string m : {"implicit_euler", "implicit_euler-tol-0.01", "implicit_euler-jacobi", "ros2"}) {
+  for (const std::string m : {"implicit_euler", "implicit_euler-tol-0.01", "implicit_euler-tol-1e-5", "implicit_euler-jacobi", "ros2"}) {
     const auto frames = results.find(run(m), "s_per_simulated_s");
     if (!frames) continue;
     noise.add(frames->cv);

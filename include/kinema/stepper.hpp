@@ -108,7 +108,7 @@ struct StepperOptions {
   FiniteGuard guard = FiniteGuard::off;
   // Implicit methods (implicit_euler, ros2): each stage's linear system is solved by
   // conjugate gradients until the residual is at most implicit_tolerance times the right
-  // side's (0: 1e-5 for float, 1e-10 for double) or implicit_max_iterations have run (the
+  // side's (0: 1e-3 for float, 1e-10 for double) or implicit_max_iterations have run (the
   // solve then stops where it is and ImplicitStats::unconverged counts it). A solve whose
   // sums overflow T (springs far too stiff for the step in this precision) throws
   // kinema::Error, the set and the clock as before the step.
@@ -129,9 +129,12 @@ struct StepperClock {
   double proposed_step = 0;
 };
 
-// StepperOptions::implicit_tolerance 0 means this, in T.
+// StepperOptions::implicit_tolerance 0 means this, in T. Float is what frame-rate scenes run
+// in, where the step's own error dwarfs a solve's: on the shipped cloth at 1/60 s, 1e-3 moves
+// the error against a fine rk4 run by under 1% under either method, with about half the
+// iterations of 1e-5 (the library guide). Double keeps a tight solve for studies of accuracy.
 template <class T>
-inline constexpr double kDefaultImplicitTolerance = sizeof(T) == sizeof(float) ? 1e-5 : 1e-10;
+inline constexpr double kDefaultImplicitTolerance = sizeof(T) == sizeof(float) ? 1e-3 : 1e-10;
 
 // What an implicit method's steps solved since the stepper was made (or took a new model).
 struct ImplicitStats {

@@ -135,7 +135,7 @@ void add_run_command(CLI::App& app, RunOptions& o, std::string& isa, std::string
       ->transform(decimal(0, 1024));
   run->add_option("--implicit-tolerance", o.implicit_tolerance,
                   "Implicit methods: each linear solve stops at this residual relative to its right side "
-                  "(default 1e-5 in float, 1e-10 in double)")
+                  "(default 1e-3 in float, 1e-10 in double)")
       ->transform(number_in(1e-300, 0.5));
   run->add_option("--implicit-iterations", o.implicit_iterations,
                   "Implicit methods: the most conjugate-gradient iterations a solve takes (default 1000)")
