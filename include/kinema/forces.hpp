@@ -95,7 +95,11 @@ struct PointSpring {
 // exact value, relative, on AVX-512 and the scalar path, and within 2e-6 on SSE2 and AVX2
 // (the exact kernel: 5e-7). The bits are the same on every thread count and job system;
 // unlike the exact sums they differ between instruction sets and may differ between CPU
-// models (the approximation instruction is the CPU's own).
+// models (the approximation instruction is the CPU's own). Bodies at one point with softening
+// 0 stay together under the exact sums; under fast, two of them in differently computed lane
+// groups are pulled a rounding apart, and the pull between them then grows without bound:
+// give fast a softening where bodies may meet. A pair too far apart for its squared distance
+// (it overflows float, past about 1.8e19) pulls by about 0, as under the exact sums.
 struct NBody {
   double G = 1;
   double softening = 0;

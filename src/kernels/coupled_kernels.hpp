@@ -59,8 +59,12 @@ struct SourceTile {
 // which is 3/2 y^3 (5/3 - r2 y^2); the 3/2 comes with the mass (SourceTile).
 // The series' first dropped term is 15/8 e^2, e ~ 2 (y's relative error): below 3e-8 for
 // AVX-512's 14-bit start, 1.1e-6 for SSE2's and AVX2's 12 bits, before float round-off.
+// A pair too far apart for its squared distance (inf: the estimate's root is 0, and inf 0 is
+// NaN) is taken at the largest value instead and pulls by about 0, as the exact m / inf does;
+// lane_min keeps a NaN (its second operand) and every finite r2 as it is.
 template <class V>
 KINEMA_INLINE V fast_inverse_cube(V r2, V mass_three_halves) {
+  r2 = lane_min(V(std::numeric_limits<value_t<V>>::max()), r2);
   const V y = rough_inverse_root(r2), y2 = y * y;
   return (mass_three_halves * y) * y2 * mul_add(V(0) - r2, y2, V(value_t<V>(5) / 3));
 }
