@@ -36,6 +36,16 @@ void World<T>::advance(T h, std::uint64_t steps) {
   if (particles.size() > 0 || rigid.size() == 0) particle_stepper_.advance(particles, h, steps);
   if (rigid.size() > 0) rigid_stepper_.advance(rigid, h, steps);
   event_hits_ = main_stepper().event_hits();
+  follow_main_clock();
+}
+
+// A kind with no bodies takes no steps: its stepper's clock is the main one's, so that bodies
+// added to it later start at the world's time, not where it was last stepped.
+template <class T>
+void World<T>::follow_main_clock() {
+  if (particles.size() > 0 && rigid.size() > 0) return;  // both stepped
+  Stepper<T>& idle = rigid_only() ? particle_stepper_ : rigid_stepper_;
+  idle.set_clock(main_stepper().clock());
 }
 
 template <class T>
@@ -61,6 +71,7 @@ std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& sto
     done += taken;
     if (taken < n || particle_stepper_.stopped_at_event()) break;
   }
+  follow_main_clock();
   return done;
 }
 
@@ -104,6 +115,7 @@ AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, c
   if (rigid.size() == 0) {
     const AdaptiveStats stats = particle_stepper_.advance_to(particles, t_end, tolerances, stop, interrupt);
     event_hits_ = particle_stepper_.event_hits();
+    follow_main_clock();
     return stats;
   }
   if (particles.size() > 0) {
@@ -111,6 +123,7 @@ AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, c
   }
   const AdaptiveStats stats = rigid_stepper_.advance_to(rigid, t_end, tolerances);
   event_hits_ = rigid_stepper_.event_hits();
+  follow_main_clock();
   return stats;
 }
 

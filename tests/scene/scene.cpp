@@ -277,6 +277,28 @@ TEST_CASE("an empty world's clock goes on under every advance", "[scene]") {
   CHECK(adaptive.time() == 0.5);
 }
 
+TEST_CASE("a kind of body the world ran out of keeps the world's clock for bodies added later", "[scene]") {
+  const Scene both = parse_scene(R"({"particles": [{"position": [0, 1, 0]}], "rigid_bodies": [{"position": [0, 1, 0]}],
+      "forces": [{"type": "gravity", "g": [0, -9.81, 0]}]})");
+  World<float> world(both, rk4);
+  world.advance(0.01f, 5);
+  world.particles.remove(0);  // the rigid body goes on alone
+  world.advance(0.01f, 5);
+  CHECK(world.advance(0.01f, 5, [] { return false; }) == 5);
+  world.particles.add({0, 1, 0}, {}, 1);
+  world.advance(0.01f, 5);
+  CHECK(world.particle_stepper().clock().steps == 20);
+  CHECK(world.rigid_stepper().clock().steps == 20);
+  CHECK(world.particle_stepper().time() == world.rigid_stepper().time());
+  CHECK(world.time() == Approx(0.2));
+  world.rigid.remove(0);  // and the other way
+  world.advance(0.01f, 3);
+  world.rigid.add({{0, 1, 0}, {}, {1, 0, 0, 0}, {}, 1, {1, 1, 1}});
+  world.advance(0.01f, 1);
+  CHECK(world.rigid_stepper().clock().steps == 24);
+  CHECK(world.rigid_stepper().time() == world.particle_stepper().time());
+}
+
 TEST_CASE("a dynamic body at an attractor's centre is refused where it is listed", "[scene][errors]") {
   const std::string central = R"("forces": [{"type": "central", "center": [0, 1, 0], "mu": 2}]})";
   CHECK_THROWS_WITH(parse_scene(R"({"particles": [{"position": [1,0,0]}, {"position": [0,1,0]}], )" + central),
