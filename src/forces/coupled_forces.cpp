@@ -224,11 +224,19 @@ double nbody_potential(const ParticleSet<T>& b, const NBody& term, const StopReq
   return u;
 }
 
+void check_springs_reach(std::size_t covered, std::size_t bodies) {
+  if (covered <= bodies) return;
+  throw Error("springs: a pair joins body " + std::to_string(covered - 1) + ", but the set has " +
+              std::to_string(bodies) + " bodies");
+}
+
 template <class T>
 double spring_potential(const ParticleSet<T>& b, std::span<const SpringPair> pairs) {
+  std::size_t covered = 0;
+  for (const SpringPair& p : pairs) covered = std::max<std::size_t>(covered, std::max(p.i, p.j) + std::size_t(1));
+  check_springs_reach(covered, b.size());
   double u = 0;
   for (const SpringPair& p : pairs) {
-    if (std::max(p.i, p.j) >= b.size()) continue;
     const double dx = double(b.px()[p.j]) - b.px()[p.i], dy = double(b.py()[p.j]) - b.py()[p.i],
                  dz = double(b.pz()[p.j]) - b.pz()[p.i];
     const double stretch = std::sqrt(dx * dx + dy * dy + dz * dz) - p.rest;

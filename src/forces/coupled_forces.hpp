@@ -54,7 +54,11 @@ CoupledForces<T> lower_coupled(const ForceModel<T>& forces);
 // Polls `stop` every few million pairs; throws kinema::Stopped once it returns true.
 template <class T>
 double nbody_potential(const ParticleSet<T>& bodies, const NBody& term, const StopRequest& stop = {});
-// sum 1/2 k (|x_i - x_j| - rest)^2 over the pairs.
+// Throws kinema::Error when pairs reaching `covered` bodies (the largest index + 1) meet a
+// set of fewer.
+void check_springs_reach(std::size_t covered, std::size_t bodies);
+// sum 1/2 k (|x_i - x_j| - rest)^2 over the pairs; kinema::Error as check_springs_reach for a
+// pair past the set (as a step refuses it).
 template <class T>
 double spring_potential(const ParticleSet<T>& bodies, std::span<const SpringPair> pairs);
 

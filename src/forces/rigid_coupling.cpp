@@ -108,11 +108,15 @@ RigidCoupling<T>::RigidCoupling(const ForceModel<T>& forces) {
             [](const End& a, const End& b) { return a.body != b.body ? a.body < b.body : a.link < b.link; });
 }
 
+void check_body_springs_reach(std::size_t covered, std::size_t bodies) {
+  if (covered <= bodies) return;
+  throw Error("body_springs: a spring joins body " + std::to_string(covered - 1) + ", but the set has " +
+              std::to_string(bodies) + " bodies");
+}
+
 template <class T>
 void RigidCoupling<T>::check_reach(std::size_t bodies) const {
-  if (covered_ <= bodies) return;
-  throw Error("body_springs: a spring joins body " + std::to_string(covered_ - 1) + ", but the set has " +
-              std::to_string(bodies) + " bodies");
+  check_body_springs_reach(covered_, bodies);
 }
 
 // A body spring's force on end i, F_i = -(k (|d| - rest) + damping (V_i - V_j) . u) u, and
@@ -200,8 +204,11 @@ double rigid_coupling_potential(const RigidBodySet<T>& set, const ForceModel<T>&
       u += 0.5 * spring->k * dot(d, d);
     }
   }
+  std::size_t covered = 0;
+  for (const BodySpring& s : forces.body_springs()) covered = std::max<std::size_t>(covered, std::max(s.i, s.j) + std::size_t(1));
+  check_body_springs_reach(covered, set.size());  // as a step refuses a spring past the set
   for (const BodySpring& s : forces.body_springs()) {
-    if (std::max(s.i, s.j) >= set.size() || (inv_mass[s.i] == 0 && inv_mass[s.j] == 0)) continue;
+    if (inv_mass[s.i] == 0 && inv_mass[s.j] == 0) continue;
     const Vec<double> a = world_point(set, s.i, s.point_i), b = world_point(set, s.j, s.point_j);
     Vec<double> d;
     for (int c = 0; c < 3; ++c) d.c[c] = a.c[c] - b.c[c];

@@ -26,6 +26,10 @@ struct RigidStage {
   T* torque[3];
 };
 
+// Throws kinema::Error when body springs reaching `covered` bodies (the largest index + 1)
+// meet a set of fewer.
+void check_body_springs_reach(std::size_t covered, std::size_t bodies);
+
 template <class T>
 class RigidCoupling {
  public:
@@ -72,7 +76,7 @@ class RigidCoupling {
 
 // The potential energy of the point springs and body springs, in double: 1/2 k |P - anchor|^2
 // and 1/2 k (|P_i - P_j| - rest)^2 over bodies with inv_mass != 0 (a body spring counts when
-// either end is).
+// either end is). kinema::Error as check_body_springs_reach for a spring past the set.
 template <class T>
 double rigid_coupling_potential(const RigidBodySet<T>& bodies, const ForceModel<T>& forces);
 

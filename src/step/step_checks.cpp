@@ -21,11 +21,7 @@ void check_step_positive(T h) {
 
 template <class T>
 void check_reach(const CoupledForces<T>& coupled, const ParticleSet<T>& bodies) {
-  const std::size_t covered = coupled.springs.covered;
-  if (covered > bodies.size()) {
-    throw Error("springs: a pair joins body " + std::to_string(covered - 1) + ", but the set has " +
-                std::to_string(bodies.size()) + " bodies");
-  }
+  check_springs_reach(coupled.springs.covered, bodies.size());
 }
 
 template <class T>
@@ -43,10 +39,12 @@ void check_stepper_options(const StepperOptions& o) {
   if (o.guard != FiniteGuard::clamp) return;
   for (const auto& [name, value] : {std::pair{"max_speed", o.max_speed},
                                     std::pair{"max_angular_speed", o.max_angular_speed}}) {
-    // Its square too: the clamp compares squared speeds.
-    if (!(value > 0 && std::isfinite(T(value) * T(value)))) {
-      throw Error(std::string("stepper options: ") + name + " must be > 0 and finite in " + type_name<T>() +
-                  ", got " + shortest_text(value));
+    // In T, and its square: the clamp compares squared speeds (one that rounds to 0 or whose
+    // square underflows would stop every body, one whose square overflows would clamp none).
+    const T square = T(value) * T(value);
+    if (!(value > 0 && std::isfinite(square) && square >= std::numeric_limits<T>::min())) {
+      throw Error(std::string("stepper options: ") + name + " must be > 0 with its square finite and normal in " +
+                  type_name<T>() + ", got " + shortest_text(value));
     }
   }
 }

@@ -280,6 +280,8 @@ TEST_CASE("springs: bad networks are refused, naming the pair", "[springs][error
   Stepper<double> s(f, rk4, test::serial_options());
   CHECK_THROWS_WITH(s.step(b, 0.1), "springs: a pair joins body 5, but the set has 1 bodies");
   CHECK(b.px()[0] == 0);
+  // The energy of that set is refused alike (it left the spring out, a potential too small).
+  CHECK_THROWS_WITH(energy(b, f), "springs: a pair joins body 5, but the set has 1 bodies");
   // The largest index on a 3-body set: refused before the network is laid out (its layout
   // grows with the largest index: gigabytes here), so the stepper holds a few bytes.
   ForceModel<float> far;

@@ -276,9 +276,16 @@ TEST_CASE("guard clamp refuses speed limits that are not positive and finite in 
     o.max_speed = bad;
     CHECK_THROWS_WITH(Stepper<double>(ForceModel<double>{}, euler, o), Catch::Contains("max_speed"));
   }
-  o.max_speed = 1e39;
-  CHECK_THROWS_WITH(Stepper<float>(ForceModel<float>{}, euler, o), Catch::Contains("max_speed must be > 0 and finite in float"));
-  CHECK_NOTHROW(Stepper<double>(ForceModel<double>{}, euler, o));
+  // In float: too large for its square (1e20), or rounding to 0 or below its square's normal
+  // range (1e-300, 1e-45, 1e-20), which would have stopped every body.
+  for (double bad : {1e39, 1e20, 1e-300, 1e-45, 1e-20}) {
+    o.max_speed = bad;
+    CHECK_THROWS_WITH(Stepper<float>(ForceModel<float>{}, euler, o),
+                      Catch::Contains("max_speed must be > 0 with its square finite and normal in float"));
+    if (bad > 1e-150) CHECK_NOTHROW(Stepper<double>(ForceModel<double>{}, euler, o));
+  }
+  o.max_speed = 1e-18;  // its square 1e-36, normal in float
+  CHECK_NOTHROW(Stepper<float>(ForceModel<float>{}, euler, o));
   o.max_speed = 1;
   o.max_angular_speed = 0;
   CHECK_THROWS_WITH(Stepper<double>(ForceModel<double>{}, euler, o), Catch::Contains("max_angular_speed"));

@@ -273,6 +273,12 @@ TEST_CASE("bad rigid bodies are refused by name", "[rigid][errors]") {
   f.add(Springs{{{0, 3, 1, 1, 0}}});  // spring pairs join rigid centres as they join particles
   Stepper<float> s(f, rk4, test::serial_options());
   CHECK_THROWS_WITH(s.step(set, 0.01f), "springs: a pair joins body 3, but the set has 1 bodies");
+  CHECK_THROWS_WITH(energy(set, f), "springs: a pair joins body 3, but the set has 1 bodies");
+  ForceModel<float> linked;
+  linked.add(BodySprings{{{0, 2, {}, {}, 1, 1, 0}}});
+  CHECK_THROWS_WITH(Stepper<float>(linked, rk4, test::serial_options()).step(set, 0.01f),
+                    "body_springs: a spring joins body 2, but the set has 1 bodies");
+  CHECK_THROWS_WITH(energy(set, linked), "body_springs: a spring joins body 2, but the set has 1 bodies");
 }
 
 namespace {
