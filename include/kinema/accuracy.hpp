@@ -100,8 +100,9 @@ struct MethodChoice {
 // steps (rtol = atol from the tolerance down by tens, each run's error measured against one
 // a hundred times tighter). A double scene is run in float when float's round-off, measured
 // by the chosen configuration in both precisions, stays ten times under the tolerance: float
-// steps cost half. Throws kinema::Error when the tolerance is not positive or cannot be
-// reached.
-MethodChoice choose_method(const Scene& scene, double tolerance, const StopRequest& stop = {});
+// steps cost half (`float_allowed` false: the scene's precision, as a caller that named it
+// asks). Throws kinema::Error when the tolerance is not positive or cannot be reached.
+MethodChoice choose_method(const Scene& scene, double tolerance, const StopRequest& stop = {},
+                           bool float_allowed = true);
 
 }  // namespace kinema

@@ -286,7 +286,8 @@ class Stepper {
   const ForceModel<T>& forces() const;
   const StepperOptions& options() const;
   Isa isa() const;           // the resolved instruction set the kernels use
-  bool fused() const;        // true when steps take the fused single-pass path
+  bool fused() const;        // true when particle steps take the fused single-pass path
+  bool fused_rigid() const;  // true when rigid steps take the fused rigid kernels (else the rigid path)
   unsigned threads() const;  // workers of the job system in use
   // The worker count the stepper's measurements favour for its last kind and size of call
   // (0: the calling thread alone); what `workers = all` uses otherwise.

@@ -516,8 +516,9 @@ std::string first_clause(const std::string& message) { return message.substr(0, 
 
 class MethodSearch {
  public:
-  MethodSearch(const Scene& scene, double tolerance)
-      : duration_(scene.dt * double(scene.steps)), tolerance_(tolerance), pilot_scene_(sample_bodies(scene, 64)) {
+  MethodSearch(const Scene& scene, double tolerance, bool float_allowed)
+      : duration_(scene.dt * double(scene.steps)), tolerance_(tolerance), float_allowed_(float_allowed),
+        pilot_scene_(sample_bodies(scene, 64)) {
     check_reachable(pilot_scene_, tolerance);
     stiffness_ = stiffness_of(pilot_scene_);
     start_ = std::clamp<std::uint64_t>(scene.steps / 16, 8, kMostPilotSteps);
@@ -568,6 +569,7 @@ class MethodSearch {
     std::snprintf(tail, sizeof tail, "; picked %s%s (%.0f evaluations)", std::string(choice_.method->name).c_str(),
                   choice_.step_tolerance ? " with error control" : "", best_cost_);
     choice_.reason = head + reason_ + tail;
+    if (!float_allowed_) return choice_;
     const double stable = stable_step(*choice_.method);
     consider_float(pilot_scene_, duration_, tolerance_, stable > 0 ? stable : std::numeric_limits<double>::infinity(),
                    choice_);
@@ -749,6 +751,7 @@ class MethodSearch {
   }
 
   double duration_, tolerance_;
+  bool float_allowed_;
   Scene pilot_scene_;
   StiffnessEstimate stiffness_;
   std::optional<StiffnessEstimate> explicit_stiffness_;  // without the springs, when asked
@@ -770,13 +773,13 @@ class MethodSearch {
 
 }  // namespace
 
-MethodChoice choose_method(const Scene& scene, double tolerance, const StopRequest& stop) {
+MethodChoice choose_method(const Scene& scene, double tolerance, const StopRequest& stop, bool float_allowed) {
   const StopScope scope(stop);
   if (!(std::isfinite(tolerance) && tolerance > 0)) {
     throw Error("tolerance must be positive and finite");
   }
   if (scene.steps == 0) throw Error("auto: the scene has no steps to choose a step size for");
-  MethodSearch search(scene, tolerance);
+  MethodSearch search(scene, tolerance, float_allowed);
   if (search.search_fixed_steps()) search.search_error_control();
   return search.result();
 }

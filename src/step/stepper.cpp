@@ -396,6 +396,10 @@ bool Stepper<T>::fused() const {
   return impl_->core.paths.fused != nullptr;
 }
 template <class T>
+bool Stepper<T>::fused_rigid() const {
+  return impl_->core.paths.rigid != nullptr;
+}
+template <class T>
 unsigned Stepper<T>::threads() const {
   return impl_->workers.jobs().worker_count();
 }

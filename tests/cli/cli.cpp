@@ -340,6 +340,16 @@ TEST_CASE("run --method auto reports its choice and meets the tolerance", "[cli]
   CHECK(j["auto"]["estimated_error"].get<double>() <= 1e-6);
   CHECK(kinema_cli("run " + scene("damped_spring.json") + " --method auto").err.find("needs a tolerance") !=
         std::string::npos);
+  // A loose tolerance lets a double scene run in float; a precision the command line names is kept.
+  const auto precision_of = [&](const std::string& options) {
+    REQUIRE(kinema_cli("run " + scene("damped_spring.json") + " --method auto --tolerance 1e-4 -q --summary " +
+                       summary.string() + options).code == 0);
+    const auto run = nlohmann::json::parse(read(summary));
+    CHECK(run["precision"] == run["auto"]["precision"]);
+    return run["precision"].get<std::string>();
+  };
+  CHECK(precision_of(" --precision double") == "double");
+  CHECK(precision_of(" --precision float") == "float");
 }
 
 TEST_CASE("run: a scene's tolerance with another method is refused, or noted when --method names it",
@@ -482,7 +492,26 @@ TEST_CASE("run: workers_used comes with what the stepper measured", "[cli]") {
     } else {
       CHECK(note.find(std::to_string(used) + " of " + j["threads"].dump() + " workers were fastest") != std::string::npos);
     }
+    CHECK(note.find("N-body") == std::string::npos);
   }
+  // N-body passes take every worker whatever the count the timings favour: the note says so.
+  REQUIRE(kinema_cli("run " + scene("plummer_cluster.json") + " -q --steps 3 --threads 2 --summary " +
+                     summary.string()).code == 0);
+  const std::string note = nlohmann::json::parse(read(summary))["workers_note"];
+  CHECK(note.find("the N-body passes ran on all 2 workers") != std::string::npos);
+}
+
+TEST_CASE("run: the summary's path is the one the bodies took", "[cli]") {
+  const fs::path summary = work_dir() / "path_summary.json";
+  const auto path_of = [&](const std::string& scene_name, const std::string& options) {
+    REQUIRE(kinema_cli("run " + scene(scene_name) + " -q --steps 2 --summary " + summary.string() + options).code == 0);
+    return nlohmann::json::parse(read(summary))["path"].get<std::string>();
+  };
+  CHECK(path_of("kepler_circular.json", "") == "fused");
+  CHECK(path_of("plummer_cluster.json", "") == "staged");
+  CHECK(path_of("cloth.json", " --method implicit_euler") == "implicit");
+  CHECK(path_of("spinning_debris.json", "") == "fused");  // rigid bodies, local terms
+  CHECK(path_of("box_chain.json", "") == "rigid");          // body springs: the rigid path
 }
 
 TEST_CASE("kinema --version prints the library's version", "[cli]") {

@@ -684,6 +684,8 @@ TEST_CASE("a blow-up names the very step, body and component", "[cli][hostile]")
   CHECK(j["first_non_finite"]["step"] == 128);
   CHECK(j["first_non_finite"]["body"] == 1);
   CHECK(j["first_non_finite"]["field"] == "vx");
+  CHECK(j["error"] == "the state is no longer finite after step 128 (t = 12.8): body 1, vx");  // what ended it
+  CHECK(j["complete"] == false);
   CHECK(j["steps"].get<int>() >= 128);  // the run stops soon after, not at step 1000
   CHECK(j["steps"].get<int>() < 1000);
 }

@@ -72,9 +72,9 @@ nlohmann::ordered_json choice_record(const MethodChoice& c, double tolerance, do
   return j;
 }
 
-MethodChoice choose(const Scene& scene, const std::string& path) {
+MethodChoice choose(const Scene& scene, const std::string& path, bool float_allowed) {
   try {
-    return choose_method(scene, *scene.tolerance, interrupt_request());
+    return choose_method(scene, *scene.tolerance, interrupt_request(), float_allowed);
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }
@@ -82,9 +82,9 @@ MethodChoice choose(const Scene& scene, const std::string& path) {
 
 }  // namespace
 
-AutoChoice apply_auto_choice(Scene& scene, const std::string& path) {
+AutoChoice apply_auto_choice(Scene& scene, const std::string& path, bool float_allowed) {
   const auto start = std::chrono::steady_clock::now();
-  const MethodChoice c = choose(scene, path);
+  const MethodChoice c = choose(scene, path, float_allowed);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   AutoChoice choice;
   choice.line = choice_line(c, scene.precision, *scene.tolerance, scene.dt * double(scene.steps));

@@ -16,7 +16,8 @@ struct AutoChoice {
 };
 
 // Chooses the method and step for the scene's tolerance (choose_method) and writes them
-// into `scene`; `path` names the file in an error.
-AutoChoice apply_auto_choice(Scene& scene, const std::string& path);
+// into `scene`; `path` names the file in an error. `float_allowed` false keeps the scene's
+// precision (the command line named it).
+AutoChoice apply_auto_choice(Scene& scene, const std::string& path, bool float_allowed);
 
 }  // namespace kinema::cli

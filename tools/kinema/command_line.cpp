@@ -197,7 +197,8 @@ void add_sweep_options(CLI::App& command, SweepOptions& o) {
              [&o](const std::string& p) { o.precision = p == "float" ? Precision::single : Precision::dual; },
              "Override the scene's precision: float or double")
       ->check(CLI::IsMember({"float", "double"}));
-  add_list_option(command, "--methods", o.methods, "Methods to compare, comma-separated (default: all)");
+  add_list_option(command, "--methods", o.methods,
+                  "Methods to compare, comma-separated (default: the explicit ones the bodies take; implicit ones when named)");
   command.add_option("--duration", o.duration, "Simulated time (default: the scene's dt x steps)")
       ->transform(positive_finite);
   command.add_option("--bodies", o.max_bodies, "Bodies sampled from the scene (default 256)")

@@ -678,8 +678,8 @@ std::uint64_t steps_taken(const StepPlan& plan, const Stepped& s) {
 }
 
 // Why the stepper used the workers it did. It times its calls with each worker count and
-// keeps the fastest for that kind and size of call.
-std::string workers_note(unsigned threads, unsigned used, const StepPlan& plan, const Stepped& s) {
+// keeps the fastest for that kind and size of call; N-body passes take every worker.
+std::string workers_note(unsigned threads, unsigned used, const StepPlan& plan, const Stepped& s, bool nbody) {
   if (threads <= 1) return "a job system of one worker takes every call";
   std::string note = used == 0
       ? "timed: the calling thread alone was as fast as " + std::to_string(threads) + " workers or faster"
@@ -691,7 +691,16 @@ std::string workers_note(unsigned threads, unsigned used, const StepPlan& plan, 
                   1e3 * s.wall_seconds / double(s.calls));
     note += text;
   }
+  if (nbody) note += "; the N-body passes ran on all " + std::to_string(threads) + " workers";
   return note + "; the results are the same bits on any count";
+}
+
+// The path the main stepper's bodies take (a world of both kinds: the particles').
+template <class T>
+const char* path_name(const Stepper<T>& stepper, bool rigid) {
+  if (rigid) return stepper.fused_rigid() ? "fused" : "rigid";
+  if (stepper.fused()) return "fused";
+  return stepper.method().kind == MethodKind::linearly_implicit ? "implicit" : "staged";
 }
 
 // What ran: the scene, the bodies, the method and where it ran.
@@ -705,13 +714,14 @@ void describe_setup(nlohmann::ordered_json& summary, const World<T>& world, cons
   summary["rigid_bodies"] = world.rigid.size();
   summary["method"] = std::string(stepper.method().name);
   if (context.auto_choice) summary["auto"] = *context.auto_choice;
-  summary["path"] = stepper.fused() ? "fused" : stepper.method().kind == MethodKind::linearly_implicit ? "implicit" : "staged";
+  summary["path"] = path_name(stepper, world.particles.size() == 0 && world.rigid.size() > 0);
   summary["precision"] = std::string(precision_name(scene.precision));
   summary["isa"] = std::string(isa_name(stepper.isa()));
   summary["relaxed_fma"] = o.relaxed_fma;
   summary["threads"] = stepper.threads();
   summary["workers_used"] = stepper.chosen_workers();  // 0: the calling thread alone
-  summary["workers_note"] = workers_note(stepper.threads(), stepper.chosen_workers(), plan, s);
+  summary["workers_note"] = workers_note(stepper.threads(), stepper.chosen_workers(), plan, s,
+                                         world.forces().nbody().has_value());
 }
 
 // The steps taken: a fixed dt (as the run's precision holds it), or error control's.
@@ -758,6 +768,16 @@ void describe_cost(nlohmann::ordered_json& summary, const World<T>& world, const
   summary["energy_final"] = s.final_energy ? number(in_precision(*s.final_energy, p)) : nlohmann::ordered_json();
 }
 
+// Where the state stopped being finite, for stderr and the summary's error.
+std::string blow_up_text(const BlowUp& b) {
+  const std::string steps = b.first == b.last
+      ? "after step " + std::to_string(b.last)
+      : "between steps " + std::to_string(b.first) + " and " + std::to_string(b.last);
+  char t[32];
+  std::snprintf(t, sizeof t, "%g", b.t);
+  return "the state is no longer finite " + steps + " (t = " + t + "): body " + std::to_string(b.body) + ", " + b.field;
+}
+
 void describe_end(nlohmann::ordered_json& summary, const Scene& scene, const StepPlan& plan, const Stepped& s) {
   summary["finite"] = !s.blow_up;
   if (s.blow_up) {
@@ -792,7 +812,8 @@ void describe_outcome(nlohmann::ordered_json& summary, const World<T>& world, co
   if (!scene.events.empty()) summary["events"] = s.events;
   if (s.stop_event) summary["stopped_by_event"] = *s.stop_event;
   if (s.error) summary["error"] = *s.error;
-  if (!s.error && interrupting_signal() != 0 && s.done < scene.steps) {
+  if (!s.error && s.blow_up) summary["error"] = blow_up_text(*s.blow_up);
+  if (!s.error && !s.blow_up && interrupting_signal() != 0 && s.done < scene.steps) {
     summary["error"] = "stopped by " + signal_name(interrupting_signal());
   }
   if (s.resumed_at) summary["resumed_from"] = {{"checkpoint", o.checkpoint.resume_path}, {"step", *s.resumed_at}};
@@ -828,13 +849,7 @@ nlohmann::ordered_json summarize(const World<T>& world, const Scene& scene, cons
 }
 
 void report_blow_up(const BlowUp& b) {
-  const std::string steps = b.first == b.last
-      ? "after step " + std::to_string(b.last)
-      : "between steps " + std::to_string(b.first) + " and " + std::to_string(b.last);
-  std::fprintf(stderr,
-               "kinema: error: the state is no longer finite %s (t = %g): body %zu, %s (try a "
-               "smaller dt or a more stable method)\n",
-               steps.c_str(), b.t, b.body, b.field.c_str());
+  std::fprintf(stderr, "kinema: error: %s (try a smaller dt or a more stable method)\n", blow_up_text(b).c_str());
 }
 
 // The outputs a signal leaves complete: those asked for.
@@ -966,7 +981,7 @@ int run_scene(const RunOptions& o) {
   ReportFile summary_file(o.summary_path, "summary");
   try {
     RunContext context;
-    if (scene.method == "auto") context.auto_choice = apply_auto_choice(scene, o.scene_path).record;
+    if (scene.method == "auto") context.auto_choice = apply_auto_choice(scene, o.scene_path, !o.precision).record;
     note_nothing_implicit(scene, o);
     note_idle_rotational_terms(scene, o);
     return with_precision(scene.precision,
