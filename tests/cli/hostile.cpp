@@ -313,6 +313,9 @@ std::vector<Case> option_cases() {
       {"", {"chart", scene, "--bodies", "0"}, 2, "--bodies: expected 1 to"},
       {"", {"chart", scene, "--repeat", "101"}, 2, "--repeat: expected 1 to 100"},
       {"", {"chart", scene, "--dts", "0.1,inf"}, 2, "--dts: expected a finite number > 0"},
+      // A step float cannot hold was the scene's "step size h must be positive ... got 0".
+      {"", {"chart", scene, "--dts", "1e-46", "--duration", "1e-44", "--precision", "float", "--out",
+            (work_dir() / "tiny_chart").string()}, 1, "--dts 1e-46 rounds to 0 in float"},
       // CLI11's delimiter dropped empty items: ",euler" ran euler alone.
       {"", {"chart", scene, "--methods", ",euler"}, 2, "--methods: an empty item in ',euler'"},
       {"", {"stability", scene, "--methods", "euler,,rk4"}, 2, "--methods: an empty item in 'euler,,rk4'"},

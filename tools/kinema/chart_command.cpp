@@ -11,6 +11,7 @@
 
 #include "kinema/scenes.hpp"
 #include "interrupt.hpp"
+#include "numbers.hpp"
 #include "work_bound.hpp"
 #include "plot.hpp"
 #include "progress.hpp"
@@ -153,6 +154,7 @@ struct Sweep {
 // the duration), smallest first, one per step count.
 std::vector<double> step_sizes(const ChartOptions& o, const Scene& full, double duration) {
   std::vector<double> dts = o.dts;
+  for (double dt : dts) check_step_option("--dts", dt, full.precision);
   if (dts.empty()) {
     for (int k = -3; k <= 4; ++k) {
       if (full.dt * std::ldexp(1.0, k) <= duration) dts.push_back(full.dt * std::ldexp(1.0, k));

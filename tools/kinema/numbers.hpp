@@ -48,16 +48,19 @@ decltype(auto) naming_scene(const std::string& scene_path, F&& f) {
   }
 }
 
-// A --dt the run's precision cannot hold (0 or infinite once rounded to float) is the
-// option's fault, not the scene file's: said so before the scene's own checks.
-inline void check_dt_option(const std::optional<double>& dt, Precision p) {
-  if (!dt || p != Precision::single) return;
-  const float rounded = float(*dt);
+// A step an option gives that the run's precision cannot hold (0 or infinite once rounded to
+// float) is the option's fault, not the scene file's: said so before the scene's own checks.
+inline void check_step_option(const char* option, double dt, Precision p) {
+  if (p != Precision::single) return;
+  const float rounded = float(dt);
   if (rounded > 0 && std::isfinite(rounded)) return;
-  char text[120];
-  std::snprintf(text, sizeof text, "--dt %g %s in float (give a step float holds, or --precision double)", *dt,
+  char text[160];
+  std::snprintf(text, sizeof text, "%s %g %s in float (give a step float holds, or --precision double)", option, dt,
                 rounded == 0 ? "rounds to 0" : "overflows");
   throw Error(text);
+}
+inline void check_dt_option(const std::optional<double>& dt, Precision p) {
+  if (dt) check_step_option("--dt", *dt, p);
 }
 
 // A value of the simulation (a step, a time, an energy) to the digits its precision holds:
