@@ -114,6 +114,9 @@ TEST_CASE("stress: the guard's three policies on a scene that blows up", "[cli][
   CHECK(at["body"] == 1);
   CHECK(at["field"] == expected["field"]);
   CHECK(at["state_kept_at_step"] == expected["step"].get<int>() - 1);
+  CHECK(j["complete"] == false);
+  CHECK(j["error"] == "group particles is no longer finite at step " + expected["step"].dump() + ": body 1, " +
+                         expected["field"].get<std::string>());  // what ended it, as on stderr
   // One group: the steps it completed, those of the state kept (and of its CRC), in the
   // report and in its intervals alike.
   CHECK(j["steps"].get<int>() == expected["step"].get<int>() - 1);

@@ -419,6 +419,14 @@ Json memory_report(const StressSetup<T>& setup, const StressOutcome& out, const 
   return j;
 }
 
+// Where a group stopped being finite, for stderr and the report's error.
+std::string failure_text(const Failure& f) {
+  const std::string steps = f.first == f.last
+      ? "at step " + std::to_string(f.last)
+      : "between steps " + std::to_string(f.first) + " and " + std::to_string(f.last);
+  return "group " + f.group + " is no longer finite " + steps + ": body " + std::to_string(f.body) + ", " + f.field;
+}
+
 Json failure_report(const Failure& f, FiniteGuard guard) {
   Json where;
   where["group"] = f.group;
@@ -471,7 +479,11 @@ Json stress_report(const StressOptions& o, const StressSetup<T>& setup, const st
   if (out.failure) j["first_non_finite"] = failure_report(*out.failure, o.guard);
   if (interrupting_signal() != 0 && !out.failure) j["interrupted"] = signal_name(interrupting_signal());
   j["complete"] = !out.failure && interrupting_signal() == 0;
-  if (interrupting_signal() != 0) j["error"] = "stopped by " + signal_name(interrupting_signal());
+  if (out.failure) {
+    j["error"] = failure_text(*out.failure);
+  } else if (interrupting_signal() != 0) {
+    j["error"] = "stopped by " + signal_name(interrupting_signal());
+  }
   if (out.resumed_at) j["resumed_from"] = {{"checkpoint", o.checkpoint.resume_path}, {"step", *out.resumed_at}};
   if (!o.checkpoint.path.empty()) j["checkpoints_written"] = out.checkpoints;
   j["state_crc32c"] = state_crc(setup.groups);
@@ -524,11 +536,7 @@ void print_report(const Json& j) {
 // The exit code, with a line on stderr when the run did not end as asked.
 int stress_exit_code(const StressOptions& o, const StressOutcome& out) {
   if (const auto& f = out.failure) {
-    const std::string steps = f->first == f->last
-        ? "at step " + std::to_string(f->last)
-        : "between steps " + std::to_string(f->first) + " and " + std::to_string(f->last);
-    std::fprintf(stderr, "kinema: error: group %s is no longer finite %s: body %zu, %s%s\n",
-                 f->group.c_str(), steps.c_str(), f->body, f->field.c_str(),
+    std::fprintf(stderr, "kinema: error: %s%s\n", failure_text(*f).c_str(),
                  o.guard == FiniteGuard::off ? "" : " (the state before that step is kept)");
     return 3;
   }
