@@ -131,7 +131,7 @@ struct StepperClock {
 
 // StepperOptions::implicit_tolerance 0 means this, in T. Float is what frame-rate scenes run
 // in, where the step's own error dwarfs a solve's: on the shipped cloth at 1/60 s, 1e-3 moves
-// the error against a fine rk4 run by under 1% under either method, with about half the
+// the error against a fine rk4 run by under 2% under either method, with about half the
 // iterations of 1e-5 (the library guide). Double keeps a tight solve for studies of accuracy.
 template <class T>
 inline constexpr double kDefaultImplicitTolerance = sizeof(T) == sizeof(float) ? 1e-3 : 1e-10;

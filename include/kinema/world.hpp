@@ -76,6 +76,7 @@ class World {
  private:
   void advance_rigid(T h, std::uint64_t steps, bool cut_short);
   void follow_main_clock();
+  struct ClockFollower;
   bool rigid_only() const { return particles.size() == 0 && rigid.size() > 0; }
 
   Stepper<T> particle_stepper_, rigid_stepper_;

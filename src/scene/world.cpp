@@ -30,13 +30,21 @@ void World<T>::watch_events() {
   (rigid_only() ? rigid_stepper_ : particle_stepper_).set_events(make_events<T>(events));
 }
 
+// Makes the idle kind's clock the main one's as a call leaves, by a throw too (the steps
+// completed before it stand). A clock copied from a stepper is valid: set_clock cannot throw.
+template <class T>
+struct World<T>::ClockFollower {
+  World& world;
+  ~ClockFollower() { world.follow_main_clock(); }
+};
+
 template <class T>
 void World<T>::advance(T h, std::uint64_t steps) {
+  const ClockFollower follow{*this};
   // An empty world's clock goes on too (as under advance_to): on its main stepper, the particles'.
   if (particles.size() > 0 || rigid.size() == 0) particle_stepper_.advance(particles, h, steps);
   if (rigid.size() > 0) rigid_stepper_.advance(rigid, h, steps);
   event_hits_ = main_stepper().event_hits();
-  follow_main_clock();
 }
 
 // A kind with no bodies takes no steps: its stepper's clock is the main one's, so that bodies
@@ -50,6 +58,7 @@ void World<T>::follow_main_clock() {
 
 template <class T>
 std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& stop) {
+  const ClockFollower follow{*this};
   const std::uint64_t chunk = steps_per_call();
   std::uint64_t done = 0;
   event_hits_.clear();
@@ -71,7 +80,6 @@ std::uint64_t World<T>::advance(T h, std::uint64_t steps, const StopRequest& sto
     done += taken;
     if (taken < n || particle_stepper_.stopped_at_event()) break;
   }
-  follow_main_clock();
   return done;
 }
 
@@ -112,10 +120,10 @@ void World<T>::advance_rigid(T h, std::uint64_t steps, bool cut_short) {
 template <class T>
 AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, const StopRequest& stop,
                                    const StopRequest& interrupt) {
+  const ClockFollower follow{*this};
   if (rigid.size() == 0) {
     const AdaptiveStats stats = particle_stepper_.advance_to(particles, t_end, tolerances, stop, interrupt);
     event_hits_ = particle_stepper_.event_hits();
-    follow_main_clock();
     return stats;
   }
   if (particles.size() > 0) {
@@ -123,7 +131,6 @@ AdaptiveStats World<T>::advance_to(double t_end, const Tolerances& tolerances, c
   }
   const AdaptiveStats stats = rigid_stepper_.advance_to(rigid, t_end, tolerances);
   event_hits_ = rigid_stepper_.event_hits();
-  follow_main_clock();
   return stats;
 }
 
