@@ -294,6 +294,9 @@ struct StateSource {
   const T* axis_in = nullptr;
   const T* axis_out = nullptr;
   T band_low = 0, band_high = 0;
+  // The way a crossing the event counts moves the coordinate through the band: +1 down (the
+  // start not below the band, the end not above it), -1 up, 0 either way.
+  int band_way = 0;
 };
 template <class T>
 StateSource<T> with_probe(StateSource<T> in, const FusedJob<T>& job) {
@@ -302,6 +305,9 @@ StateSource<T> with_probe(StateSource<T> in, const FusedJob<T>& job) {
   const EventScanJob<T>& plane = in.probe->tests[0];
   in.axis_in = in.x[plane.axis], in.axis_out = job.bodies.x[plane.axis];
   in.band_low = plane.band[0], in.band_high = plane.band[1];
+  // A value falling through zero (down) moves the coordinate down where a > 0, up where a < 0.
+  const int falls = plane.a[plane.axis] > 0 ? 1 : -1;
+  in.band_way = plane.down && plane.up ? 0 : plane.down ? falls : -falls;
   return in;
 }
 template <class T>
@@ -321,14 +327,19 @@ KINEMA_INLINE V along_before(const StateSource<value_t<V>>& in, std::size_t i) {
 }
 
 // Whether a body of the batch may have crossed the one-plane probe's plane, from its
-// coordinate along the axis before and after the step: both ends on one side of the band
-// rule a crossing out (EventScanJob::band), anything else lets event_scan decide. One compare
-// into a mask, the rest in vector registers: the compares that make masks cost these kernels
-// the most.
+// coordinate along the axis before and after the step: outside the band the value's sign is
+// known (EventScanJob::band), so a crossing one way needs its start not past the band on one
+// side and its end not past it on the other (two compares); either way, both ends on one
+// side rule it out. Anything else lets event_scan decide. These kernels are bound by their
+// vector instructions: each one here costs about 1% of a step.
 template <class V>
-KINEMA_INLINE bool near_plane(const StateSource<value_t<V>>& in, const V& along0, const V& along1) {
-  const V above = V(in.band_high) - lane_min(along0, along1), below = lane_max(along0, along1) - V(in.band_low);
-  return any_lane(lane_min(above, below) >= V(0));
+KINEMA_INLINE bool near_plane(const StateSource<value_t<V>>& in, V along0, V along1) {
+  if (in.band_way == 0) {
+    const V above = V(in.band_high) - lane_min(along0, along1), below = lane_max(along0, along1) - V(in.band_low);
+    return any_lane(lane_min(above, below) >= V(0));
+  }
+  if (in.band_way < 0) std::swap(along0, along1);  // up: the end is where a fall would start
+  return any_lane((along0 >= V(in.band_low)) & (along1 <= V(in.band_high)));
 }
 
 // Lists batch i with the probe; returns where its start state goes: packed, the k-th listed

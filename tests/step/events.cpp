@@ -347,11 +347,12 @@ TEST_CASE("the fused kernels' own sign test finds exactly the crossings a full s
 namespace {
 
 // The hits of the fused kernels' own test of a plane along y (normal (0, a, 0), offset b)
-// against those of a full scan, on every ISA, for bodies `start` over two steps of 1.
+// against those of a full scan, on every ISA, for bodies `start` over two steps of 1: either
+// way, and each way alone (the kernels test a crossing one way with other compares).
 template <class T>
-void check_plane_hits(T a, T b, const ParticleSet<T>& start, std::size_t expected_at_least) {
-  INFO("a " << a << ", b " << b << (sizeof(T) == 4 ? " float" : " double"));
-  const Event<T> plane{PlaneEvent{{0, double(a), 0}, double(b)}, Crossing::either};
+void check_plane_hits(T a, T b, Crossing way, const ParticleSet<T>& start, std::size_t expected_at_least) {
+  INFO("a " << a << ", b " << b << (sizeof(T) == 4 ? " float" : " double") << ", way " << int(way));
+  const Event<T> plane{PlaneEvent{{0, double(a), 0}, double(b)}, way};
   const Event<T> never{EventFunction<T>([](const EventBlock<T>& v, T* value) { std::fill(value, value + v.count, T(1)); }),
                        Crossing::either};
   auto hits = [&](Isa isa, bool scanned) {
@@ -375,19 +376,31 @@ void check_plane_hits(T a, T b, const ParticleSet<T>& start, std::size_t expecte
   }
 }
 
+template <class T>
+void check_plane_hits(T a, T b, const ParticleSet<T>& start, std::size_t expected_at_least) {
+  for (Crossing way : {Crossing::either, Crossing::down, Crossing::up}) {
+    const std::size_t least = way == Crossing::either ? expected_at_least : expected_at_least / 3;
+    check_plane_hits(a, b, way, start, least);
+  }
+}
+
 // Bodies that start a few steps to either side of b / a and move by a few steps a step: where
 // the rounded value a y - b is 0 or turns sign. A step is an ulp of y, or where a is so short
 // that the product's own underflow is coarser, the y that moves the product by a subnormal.
+// And bodies that leap from far on one side to far on the other in one step, each way.
 template <class T>
 void check_plane_edges(T a, T b, std::size_t expected_at_least) {
   const T coarse = T(2 * double(std::numeric_limits<T>::denorm_min()) / std::abs(double(a)));
   const auto step = [&](T y) { return std::max(std::nextafter(std::abs(y), std::numeric_limits<T>::infinity()) - std::abs(y), coarse); };
   ParticleSet<T> start;
-  T y = T(double(b) / double(a));
+  const T centre = T(double(b) / double(a));
+  T y = centre;
   for (int k = 0; k < 40; ++k) y -= step(y);
   for (int k = 0; k < 80; ++k, y += step(y)) {
     for (const T steps : {T(-3), T(-1), T(1), T(3)}) start.add({T(k % 7), y, T(0)}, {T(0), steps * step(y), T(0)}, T(1));
   }
+  const T far = std::max(std::abs(centre) / 64, T(1));
+  for (const T side : {T(-1), T(1)}) start.add({T(0), centre + side * far, T(0)}, {T(0), -side * 2 * far, T(0)}, T(1));
   check_plane_hits(a, b, start, expected_at_least);
 }
 
