@@ -20,6 +20,8 @@ namespace {
 
 using Vec = std::array<double, 3>;
 
+constexpr std::size_t kMaxWidth = 16;  // SIMD lanes
+
 double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
 bool finite(const Vec& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
@@ -245,13 +247,24 @@ void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, do
 }
 
 // Each batch the kernel's probe listed as a slice of its own, its start packed in `before`.
+// The probe runs where every event is a built-in one: each batch takes the kernels' exact
+// test straight from the table, the tests set once a call.
 template <class T>
 void EventWatch<T>::scan_listed(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
   const std::size_t width = call.table->width;
+  std::array<kernels::EventScanJob<T>, kernels::kProbeTests> tests;
+  std::copy(jobs_.begin(), jobs_.end(), tests.begin());
+  std::uint32_t found[kMaxWidth];
   for (std::size_t k = 0; k < slice.batch_count; ++k) {
     SliceEnds<T> batch{{}, {}, slice.first + slice.batches[k], width};
     for (int a = 0; a < 6; ++a) batch.before[a] = slice.before[a] + k * width, batch.after[a] = slice.after[a] + slice.batches[k];
-    scan(call, batch, t0, h);
+    const std::size_t real = std::min(width, call.size - std::min(call.size, batch.first));
+    for (std::size_t e = 0; e < jobs_.size(); ++e) {
+      kernels::EventScanJob<T>& test = tests[e];
+      for (int a = 0; a < 6; ++a) test.before[a] = batch.before[a], test.after[a] = batch.after[a];
+      const std::size_t n = call.table->event_scan[int(test.value)](test, width, found);
+      for (std::size_t j = 0; j < n && found[j] < real; ++j) locate(int(e), call, batch, found[j], t0, h);
+    }
   }
 }
 
@@ -307,8 +320,6 @@ std::size_t EventWatch<T>::candidates(int e, const EventCall<T>& call, const Sli
 }
 
 namespace {
-
-constexpr std::size_t kMaxWidth = 16;
 
 // The accelerations of the SIMD group whose first body is `body0`, its state at `state` (six
 // arrays from the group's first body), through the stage kernel (the staged path's stage 0:
@@ -406,51 +417,80 @@ Vec3<T> narrow(const Vec& v) {
 
 namespace {
 
-// A body's step as curves: positions from (x, v), velocities from (v, a).
-struct Track {
-  Curve x[3], v[3];
-  explicit Track(const StepEnds& e) {
-    for (int d = 0; d < 3; ++d) {
-      x[d] = Curve::of(e.x0[d], e.v0[d], e.x1[d], e.v1[d], e.h, e.rx[d]);
-      v[d] = Curve::of(e.v0[d], e.a0[d], e.v1[d], e.a1[d], e.h, e.rv[d]);
-    }
+// A body's positions (from x, v) or velocities (from v, a) over the step, as curves.
+struct Curves {
+  Curve y[3];
+  static Curves positions(const StepEnds& e) {
+    Curves c;
+    for (int d = 0; d < 3; ++d) c.y[d] = Curve::of(e.x0[d], e.v0[d], e.x1[d], e.v1[d], e.h, e.rx[d]);
+    return c;
+  }
+  static Curves velocities(const StepEnds& e) {
+    Curves c;
+    for (int d = 0; d < 3; ++d) c.y[d] = Curve::of(e.v0[d], e.a0[d], e.v1[d], e.a1[d], e.h, e.rv[d]);
+    return c;
   }
 };
 
+// A plane's value n . x(theta) - offset and its slope, the zero components of n left out
+// (each would add a zero: the same sums, a third of the work on an axis).
+class PlaneValue {
+ public:
+  PlaneValue(const PlaneEvent& plane, const StepEnds& e) : offset_(plane.offset) {
+    for (int d = 0; d < 3; ++d) {
+      if (plane.normal[d] == 0) continue;
+      x_[count_] = Curve::of(e.x0[d], e.v0[d], e.x1[d], e.v1[d], e.h, e.rx[d]);
+      normal_[count_++] = plane.normal[d];
+    }
+  }
+  Sample operator()(double theta) const {
+    double value = 0, slope = 0;
+    for (int k = 0; k < count_; ++k) value += normal_[k] * x_[k].at(theta), slope += normal_[k] * x_[k].slope(theta);
+    return {value - offset_, slope};
+  }
+
+ private:
+  Curve x_[3];
+  double normal_[3];
+  int count_ = 0;
+  double offset_;
+};
+
 // |y(theta) - p|^2 - r2 and its slope.
-Sample squared_distance(const Curve (&y)[3], const Vec& p, double r2, double theta) {
+Sample squared_distance(const Curves& y, const Vec& p, double r2, double theta) {
   double sum = 0, slope = 0;
   for (int d = 0; d < 3; ++d) {
-    const double offset = y[d].at(theta) - p[d];
-    sum += offset * offset, slope += 2 * offset * y[d].slope(theta);
+    const double offset = y.y[d].at(theta) - p[d];
+    sum += offset * offset, slope += 2 * offset * y.y[d].slope(theta);
   }
   return {sum - r2, slope};
 }
 
-// The event's value at theta: the built-in ones with their slopes, a user's function on the
-// state in T (no slope).
+// The fraction of the step at which the body's value of event e crosses: the built-in values
+// with their slopes on the curves they read (formed once), a user's function on the state in
+// T (no slope; NaN refused).
 template <class T>
-Sample sample(const Event<T>& event, const Track& track, const StepEnds& ends, std::size_t body, double t0,
-              double theta) {
-  if (const auto* plane = std::get_if<PlaneEvent>(&event.kind)) {
-    double value = 0, slope = 0;
-    for (int d = 0; d < 3; ++d) {
-      if (plane->normal[d] == 0) continue;  // adds a zero: the same sum, a third of the work on an axis
-      value += plane->normal[d] * track.x[d].at(theta), slope += plane->normal[d] * track.x[d].slope(theta);
-    }
-    return {value - plane->offset, slope};
-  }
+double crossing_of(const Event<T>& event, int e, const StepEnds& ends, std::size_t body, double t0, double tolerance) {
+  if (const auto* plane = std::get_if<PlaneEvent>(&event.kind)) return crossing_fraction(PlaneValue(*plane, ends), tolerance);
   if (const auto* distance = std::get_if<DistanceEvent>(&event.kind)) {
-    return squared_distance(track.x, distance->point, distance->radius * distance->radius, theta);
+    const Curves x = Curves::positions(ends);
+    const double r2 = distance->radius * distance->radius;
+    return crossing_fraction([&](double f) { return squared_distance(x, distance->point, r2, f); }, tolerance);
   }
   if (const auto* speed = std::get_if<SpeedEvent>(&event.kind)) {
-    return squared_distance(track.v, Vec{}, speed->speed * speed->speed, theta);
+    const Curves v = Curves::velocities(ends);
+    const double s2 = speed->speed * speed->speed;
+    return crossing_fraction([&](double f) { return squared_distance(v, Vec{}, s2, f); }, tolerance);
   }
-  const Vec3<T> xt = narrow<T>(dense_position(ends, theta)), vt = narrow<T>(dense_velocity(ends, theta));
-  const EventBlock<T> one{body, 1, t0 + theta * ends.h, &xt[0], &xt[1], &xt[2], &vt[0], &vt[1], &vt[2]};
-  T g = 0;
-  std::get<EventFunction<T>>(event.kind)(one, &g);
-  return {double(g), std::numeric_limits<double>::quiet_NaN()};
+  const auto& fn = std::get<EventFunction<T>>(event.kind);
+  return crossing_fraction([&](double f) {
+    const Vec3<T> xt = narrow<T>(dense_position(ends, f)), vt = narrow<T>(dense_velocity(ends, f));
+    const EventBlock<T> one{body, 1, t0 + f * ends.h, &xt[0], &xt[1], &xt[2], &vt[0], &vt[1], &vt[2]};
+    T g = 0;
+    fn(one, &g);
+    if (std::isnan(g)) check_given(e, &g, 1, body, t0 + f * ends.h);
+    return Sample{double(g), std::numeric_limits<double>::quiet_NaN()};
+  }, tolerance);
 }
 
 }  // namespace
@@ -460,14 +500,7 @@ void EventWatch<T>::locate(int e, const EventCall<T>& call, const SliceEnds<T>& 
                            double h) {
   const StepEnds ends = ends_of(call, slice, local, h);
   const std::size_t body = slice.first + local;
-  const Track track(ends);
-  const double theta =
-      crossing_fraction([&](double f) {
-        const Sample at = sample(events_[e], track, ends, body, t0, f);
-        const bool given = std::holds_alternative<EventFunction<T>>(events_[e].kind);
-        if (given && std::isnan(at.value)) check_given(e, &at.value, 1, body, t0 + f * h);
-        return at;
-      }, tolerance_ / h);
+  const double theta = crossing_of(events_[e], e, ends, body, t0, tolerance_ / h);
   if (found_at_settle(body, e, t0, theta, ends)) return;
   EventHit<T> hit{t0 + theta * h, body, e, narrow<T>(dense_position(ends, theta)),
                   narrow<T>(dense_velocity(ends, theta))};
