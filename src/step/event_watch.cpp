@@ -226,16 +226,29 @@ std::optional<typename EventWatch<T>::Stop> EventWatch<T>::first_stop() const {
 template <class T>
 void EventWatch<T>::finish(std::optional<double> until) {
   if (until) std::erase_if(hits_, [&](const EventHit<T>& hit) { return hit.time > *until; });
-  std::sort(hits_.begin(), hits_.end(), [](const EventHit<T>& a, const EventHit<T>& b) {
+  // The keys sorted, then the hits gathered once: a hit is twice a key's size and more.
+  order_.clear();
+  for (std::size_t i = 0; i < hits_.size(); ++i) order_.push_back({hits_[i].time, hits_[i].body, hits_[i].event, i});
+  std::sort(order_.begin(), order_.end(), [](const HitKey& a, const HitKey& b) {
     if (a.time != b.time) return a.time < b.time;
     if (a.body != b.body) return a.body < b.body;
     return a.event < b.event;
   });
+  sorted_.clear();
+  for (const HitKey& key : order_) sorted_.push_back(hits_[key.index]);
+  hits_.swap(sorted_);
 }
 
 template <class T>
 void EventWatch<T>::scan(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
   if (slice.batches != nullptr) return scan_listed(call, slice, t0, h);
+  scan_all(call, slice, t0, h);
+}
+
+// Every body of the slice (its own frame: the list of a block's bodies is large, and the
+// listed batches' scan, which runs once a block, does not touch it).
+template <class T>
+void EventWatch<T>::scan_all(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h) {
   if (slice.first >= call.size) return;
   const std::size_t real = std::min(slice.count, call.size - slice.first);
   // A slice is at most a block (the kernels' own test) and every body of it may cross.

@@ -111,6 +111,7 @@ class EventWatch {
 
  private:
   void scan_listed(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h);
+  [[gnu::noinline]] void scan_all(const EventCall<T>& call, const SliceEnds<T>& slice, double t0, double h);
   std::size_t candidates(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t real, double t0,
                          double h, std::uint32_t* found) const;
   void locate(int e, const EventCall<T>& call, const SliceEnds<T>& slice, std::size_t local, double t0, double h);
@@ -126,6 +127,15 @@ class EventWatch {
   bool calls_user_ = false;
   mutable std::mutex mutex_;  // hits_ and stop_
   std::vector<EventHit<T>> hits_;
+  // finish's order: each hit's key and place, and the hits in order (kept for their capacity).
+  struct HitKey {
+    double time;
+    std::size_t body;
+    int event;
+    std::size_t index;
+  };
+  std::vector<HitKey> order_;
+  std::vector<EventHit<T>> sorted_;
   std::optional<Stop> stop_;
   std::optional<Stop> settled_;  // the stop the set was last left at
   // A hit reported at the stop's time: its body and event, and the body's position as

@@ -362,45 +362,90 @@ void FixedSteps<T>::run(const Workers& w, ParticleSet<T>& b, T h, std::uint64_t 
 template <class T>
 void FixedSteps<T>::run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
                                 const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard) {
-  const EventCall<T> call = event_call(b);
-  const Clock<T> start = core_.clock;
-  const bool keeps_previous = events_.stops();
   const bool clamps = guard && guard->clamp;
-  const auto probe = keeps_previous || clamps ? std::nullopt : events_.probe();
-  const std::size_t slice_bodies = probe ? kBlockBodies : kEventSliceBodies<T>;
-  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  const Watched c{b, fused_fn, job, event_call(b), core_.clock, steps, clamps,
+                  events_.stops() || clamps ? std::nullopt : events_.probe()};
+  const std::size_t batches = b.padded_size() / c.call.table->width;
+  if (c.probe && listed_.size() < batches) listed_.resize(batches);
   for_each_block(w, b.padded_size(), [&](Block block) {
     if (guard) guard->checkpoint.save(guard->state, block);
-    alignas(64) T kept[6][kEventSliceBodies<T>];
-    std::uint32_t batches[kBlockBodies];
-    kernels::EventProbe<T> block_probe;
-    if (probe) block_probe = *probe, block_probe.batches = batches;
-    for (std::size_t s = block.begin; s < block.end; s += slice_bodies) {
-      const std::size_t count = std::min(slice_bodies, block.end - s);
-      T* before[6];
-      for (int a = 0; a < 6; ++a) before[a] = keeps_previous || probe ? previous_[a].data() + s : kept[a];
-      // The slice as a job of its own: every array from its first body.
-      kernels::FusedJob<T> slice_job = job;
-      for (int d = 0; d < 3; ++d) slice_job.bodies.x[d] = state[d] + s, slice_job.bodies.v[d] = state[3 + d] + s;
-      slice_job.bodies.inv_mass = job.bodies.inv_mass + s;
-      slice_job.bodies.per_body = job.bodies.per_body.from(s);
-      slice_job.before = before;
-      SliceEnds<T> ends{{before[0], before[1], before[2], before[3], before[4], before[5]}, {}, s, count};
-      for (int a = 0; a < 6; ++a) ends.after[a] = state[a] + s;
-      if (probe) slice_job.probe = &block_probe, ends.batches = batches;
-      for (std::uint64_t k = 0; k < steps; ++k) {
-        block_probe.found = 0;
-        fused_fn(slice_job, 0, count);
-        ends.batch_count = block_probe.found;
-        if (clamps) clamp(b, {s, s + count});
-        Clock<T> now = start;
-        now.steps += k;
-        events_.scan(call, ends, now.time(), double(job.h));
-      }
+    if (c.probe) {
+      watch_probed(c, block);
+    } else {
+      watch_slices(c, block);
     }
     if (guard) guard->scan.scan(block);
   });
   core_.clock.steps += steps;
+}
+
+// The fused job for the `count` bodies from s, writing their start to `before`: every array
+// from the slice's first body.
+template <class T>
+kernels::FusedJob<T> FixedSteps<T>::slice_job(const Watched& c, std::size_t s, T* const* before) {
+  kernels::FusedJob<T> job = c.job;
+  ParticleSet<T>& b = c.bodies;
+  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  for (int d = 0; d < 3; ++d) job.bodies.x[d] = state[d] + s, job.bodies.v[d] = state[3 + d] + s;
+  job.bodies.inv_mass = c.job.bodies.inv_mass + s;
+  job.bodies.per_body = c.job.bodies.per_body.from(s);
+  job.before = before;
+  return job;
+}
+
+template <class T>
+SliceEnds<T> FixedSteps<T>::slice_ends(const Watched& c, std::size_t s, std::size_t count, T* const* before) {
+  ParticleSet<T>& b = c.bodies;
+  SliceEnds<T> ends{{before[0], before[1], before[2], before[3], before[4], before[5]}, {}, s, count};
+  T* const state[6] = {b.px(), b.py(), b.pz(), b.vx(), b.vy(), b.vz()};
+  for (int a = 0; a < 6; ++a) ends.after[a] = state[a] + s;
+  return ends;
+}
+
+template <class T>
+double FixedSteps<T>::step_start(const Watched& c, std::uint64_t k) {
+  Clock<T> now = c.start;
+  now.steps += k;
+  return now.time();
+}
+
+// Slices of a block in L1 (kept, or previous_ under a stop event), each tested after each step.
+template <class T>
+void FixedSteps<T>::watch_slices(const Watched& c, Block block) {
+  alignas(64) T kept[6][kEventSliceBodies<T>];
+  for (std::size_t s = block.begin; s < block.end; s += kEventSliceBodies<T>) {
+    const std::size_t count = std::min(kEventSliceBodies<T>, block.end - s);
+    T* before[6];
+    for (int a = 0; a < 6; ++a) before[a] = events_.stops() ? previous_[a].data() + s : kept[a];
+    const kernels::FusedJob<T> job = slice_job(c, s, before);
+    const SliceEnds<T> ends = slice_ends(c, s, count, before);
+    for (std::uint64_t k = 0; k < c.steps; ++k) {
+      c.fused_fn(job, 0, count);
+      if (c.clamps) clamp(c.bodies, {s, s + count});
+      events_.scan(c.call, ends, step_start(c, k), double(c.job.h));
+    }
+  }
+}
+
+// The whole block under the kernel's probe, the listed batches' starts packed from the
+// block's place in previous_ and their list in listed_ (no scratch on the stack: this runs
+// once a block, where a frame's first touch is a miss).
+template <class T>
+void FixedSteps<T>::watch_probed(const Watched& c, Block block) {
+  T* before[6];
+  for (int a = 0; a < 6; ++a) before[a] = previous_[a].data() + block.begin;
+  kernels::EventProbe<T> probe = *c.probe;
+  probe.batches = listed_.data() + block.begin / c.call.table->width;
+  kernels::FusedJob<T> job = slice_job(c, block.begin, before);
+  job.probe = &probe;
+  SliceEnds<T> ends = slice_ends(c, block.begin, block.end - block.begin, before);
+  ends.batches = probe.batches;
+  for (std::uint64_t k = 0; k < c.steps; ++k) {
+    probe.found = 0;
+    c.fused_fn(job, 0, block.end - block.begin);
+    ends.batch_count = probe.found;
+    events_.scan(c.call, ends, step_start(c, k), double(c.job.h));
+  }
 }
 
 namespace {

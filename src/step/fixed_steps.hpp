@@ -77,6 +77,22 @@ class FixedSteps {
   // tested after each, both ends of the step at hand.
   void run_watched(const Workers& w, ParticleSet<T>& b, kernels::FusedFn<T> fused_fn,
                    const kernels::FusedJob<T>& job, std::uint64_t steps, Guard* guard);
+  // What run_watched's blocks share.
+  struct Watched {
+    ParticleSet<T>& bodies;
+    kernels::FusedFn<T> fused_fn;
+    const kernels::FusedJob<T>& job;
+    EventCall<T> call;
+    Clock<T> start;
+    std::uint64_t steps;
+    bool clamps;
+    std::optional<kernels::EventProbe<T>> probe;  // the kernel's own sign test, where it runs
+  };
+  [[gnu::noinline]] void watch_slices(const Watched& c, Block block);  // its scratch, its own frame
+  void watch_probed(const Watched& c, Block block);
+  static kernels::FusedJob<T> slice_job(const Watched& c, std::size_t s, T* const* before);
+  static SliceEnds<T> slice_ends(const Watched& c, std::size_t s, std::size_t count, T* const* before);
+  static double step_start(const Watched& c, std::uint64_t k);
   EventCall<T> event_call(ParticleSet<T>& b) const;
   EventCall<T> event_call(RigidBodySet<T>& b) const;
   // Rigid bodies with events: each slice of a block (`slice_bodies`, at most
@@ -153,6 +169,7 @@ class FixedSteps {
   // batches the kernel's probe listed): px .. vz, and for rigid bodies (under a stop event
   // only) q and L too.
   std::array<AlignedArray<T>, 13> previous_;
+  std::vector<std::uint32_t> listed_;  // the batches the probe listed, each block's from its first batch
   std::uint64_t steps_to_stop_ = 0;
   Checkpoint<T> call_start_;  // events with a user function: the state a call starts from
   // The block path, when user code may throw: per block, the steps it completed (kNotRun for
