@@ -101,8 +101,13 @@ struct Curve {
     const double d = y1 - y0, r0 = h * rate0, r1 = h * rate1;
     return {y0, r0, 3 * d - 2 * r0 - r1 + r, r0 + r1 - 2 * d - 2 * r, r, y1};
   }
-  double at(double t) const { return t == 1 ? end : c0 + t * (c1 + t * (c2 + t * (c3 + t * c4))); }
-  double slope(double t) const { return c1 + t * (2 * c2 + t * (3 * c3 + t * (4 * c4))); }
+  // Without dopri5's term (c4 = 0) its product and sum are left out: they add zeros, and the
+  // root finder waits on each value.
+  double at(double t) const {
+    if (t == 1) return end;
+    return c0 + t * (c1 + t * (c2 + t * (c4 == 0 ? c3 : c3 + t * c4)));
+  }
+  double slope(double t) const { return c1 + t * (2 * c2 + t * (c4 == 0 ? 3 * c3 : 3 * c3 + t * (4 * c4))); }
 };
 
 
