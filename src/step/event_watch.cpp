@@ -234,14 +234,58 @@ void EventWatch<T>::finish(std::optional<double> until) {
   // The keys sorted, then the hits gathered once: a hit is twice a key's size and more.
   order_.clear();
   for (std::size_t i = 0; i < hits_.size(); ++i) order_.push_back({hits_[i].time, hits_[i].body, hits_[i].event, i});
-  std::sort(order_.begin(), order_.end(), [](const HitKey& a, const HitKey& b) {
-    if (a.time != b.time) return a.time < b.time;
-    if (a.body != b.body) return a.body < b.body;
-    return a.event < b.event;
-  });
+  sort_keys(order_, merged_, buckets_);
   sorted_.clear();
   for (const HitKey& key : order_) sorted_.push_back(hits_[key.index]);
   hits_.swap(sorted_);
+}
+
+namespace {
+
+// Whether key a comes first: by time, body, event.
+template <class Key>
+bool before(const Key& a, const Key& b) {
+  const bool body_first = (a.body < b.body) | ((a.body == b.body) & (a.event < b.event));
+  return (a.time < b.time) | ((a.time == b.time) & body_first);
+}
+
+// Inserts each key after those before it: a pass, and a move per key out of order.
+template <class Key>
+void insertion_sort(Key* keys, std::size_t n) {
+  for (std::size_t i = 1; i < n; ++i) {
+    const Key key = keys[i];
+    std::size_t j = i;
+    for (; j > 0 && before(key, keys[j - 1]); --j) keys[j] = keys[j - 1];
+    keys[j] = key;
+  }
+}
+
+}  // namespace
+
+// A bucket sort by time, then each bucket sorted: each key's bucket rises with its time, so
+// the buckets come in order (a step's crossings spread over it: a few keys a bucket, sorted
+// by insertion; a crowded bucket by std::sort). Linear where a comparison sort mispredicts
+// every other comparison.
+template <class T>
+void EventWatch<T>::sort_keys(std::vector<HitKey>& keys, std::vector<HitKey>& scratch, std::vector<std::size_t>& ends) {
+  const std::size_t n = keys.size();
+  const auto sort_run = [](HitKey* begin, HitKey* end) {
+    if (end - begin > 16) return std::sort(begin, end, before<HitKey>);
+    insertion_sort(begin, std::size_t(end - begin));
+  };
+  if (n < 2) return;
+  double first = keys[0].time, last = keys[0].time;
+  for (const HitKey& k : keys) first = std::min(first, k.time), last = std::max(last, k.time);
+  const double scale = double(n - 1) / (last - first);
+  if (!(std::isfinite(scale) && scale > 0)) return sort_run(keys.data(), keys.data() + n);  // one time, or a span past double
+  const auto bucket = [&](const HitKey& k) { return std::min(std::size_t((k.time - first) * scale), n - 1); };
+  ends.assign(n + 1, 0);  // each bucket's first place, then (as keys go in) its end
+  for (const HitKey& k : keys) ++ends[bucket(k) + 1];
+  for (std::size_t b = 1; b <= n; ++b) ends[b] += ends[b - 1];
+  scratch.resize(n);
+  for (const HitKey& k : keys) scratch[ends[bucket(k)]++] = k;
+  keys.swap(scratch);
+  for (std::size_t b = 0, begin = 0; b < n; begin = ends[b++]) sort_run(keys.data() + begin, keys.data() + ends[b]);
 }
 
 template <class T>

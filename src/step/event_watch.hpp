@@ -134,8 +134,10 @@ class EventWatch {
     int event;
     std::size_t index;
   };
-  std::vector<HitKey> order_;
+  std::vector<HitKey> order_, merged_;
+  std::vector<std::size_t> buckets_;
   std::vector<EventHit<T>> sorted_;
+  static void sort_keys(std::vector<HitKey>& keys, std::vector<HitKey>& scratch, std::vector<std::size_t>& ends);
   std::optional<Stop> stop_;
   std::optional<Stop> settled_;  // the stop the set was last left at
   // A hit reported at the stop's time: its body and event, and the body's position as

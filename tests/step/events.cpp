@@ -8,10 +8,12 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <tuple>
 
 #include <xmmintrin.h>
 
 #include "support.hpp"
+#include "thread_pool.hpp"
 
 using namespace kinema;
 
@@ -198,6 +200,29 @@ TEST_CASE("every body falling through a plane is found once, at its analytic tim
   CHECK(std::count(found.begin(), found.end(), 1) == std::ptrdiff_t(n));  // none missed, none twice
   INFO("worst time error " << worst);
   CHECK(worst < 2e-5);
+}
+
+TEST_CASE("hits come in order of time, body and event, however their times crowd", "[events]") {
+  // A thousand bodies that cross two planes at one time, others spread over the steps, one
+  // far ahead of the rest: on two workers, several steps a call, blocks found in any order.
+  ParticleSet<double> b;
+  for (std::size_t i = 0; i < 3 * kBlockBodies; ++i) {
+    const double height = i % 3 == 0 ? 1.0 : 0.6 + double((i * 7919) % 1000) / 1000;
+    b.add({double(i % 13), i == 5 ? 0.51 : height, 0}, {0, i == 5 ? -30.0 : -4.0, 0}, 1);
+  }
+  ForceModel<double> f;
+  f.add(Gravity{{0, -kG, 0}});
+  test::ThreadPool pool(2);
+  StepperOptions o = test::serial_options();
+  o.jobs = &pool, o.workers = WorkerChoice::all;
+  Stepper<double> s(f, rk4, o);
+  s.set_events({{{PlaneEvent{{0, 1, 0}, 0.5}, Crossing::down}, {PlaneEvent{{0, 1, 0}, 0}, Crossing::down}}});
+  s.advance(b, 0.05, 12);
+  const auto& hits = s.event_hits();
+  REQUIRE(hits.size() == 2 * b.size());  // each body through each plane once
+  const auto key = [](const EventHit<double>& h) { return std::tuple(h.time, h.body, h.event); };
+  for (std::size_t i = 1; i < hits.size(); ++i) CHECK(key(hits[i - 1]) < key(hits[i]));
+  CHECK(hits.front().body == 5);
 }
 
 namespace {
