@@ -75,6 +75,25 @@ KINEMA_INLINE bool any_lane(const M& mask) {
   }
 }
 
+// The lanes of a mask as bits, lane l at bit l.
+template <class M>
+KINEMA_INLINE std::uint32_t lane_bits(const M& mask) {
+  if constexpr (std::is_integral_v<M> || std::is_same_v<M, bool>) {
+    return mask ? 1u : 0u;
+  } else {
+    const typename M::register_type bits(mask);
+    if constexpr (std::is_integral_v<typename M::register_type>) {
+      return std::uint32_t(bits);  // AVX-512: a mask register already
+    } else if constexpr (sizeof(bits) == 32) {
+      if constexpr (sizeof(typename M::batch_type::value_type) == 4) return std::uint32_t(_mm256_movemask_ps(bits));
+      else return std::uint32_t(_mm256_movemask_pd(bits));
+    } else {
+      if constexpr (sizeof(typename M::batch_type::value_type) == 4) return std::uint32_t(_mm_movemask_ps(bits));
+      else return std::uint32_t(_mm_movemask_pd(bits));
+    }
+  }
+}
+
 // Whether any body of a batch may have crossed one of the probe's events over its step from
 // (x0, v0) to (x1, v1): the values of event_scan, on registers, tested for a sign change in
 // either direction (g0 g1 <= 0, a superset of every direction's test: an underflow to 0 only
@@ -115,12 +134,9 @@ std::size_t event_scan(const EventScanJob<value_t<V>>& job, std::size_t count, s
   std::size_t n = 0;
   for (std::size_t i = 0; i < count; i += width) {
     const V g0 = test.value(before, i), g1 = test.value(after, i);
-    if (!any_lane(test.crossed(g0, g1))) continue;
-    alignas(64) T start[width], end[width];
-    store(start, g0);
-    store(end, g1);
-    for (std::size_t l = 0; l < width; ++l) {
-      if (any_lane(test.crossed(start[l], end[l]))) found[n++] = std::uint32_t(i + l);
+    // The lanes that crossed, lowest first, without a branch per lane.
+    for (std::uint32_t bits = lane_bits(test.crossed(g0, g1)); bits != 0; bits &= bits - 1) {
+      found[n++] = std::uint32_t(i + unsigned(__builtin_ctz(bits)));
     }
   }
   return n;
