@@ -82,7 +82,7 @@ KINEMA_INLINE std::uint32_t lane_bits(const M& mask) {
     return mask ? 1u : 0u;
   } else {
     const typename M::register_type bits(mask);
-    if constexpr (std::is_integral_v<typename M::register_type>) {
+    if constexpr (sizeof(typename M::register_type) <= 2) {
       return std::uint32_t(bits);  // AVX-512: a mask register already
     } else if constexpr (sizeof(bits) == 32) {
       if constexpr (sizeof(typename M::batch_type::value_type) == 4) return std::uint32_t(_mm256_movemask_ps(bits));

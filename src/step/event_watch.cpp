@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <new>
 #include <string>
 #include <type_traits>
 
@@ -21,6 +22,24 @@ namespace {
 using Vec = std::array<double, 3>;
 
 constexpr std::size_t kMaxWidth = 16;  // SIMD lanes
+
+// Whether key a comes first: by time, body, event.
+template <class Key>
+bool before(const Key& a, const Key& b) {
+  const bool body_first = (a.body < b.body) | ((a.body == b.body) & (a.event < b.event));
+  return (a.time < b.time) | ((a.time == b.time) & body_first);
+}
+
+// Inserts each key after those before it: a pass, and a move per key out of order.
+template <class Key>
+void insertion_sort(Key* keys, std::size_t n) {
+  for (std::size_t i = 1; i < n; ++i) {
+    const Key key = keys[i];
+    std::size_t j = i;
+    for (; j > 0 && before(key, keys[j - 1]); --j) keys[j] = keys[j - 1];
+    keys[j] = key;
+  }
+}
 
 double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
@@ -231,36 +250,22 @@ std::optional<typename EventWatch<T>::Stop> EventWatch<T>::first_stop() const {
 template <class T>
 void EventWatch<T>::finish(std::optional<double> until) {
   if (until) std::erase_if(hits_, [&](const EventHit<T>& hit) { return hit.time > *until; });
-  // The keys sorted, then the hits gathered once: a hit is twice a key's size and more.
-  order_.clear();
-  for (std::size_t i = 0; i < hits_.size(); ++i) order_.push_back({hits_[i].time, hits_[i].body, hits_[i].event, i});
-  sort_keys(order_, merged_, buckets_);
-  sorted_.clear();
-  for (const HitKey& key : order_) sorted_.push_back(hits_[key.index]);
+  // The keys sorted, then the hits gathered once: a hit is twice a key's size and more. Its
+  // scratch grows with the hits; where it cannot (finish runs in a destructor, maybe while
+  // another error unwinds), the hits are sorted in place.
+  try {
+    order_.clear();
+    for (std::size_t i = 0; i < hits_.size(); ++i) order_.push_back({hits_[i].time, hits_[i].body, hits_[i].event, i});
+    sort_keys(order_, merged_, buckets_);
+    sorted_.clear();
+    for (const HitKey& key : order_) sorted_.push_back(hits_[key.index]);
+  } catch (const std::bad_alloc&) {
+    std::sort(hits_.begin(), hits_.end(), [](const EventHit<T>& a, const EventHit<T>& b) { return before(a, b); });
+    return;
+  }
   hits_.swap(sorted_);
 }
 
-namespace {
-
-// Whether key a comes first: by time, body, event.
-template <class Key>
-bool before(const Key& a, const Key& b) {
-  const bool body_first = (a.body < b.body) | ((a.body == b.body) & (a.event < b.event));
-  return (a.time < b.time) | ((a.time == b.time) & body_first);
-}
-
-// Inserts each key after those before it: a pass, and a move per key out of order.
-template <class Key>
-void insertion_sort(Key* keys, std::size_t n) {
-  for (std::size_t i = 1; i < n; ++i) {
-    const Key key = keys[i];
-    std::size_t j = i;
-    for (; j > 0 && before(key, keys[j - 1]); --j) keys[j] = keys[j - 1];
-    keys[j] = key;
-  }
-}
-
-}  // namespace
 
 // A bucket sort by time, then each bucket sorted: each key's bucket rises with its time, so
 // the buckets come in order (a step's crossings spread over it: a few keys a bucket, sorted
@@ -696,6 +701,8 @@ template <class T>
 std::size_t EventWatch<T>::bytes() const {
   std::size_t n = 0;
   for (const auto& a : acc_) n += a.size() * sizeof(T);
+  n += (order_.capacity() + merged_.capacity()) * sizeof(HitKey) + buckets_.capacity() * sizeof(std::size_t) +
+       sorted_.capacity() * sizeof(EventHit<T>);
   for (const auto* arrays : {&end_state_, &end_rates_}) {
     for (const auto& a : *arrays) n += a.size() * sizeof(T);
   }

@@ -76,7 +76,7 @@ class EventWatch {
   // step in full, blocks spread over the workers.
   void scan_blocks(const Workers& workers, const EventCall<T>& call, const T* const before[6],
                    const T* const after[6], std::size_t padded, double t0, double h);
-  // Bytes of the settles' scratch.
+  // Bytes of the settles' scratch and of the hits' ordering.
   std::size_t bytes() const;
   // Forgets the hits recorded after the first `kept` (steps taken back).
   void rollback(std::size_t kept);
